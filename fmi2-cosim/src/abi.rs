@@ -1,0 +1,944 @@
+//! The FMI 2.0 C entry points, generic over the model. [`export_fmi2!`](crate::export_fmi2)
+//! exports them under their standard names.
+//!
+//! Every entry point: checks its pointers (an instance pointer is checked for
+//! NULL and for this layer's magic number), checks the state machine, logs a
+//! refusal with the function's name and the reason, catches any panic so that
+//! none crosses the C boundary, and moves the instance to its error state after
+//! `fmi2Error`. With `n == 0`, array pointers may be NULL.
+
+use std::ffi::{CStr, CString, c_char};
+use std::panic::{self, AssertUnwindSafe};
+use std::ptr;
+
+use fmi_sys::fmi2 as sys;
+
+use crate::fmu_state::{self, SNAPSHOT_MAGIC, Snapshot};
+use crate::instance::{FmiValue, INSTANCE_MAGIC, Instance};
+use crate::logging::{LogCategory, Logger};
+use crate::model::CoSimModel;
+use crate::model_description;
+use crate::resources;
+use crate::status::{FmiFunction, Status};
+
+const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> &str {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        s
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s
+    } else {
+        "unknown panic"
+    }
+}
+
+/// The instance behind `c`, if it is one of ours.
+///
+/// # Safety
+/// `c` must be NULL or a pointer returned by `fmi2Instantiate` of model `M`
+/// that was not freed. A NULL pointer and a pointer to another object of this
+/// layer (such as an FMU state) are recognised and refused.
+unsafe fn instance<'a, M: CoSimModel>(c: sys::fmi2Component) -> Option<&'a mut Instance<M>> {
+    if c.is_null() {
+        return None;
+    }
+    // SAFETY: every object this layer hands out (instances and FMU states) is
+    // repr(C) with a u64 magic number first, so reading the first eight bytes
+    // stays inside the allocation whichever of them `c` is.
+    let magic = unsafe { ptr::read(c as *const u64) };
+    if magic != INSTANCE_MAGIC {
+        return None;
+    }
+    Some(unsafe { &mut *(c as *mut Instance<M>) })
+}
+
+/// Runs `body` on the instance if `function` is legal in its state.
+///
+/// # Safety
+/// As for [`instance`].
+unsafe fn call<M, F>(c: sys::fmi2Component, function: FmiFunction, body: F) -> sys::fmi2Status
+where
+    M: CoSimModel,
+    F: FnOnce(&mut Instance<M>) -> Status,
+{
+    let Some(inst) = (unsafe { instance::<M>(c) }) else {
+        return ERROR;
+    };
+    if !function.allowed_states().contains(inst.state) {
+        inst.logger.error(
+            function.name(),
+            format_args!(
+                "illegal call sequence: not allowed in state {}",
+                inst.state.name()
+            ),
+        );
+        inst.enter_error_state(Status::Error);
+        return ERROR;
+    }
+    let outcome = panic::catch_unwind(AssertUnwindSafe(|| body(&mut *inst)));
+    let status = match outcome {
+        Ok(status) => status,
+        Err(payload) => {
+            inst.logger.error(
+                function.name(),
+                format_args!("internal error (panic): {}", panic_message(&*payload)),
+            );
+            Status::Error
+        }
+    };
+    inst.enter_error_state(status);
+    status.to_raw()
+}
+
+/// A C string argument as `&str` (lossy on invalid UTF-8).
+///
+/// # Safety
+/// `s` must be NULL or a NUL-terminated string.
+unsafe fn string_arg<'a>(s: *const c_char) -> Option<std::borrow::Cow<'a, str>> {
+    (!s.is_null()).then(|| unsafe { CStr::from_ptr(s) }.to_string_lossy())
+}
+
+/// The array arguments of a getter or setter as slices; refuses NULL arrays
+/// when `n > 0`.
+///
+/// # Safety
+/// When non-NULL, `vr` and `values` must point to `n` elements.
+unsafe fn arrays<'a, T>(
+    inst: &Instance<impl CoSimModel>,
+    function: FmiFunction,
+    vr: *const sys::fmi2ValueReference,
+    n: usize,
+    values: *const T,
+    values_name: &str,
+) -> Result<(&'a [u32], *const T), Status> {
+    if n == 0 {
+        return Ok((&[], values));
+    }
+    if vr.is_null() {
+        return Err(inst.error(function, format_args!("vr[] is NULL but nvr = {n}")));
+    }
+    if values.is_null() {
+        return Err(inst.error(
+            function,
+            format_args!("{values_name}[] is NULL but nvr = {n}"),
+        ));
+    }
+    Ok((unsafe { std::slice::from_raw_parts(vr, n) }, values))
+}
+
+fn trace<M: CoSimModel>(inst: &Instance<M>, function: FmiFunction, args: std::fmt::Arguments<'_>) {
+    if inst.logger.is_enabled(LogCategory::FmiCalls) {
+        inst.logger
+            .log_in(function.name(), Status::Ok, LogCategory::FmiCalls, args);
+    }
+}
+
+pub extern "C" fn get_types_platform() -> *const c_char {
+    c"default".as_ptr()
+}
+
+pub extern "C" fn get_version() -> *const c_char {
+    c"2.0".as_ptr()
+}
+
+/// # Safety
+/// Arguments as `fmi2Instantiate` of the FMI 2.0 standard.
+pub unsafe fn instantiate<M: CoSimModel>(
+    instance_name: sys::fmi2String,
+    fmu_type: sys::fmi2Type,
+    fmu_guid: sys::fmi2String,
+    fmu_resource_location: sys::fmi2String,
+    functions: *const sys::fmi2CallbackFunctions,
+    _visible: sys::fmi2Boolean,
+    logging_on: sys::fmi2Boolean,
+) -> sys::fmi2Component {
+    let outcome = panic::catch_unwind(|| unsafe {
+        instantiate_checked::<M>(
+            instance_name,
+            fmu_type,
+            fmu_guid,
+            fmu_resource_location,
+            functions,
+            logging_on,
+        )
+    });
+    outcome.unwrap_or(ptr::null_mut())
+}
+
+unsafe fn instantiate_checked<M: CoSimModel>(
+    instance_name: sys::fmi2String,
+    fmu_type: sys::fmi2Type,
+    fmu_guid: sys::fmi2String,
+    fmu_resource_location: sys::fmi2String,
+    functions: *const sys::fmi2CallbackFunctions,
+    logging_on: sys::fmi2Boolean,
+) -> sys::fmi2Component {
+    const NAME: &str = "fmi2Instantiate";
+    if functions.is_null() {
+        // Without callbacks there is no logger to say why.
+        return ptr::null_mut();
+    }
+    let callbacks = unsafe { *functions };
+    let name = unsafe { string_arg(instance_name) };
+    let logger_name = CString::new(name.as_deref().unwrap_or("(NULL)").replace('\0', "?"))
+        .expect("NUL bytes replaced");
+    let logger = Logger::new(
+        callbacks.logger,
+        callbacks.componentEnvironment,
+        logger_name,
+        logging_on != 0,
+    );
+    if name.is_none() {
+        logger.error(NAME, format_args!("instanceName is NULL"));
+        return ptr::null_mut();
+    }
+    if fmu_type != sys::fmi2Type_fmi2CoSimulation {
+        logger.error(
+            NAME,
+            format_args!(
+                "{} implements FMI 2.0 co-simulation only; fmuType {fmu_type} was requested",
+                M::INFO.model_identifier
+            ),
+        );
+        return ptr::null_mut();
+    }
+    let guid = match model_description::guid::<M>() {
+        Ok(guid) => guid,
+        Err(e) => {
+            logger.error(
+                NAME,
+                format_args!("the model's variable table is inconsistent: {e}"),
+            );
+            return ptr::null_mut();
+        }
+    };
+    match unsafe { string_arg(fmu_guid) } {
+        None => {
+            logger.error(NAME, format_args!("fmuGUID is NULL (expected {guid})"));
+            return ptr::null_mut();
+        }
+        Some(given) if given != guid => {
+            logger.error(
+                NAME,
+                format_args!(
+                    "fmuGUID {given} does not match this binary's GUID {guid}: the \
+                     modelDescription.xml and the binary come from different builds"
+                ),
+            );
+            return ptr::null_mut();
+        }
+        Some(_) => {}
+    }
+    let location = unsafe { string_arg(fmu_resource_location) };
+    let resource_dir = match resources::resource_dir(location.as_deref()) {
+        Ok(dir) => dir,
+        Err(reason) => {
+            logger.warning(NAME, format_args!("{reason}; continuing without resources"));
+            None
+        }
+    };
+    let instance = Instance::<M>::new(logger, resource_dir, guid);
+    instance.logger.log_in(
+        NAME,
+        Status::Ok,
+        LogCategory::Events,
+        format_args!("instantiated {}", M::INFO.model_identifier),
+    );
+    Box::into_raw(Box::new(instance)).cast()
+}
+
+/// # Safety
+/// `c` as for every FMI function.
+pub unsafe fn free_instance<M: CoSimModel>(c: sys::fmi2Component) {
+    let Some(inst) = (unsafe { instance::<M>(c) }) else {
+        return;
+    };
+    // Poison the magic so that a second free of the same pointer is refused
+    // as long as the memory has not been reused.
+    inst.magic = 0;
+    let boxed = unsafe { Box::from_raw(c as *mut Instance<M>) };
+    let _ = panic::catch_unwind(AssertUnwindSafe(move || drop(boxed)));
+}
+
+/// # Safety
+/// Arguments as `fmi2SetDebugLogging`.
+pub unsafe fn set_debug_logging<M: CoSimModel>(
+    c: sys::fmi2Component,
+    logging_on: sys::fmi2Boolean,
+    n_categories: usize,
+    categories: *const sys::fmi2String,
+) -> sys::fmi2Status {
+    let function = FmiFunction::SetDebugLogging;
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            if n_categories > 0 && categories.is_null() {
+                return inst.error(
+                    function,
+                    format_args!("categories[] is NULL but nCategories = {n_categories}"),
+                );
+            }
+            let raw: &[sys::fmi2String] = if n_categories == 0 {
+                &[]
+            } else {
+                std::slice::from_raw_parts(categories, n_categories)
+            };
+            if raw.iter().any(|p| p.is_null()) {
+                return inst.error(function, format_args!("a category name is NULL"));
+            }
+            let names: Vec<std::borrow::Cow<'_, str>> = raw
+                .iter()
+                .map(|p| string_arg(*p).expect("checked"))
+                .collect();
+            let names: Vec<&str> = names.iter().map(|n| n.as_ref()).collect();
+            inst.set_debug_logging(logging_on != 0, &names)
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2SetupExperiment`.
+pub unsafe fn setup_experiment<M: CoSimModel>(
+    c: sys::fmi2Component,
+    _tolerance_defined: sys::fmi2Boolean,
+    _tolerance: sys::fmi2Real,
+    start_time: sys::fmi2Real,
+    stop_time_defined: sys::fmi2Boolean,
+    stop_time: sys::fmi2Real,
+) -> sys::fmi2Status {
+    // The tolerance is not used: the models integrate their linear parts exactly
+    // and bound the rest by their own solver parameters.
+    unsafe {
+        call::<M, _>(c, FmiFunction::SetupExperiment, |inst| {
+            inst.setup_experiment(start_time, (stop_time_defined != 0).then_some(stop_time))
+        })
+    }
+}
+
+/// # Safety
+/// `c` as for every FMI function.
+pub unsafe fn enter_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe {
+        call::<M, _>(c, FmiFunction::EnterInitializationMode, |i| {
+            i.enter_initialization_mode()
+        })
+    }
+}
+
+/// # Safety
+/// `c` as for every FMI function.
+pub unsafe fn exit_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe {
+        call::<M, _>(c, FmiFunction::ExitInitializationMode, |i| {
+            i.exit_initialization_mode()
+        })
+    }
+}
+
+/// # Safety
+/// `c` as for every FMI function.
+pub unsafe fn terminate<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe { call::<M, _>(c, FmiFunction::Terminate, |i| i.terminate()) }
+}
+
+/// # Safety
+/// `c` as for every FMI function.
+pub unsafe fn reset<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe { call::<M, _>(c, FmiFunction::Reset, |i| i.reset()) }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetReal` and friends; `values` points to `nvr` elements of
+/// the C type that `to_c` produces.
+unsafe fn get<M: CoSimModel, T: FmiValue, C>(
+    c: sys::fmi2Component,
+    function: FmiFunction,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    values: *mut C,
+    to_c: fn(T) -> C,
+) -> sys::fmi2Status {
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            let (vrs, values) = match arrays(inst, function, vr, nvr, values.cast_const(), "value")
+            {
+                Ok(v) => v,
+                Err(status) => return status,
+            };
+            let out: &mut [C] = if nvr == 0 {
+                &mut []
+            } else {
+                std::slice::from_raw_parts_mut(values.cast_mut(), nvr)
+            };
+            trace(inst, function, format_args!("nvr = {nvr}"));
+            inst.get_values(function, vrs, |i, value: T| out[i] = to_c(value))
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2SetReal` and friends; `values` points to `nvr` elements of
+/// the C type that `from_c` reads.
+unsafe fn set<M: CoSimModel, T: FmiValue, C: Copy>(
+    c: sys::fmi2Component,
+    function: FmiFunction,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    values: *const C,
+    from_c: fn(C) -> T,
+) -> sys::fmi2Status {
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            let (vrs, values) = match arrays(inst, function, vr, nvr, values, "value") {
+                Ok(v) => v,
+                Err(status) => return status,
+            };
+            let raw: &[C] = if nvr == 0 {
+                &[]
+            } else {
+                std::slice::from_raw_parts(values, nvr)
+            };
+            trace(inst, function, format_args!("nvr = {nvr}"));
+            inst.set_values(function, vrs, |i| from_c(raw[i]))
+        })
+    }
+}
+
+fn bool_to_c(b: bool) -> sys::fmi2Boolean {
+    b as sys::fmi2Boolean
+}
+
+fn bool_from_c(b: sys::fmi2Boolean) -> bool {
+    b != 0
+}
+
+/// # Safety
+/// Arguments as `fmi2GetReal`.
+pub unsafe fn get_real<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *mut sys::fmi2Real,
+) -> sys::fmi2Status {
+    unsafe { get::<M, f64, _>(c, FmiFunction::GetReal, vr, nvr, value, |v| v) }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetInteger`.
+pub unsafe fn get_integer<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *mut sys::fmi2Integer,
+) -> sys::fmi2Status {
+    unsafe { get::<M, i32, _>(c, FmiFunction::GetInteger, vr, nvr, value, |v| v) }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetBoolean`.
+pub unsafe fn get_boolean<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *mut sys::fmi2Boolean,
+) -> sys::fmi2Status {
+    unsafe { get::<M, bool, _>(c, FmiFunction::GetBoolean, vr, nvr, value, bool_to_c) }
+}
+
+/// A String value that no variable has: the models serve no String variables,
+/// so every value reference is refused with the variable's actual type.
+#[derive(Clone, Copy, PartialEq)]
+struct NoString;
+
+impl std::fmt::Display for NoString {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("(string)")
+    }
+}
+
+impl FmiValue for NoString {
+    const TYPE_NAME: &'static str = "String";
+    fn getter<M>(_: &crate::variables::Value<M>) -> Option<fn(&M) -> NoString> {
+        None
+    }
+    fn setter<M>(_: &crate::variables::Value<M>) -> Option<fn(&mut M, NoString)> {
+        None
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetString`.
+pub unsafe fn get_string<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *mut sys::fmi2String,
+) -> sys::fmi2Status {
+    unsafe { get::<M, NoString, _>(c, FmiFunction::GetString, vr, nvr, value, |_| ptr::null()) }
+}
+
+/// # Safety
+/// Arguments as `fmi2SetReal`.
+pub unsafe fn set_real<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *const sys::fmi2Real,
+) -> sys::fmi2Status {
+    unsafe { set::<M, f64, _>(c, FmiFunction::SetReal, vr, nvr, value, |v| v) }
+}
+
+/// # Safety
+/// Arguments as `fmi2SetInteger`.
+pub unsafe fn set_integer<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *const sys::fmi2Integer,
+) -> sys::fmi2Status {
+    unsafe { set::<M, i32, _>(c, FmiFunction::SetInteger, vr, nvr, value, |v| v) }
+}
+
+/// # Safety
+/// Arguments as `fmi2SetBoolean`.
+pub unsafe fn set_boolean<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *const sys::fmi2Boolean,
+) -> sys::fmi2Status {
+    unsafe { set::<M, bool, _>(c, FmiFunction::SetBoolean, vr, nvr, value, bool_from_c) }
+}
+
+/// # Safety
+/// Arguments as `fmi2SetString`.
+pub unsafe fn set_string<M: CoSimModel>(
+    c: sys::fmi2Component,
+    vr: *const sys::fmi2ValueReference,
+    nvr: usize,
+    value: *const sys::fmi2String,
+) -> sys::fmi2Status {
+    unsafe { set::<M, NoString, _>(c, FmiFunction::SetString, vr, nvr, value, |_| NoString) }
+}
+
+/// The snapshot behind an `fmi2FMUstate`, if it is one of ours.
+///
+/// # Safety
+/// `state` must be NULL or a pointer returned by this layer's
+/// `fmi2GetFMUstate`/`fmi2DeSerializeFMUstate` for model `M`, not yet freed.
+unsafe fn snapshot<'a, M>(state: sys::fmi2FMUstate) -> Option<&'a mut Snapshot<M>> {
+    if state.is_null() {
+        return None;
+    }
+    // SAFETY: as in `instance`: the magic number is the first field.
+    let magic = unsafe { ptr::read(state as *const u64) };
+    if magic != SNAPSHOT_MAGIC {
+        return None;
+    }
+    Some(unsafe { &mut *(state as *mut Snapshot<M>) })
+}
+
+/// Stores `data` in `*slot`, reusing the snapshot already there if there is one.
+///
+/// # Safety
+/// `slot` must be valid for reads and writes; `*slot` as for [`snapshot`].
+unsafe fn store_snapshot<M: CoSimModel>(
+    inst: &Instance<M>,
+    function: FmiFunction,
+    slot: *mut sys::fmi2FMUstate,
+    data: fmu_state::SnapshotData<M>,
+) -> Status {
+    let current = unsafe { *slot };
+    if current.is_null() {
+        let boxed = Box::new(Snapshot::new(data));
+        unsafe { *slot = Box::into_raw(boxed).cast() };
+        return Status::Ok;
+    }
+    match unsafe { snapshot::<M>(current) } {
+        Some(existing) => {
+            existing.data = data;
+            existing.encoded = None;
+            Status::Ok
+        }
+        None => inst.error(
+            function,
+            format_args!("*FMUstate is neither NULL nor a state of this FMU"),
+        ),
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetFMUstate`.
+pub unsafe fn get_fmu_state<M: CoSimModel>(
+    c: sys::fmi2Component,
+    state: *mut sys::fmi2FMUstate,
+) -> sys::fmi2Status {
+    let function = FmiFunction::GetFmuState;
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            if state.is_null() {
+                return inst.error(function, format_args!("FMUstate is NULL"));
+            }
+            store_snapshot(inst, function, state, inst.snapshot())
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2SetFMUstate`.
+pub unsafe fn set_fmu_state<M: CoSimModel>(
+    c: sys::fmi2Component,
+    state: sys::fmi2FMUstate,
+) -> sys::fmi2Status {
+    let function = FmiFunction::SetFmuState;
+    unsafe {
+        call::<M, _>(c, function, |inst| match snapshot::<M>(state) {
+            Some(snapshot) => inst.restore(function, &snapshot.data),
+            None => inst.error(
+                function,
+                format_args!("FMUstate is NULL or not a state of this FMU"),
+            ),
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2FreeFMUstate`.
+pub unsafe fn free_fmu_state<M: CoSimModel>(
+    c: sys::fmi2Component,
+    state: *mut sys::fmi2FMUstate,
+) -> sys::fmi2Status {
+    let function = FmiFunction::FreeFmuState;
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            if state.is_null() {
+                return inst.error(function, format_args!("FMUstate is NULL"));
+            }
+            let current = *state;
+            if current.is_null() {
+                return Status::Ok;
+            }
+            match snapshot::<M>(current) {
+                Some(snapshot) => {
+                    snapshot.magic = 0;
+                    drop(Box::from_raw(current as *mut Snapshot<M>));
+                    *state = ptr::null_mut();
+                    Status::Ok
+                }
+                None => inst.error(
+                    function,
+                    format_args!("*FMUstate is not a state of this FMU"),
+                ),
+            }
+        })
+    }
+}
+
+/// The encoded bytes of a snapshot, computed once.
+fn encoded<'a, M: CoSimModel>(
+    inst: &Instance<M>,
+    function: FmiFunction,
+    snapshot: &'a mut Snapshot<M>,
+) -> Result<&'a [u8], Status> {
+    if snapshot.encoded.is_none() {
+        match fmu_state::encode(&snapshot.data, &inst.guid) {
+            Ok(bytes) => snapshot.encoded = Some(bytes),
+            Err(e) => return Err(inst.error(function, format_args!("{e}"))),
+        }
+    }
+    Ok(snapshot.encoded.as_deref().expect("just encoded"))
+}
+
+/// # Safety
+/// Arguments as `fmi2SerializedFMUstateSize`.
+pub unsafe fn serialized_fmu_state_size<M: CoSimModel>(
+    c: sys::fmi2Component,
+    state: sys::fmi2FMUstate,
+    size: *mut usize,
+) -> sys::fmi2Status {
+    let function = FmiFunction::SerializedFmuStateSize;
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            if size.is_null() {
+                return inst.error(function, format_args!("size is NULL"));
+            }
+            let Some(snapshot) = snapshot::<M>(state) else {
+                return inst.error(
+                    function,
+                    format_args!("FMUstate is NULL or not a state of this FMU"),
+                );
+            };
+            match encoded(inst, function, snapshot) {
+                Ok(bytes) => {
+                    *size = bytes.len();
+                    Status::Ok
+                }
+                Err(status) => status,
+            }
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2SerializeFMUstate`.
+pub unsafe fn serialize_fmu_state<M: CoSimModel>(
+    c: sys::fmi2Component,
+    state: sys::fmi2FMUstate,
+    serialized: *mut sys::fmi2Byte,
+    size: usize,
+) -> sys::fmi2Status {
+    let function = FmiFunction::SerializeFmuState;
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            let Some(snapshot) = snapshot::<M>(state) else {
+                return inst.error(
+                    function,
+                    format_args!("FMUstate is NULL or not a state of this FMU"),
+                );
+            };
+            let bytes = match encoded(inst, function, snapshot) {
+                Ok(bytes) => bytes,
+                Err(status) => return status,
+            };
+            if size != bytes.len() {
+                return inst.error(
+                    function,
+                    format_args!(
+                        "size is {size} but the state needs {} bytes (ask fmi2SerializedFMUstateSize)",
+                        bytes.len()
+                    ),
+                );
+            }
+            if serialized.is_null() {
+                return inst.error(function, format_args!("serializedState is NULL"));
+            }
+            ptr::copy_nonoverlapping(bytes.as_ptr(), serialized.cast::<u8>(), size);
+            Status::Ok
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2DeSerializeFMUstate`.
+pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
+    c: sys::fmi2Component,
+    serialized: *const sys::fmi2Byte,
+    size: usize,
+    state: *mut sys::fmi2FMUstate,
+) -> sys::fmi2Status {
+    let function = FmiFunction::DeSerializeFmuState;
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            if state.is_null() {
+                return inst.error(function, format_args!("FMUstate is NULL"));
+            }
+            if serialized.is_null() && size > 0 {
+                return inst.error(
+                    function,
+                    format_args!("serializedState is NULL but size = {size}"),
+                );
+            }
+            let bytes: &[u8] = if size == 0 {
+                &[]
+            } else {
+                std::slice::from_raw_parts(serialized.cast::<u8>(), size)
+            };
+            match fmu_state::decode::<M>(bytes, &inst.guid) {
+                Ok(data) => store_snapshot(inst, function, state, data),
+                Err(reason) => inst.error(function, format_args!("refused: {reason}")),
+            }
+        })
+    }
+}
+
+/// An optional capability this layer does not offer: `fmi2Error` with the
+/// reason, after the usual state check.
+///
+/// # Safety
+/// `c` as for every FMI function.
+unsafe fn not_offered<M: CoSimModel>(
+    c: sys::fmi2Component,
+    function: FmiFunction,
+    capability: &'static str,
+) -> sys::fmi2Status {
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            inst.error(
+                function,
+                format_args!("not offered by this FMU (modelDescription declares {capability})"),
+            )
+        })
+    }
+}
+
+/// # Safety
+/// `c` as for every FMI function; the other arguments are not read.
+pub unsafe fn get_directional_derivative<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe {
+        not_offered::<M>(
+            c,
+            FmiFunction::GetDirectionalDerivative,
+            "providesDirectionalDerivative=\"false\"",
+        )
+    }
+}
+
+/// # Safety
+/// `c` as for every FMI function; the other arguments are not read.
+pub unsafe fn set_real_input_derivatives<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe {
+        not_offered::<M>(
+            c,
+            FmiFunction::SetRealInputDerivatives,
+            "canInterpolateInputs=\"false\"",
+        )
+    }
+}
+
+/// # Safety
+/// `c` as for every FMI function; the other arguments are not read.
+pub unsafe fn get_real_output_derivatives<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe {
+        not_offered::<M>(
+            c,
+            FmiFunction::GetRealOutputDerivatives,
+            "maxOutputDerivativeOrder=\"0\"",
+        )
+    }
+}
+
+/// # Safety
+/// `c` as for every FMI function. Only legal while an asynchronous step is in
+/// progress, which never happens here, so the state check refuses it.
+pub unsafe fn cancel_step<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    unsafe {
+        not_offered::<M>(
+            c,
+            FmiFunction::CancelStep,
+            "canRunAsynchronuously=\"false\"",
+        )
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2DoStep`.
+pub unsafe fn do_step<M: CoSimModel>(
+    c: sys::fmi2Component,
+    current_communication_point: sys::fmi2Real,
+    communication_step_size: sys::fmi2Real,
+    _no_set_fmu_state_prior_to_current_point: sys::fmi2Boolean,
+) -> sys::fmi2Status {
+    let function = FmiFunction::DoStep;
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            trace(
+                inst,
+                function,
+                format_args!(
+                    "currentCommunicationPoint = {current_communication_point}, \
+                     communicationStepSize = {communication_step_size}"
+                ),
+            );
+            inst.do_step(current_communication_point, communication_step_size)
+        })
+    }
+}
+
+/// A status query. Steps are never asynchronous, so only the last successful
+/// time and the terminated flag are available; other kinds answer
+/// `fmi2Discard`, as the standard prescribes for an unavailable status.
+///
+/// # Safety
+/// `value` must be NULL or valid for a write of `T`.
+unsafe fn status_query<M: CoSimModel, T>(
+    c: sys::fmi2Component,
+    function: FmiFunction,
+    kind: sys::fmi2StatusKind,
+    value: *mut T,
+    answer: impl FnOnce(&Instance<M>, sys::fmi2StatusKind) -> Option<T>,
+) -> sys::fmi2Status {
+    unsafe {
+        call::<M, _>(c, function, |inst| {
+            if value.is_null() {
+                return inst.error(function, format_args!("value is NULL"));
+            }
+            match answer(inst, kind) {
+                Some(v) => {
+                    *value = v;
+                    Status::Ok
+                }
+                None => {
+                    inst.logger.log_in(
+                        function.name(),
+                        Status::Discard,
+                        LogCategory::StatusDiscard,
+                        format_args!(
+                            "status kind {kind} is not available here: this FMU never runs \
+                             asynchronous steps"
+                        ),
+                    );
+                    Status::Discard
+                }
+            }
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetStatus`.
+pub unsafe fn get_status<M: CoSimModel>(
+    c: sys::fmi2Component,
+    kind: sys::fmi2StatusKind,
+    value: *mut sys::fmi2Status,
+) -> sys::fmi2Status {
+    unsafe { status_query::<M, _>(c, FmiFunction::GetStatus, kind, value, |_, _| None) }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetRealStatus`.
+pub unsafe fn get_real_status<M: CoSimModel>(
+    c: sys::fmi2Component,
+    kind: sys::fmi2StatusKind,
+    value: *mut sys::fmi2Real,
+) -> sys::fmi2Status {
+    unsafe {
+        status_query::<M, _>(c, FmiFunction::GetRealStatus, kind, value, |inst, kind| {
+            (kind == sys::fmi2StatusKind_fmi2LastSuccessfulTime).then_some(inst.time)
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetIntegerStatus`.
+pub unsafe fn get_integer_status<M: CoSimModel>(
+    c: sys::fmi2Component,
+    kind: sys::fmi2StatusKind,
+    value: *mut sys::fmi2Integer,
+) -> sys::fmi2Status {
+    unsafe { status_query::<M, _>(c, FmiFunction::GetIntegerStatus, kind, value, |_, _| None) }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetBooleanStatus`.
+pub unsafe fn get_boolean_status<M: CoSimModel>(
+    c: sys::fmi2Component,
+    kind: sys::fmi2StatusKind,
+    value: *mut sys::fmi2Boolean,
+) -> sys::fmi2Status {
+    unsafe {
+        status_query::<M, _>(c, FmiFunction::GetBooleanStatus, kind, value, |_, kind| {
+            // The slave never asks the master to stop the simulation.
+            (kind == sys::fmi2StatusKind_fmi2Terminated).then_some(0)
+        })
+    }
+}
+
+/// # Safety
+/// Arguments as `fmi2GetStringStatus`.
+pub unsafe fn get_string_status<M: CoSimModel>(
+    c: sys::fmi2Component,
+    kind: sys::fmi2StatusKind,
+    value: *mut sys::fmi2String,
+) -> sys::fmi2Status {
+    unsafe { status_query::<M, _>(c, FmiFunction::GetStringStatus, kind, value, |_, _| None) }
+}

@@ -1,0 +1,528 @@
+//! One FMU instance: the state machine and the rules of every FMI call, in safe
+//! Rust. `abi` turns C pointers into the slices these methods take; the model
+//! only sees validated calls in legal states.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use crate::fmu_state::SnapshotData;
+use crate::logging::{LogCategory, Logger};
+use crate::model::{CoSimModel, Context};
+use crate::status::{FmiFunction, FmiState, Status};
+use crate::variables::{Causality, Value, Variability, Variable};
+
+/// Marks a live instance allocated by this layer (checked before use).
+pub(crate) const INSTANCE_MAGIC: u64 = 0x5453_4e49_3249_4d46;
+
+/// `repr(C)` with the magic number first, so that a pointer can be recognised
+/// by reading its first eight bytes before it is used as an instance.
+#[repr(C)]
+pub struct Instance<M: CoSimModel> {
+    pub(crate) magic: u64,
+    pub(crate) logger: Logger,
+    pub(crate) state: FmiState,
+    pub(crate) time: f64,
+    pub(crate) start_time: f64,
+    pub(crate) initialized: bool,
+    pub(crate) model: M,
+    pub(crate) resource_dir: Option<PathBuf>,
+    pub(crate) guid: String,
+}
+
+/// What a setter does with one value after validation.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum SetAction {
+    Apply,
+    /// A fixed parameter written again after initialization with the value it
+    /// already has: accepted with a warning.
+    KeepSameValue,
+}
+
+/// A value type served by fmi2Get/SetXXX.
+pub(crate) trait FmiValue: Copy + PartialEq + fmt::Display {
+    const TYPE_NAME: &'static str;
+    fn getter<M>(value: &Value<M>) -> Option<fn(&M) -> Self>;
+    fn setter<M>(value: &Value<M>) -> Option<fn(&mut M, Self)>;
+    /// Why the value cannot be stored, if it cannot.
+    fn invalid(self) -> Option<&'static str> {
+        None
+    }
+}
+
+impl FmiValue for f64 {
+    const TYPE_NAME: &'static str = "Real";
+    fn getter<M>(value: &Value<M>) -> Option<fn(&M) -> f64> {
+        match value {
+            Value::Real(r) => Some(r.get),
+            _ => None,
+        }
+    }
+    fn setter<M>(value: &Value<M>) -> Option<fn(&mut M, f64)> {
+        match value {
+            Value::Real(r) => r.set,
+            _ => None,
+        }
+    }
+    fn invalid(self) -> Option<&'static str> {
+        if self.is_nan() {
+            Some("NaN")
+        } else if self.is_infinite() {
+            Some("infinite")
+        } else {
+            None
+        }
+    }
+}
+
+impl FmiValue for i32 {
+    const TYPE_NAME: &'static str = "Integer";
+    fn getter<M>(value: &Value<M>) -> Option<fn(&M) -> i32> {
+        match value {
+            Value::Integer(i) => Some(i.get),
+            _ => None,
+        }
+    }
+    fn setter<M>(value: &Value<M>) -> Option<fn(&mut M, i32)> {
+        match value {
+            Value::Integer(i) => i.set,
+            _ => None,
+        }
+    }
+}
+
+impl FmiValue for bool {
+    const TYPE_NAME: &'static str = "Boolean";
+    fn getter<M>(value: &Value<M>) -> Option<fn(&M) -> bool> {
+        match value {
+            Value::Boolean(b) => Some(b.get),
+            _ => None,
+        }
+    }
+    fn setter<M>(value: &Value<M>) -> Option<fn(&mut M, bool)> {
+        match value {
+            Value::Boolean(b) => b.set,
+            _ => None,
+        }
+    }
+}
+
+impl<M: CoSimModel> Instance<M> {
+    pub(crate) fn new(logger: Logger, resource_dir: Option<PathBuf>, guid: String) -> Self {
+        Instance {
+            magic: INSTANCE_MAGIC,
+            logger,
+            state: FmiState::Instantiated,
+            time: 0.0,
+            start_time: 0.0,
+            initialized: false,
+            model: M::new(),
+            resource_dir,
+            guid,
+        }
+    }
+
+    pub fn state(&self) -> FmiState {
+        self.state
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    pub(crate) fn error(&self, function: FmiFunction, args: fmt::Arguments<'_>) -> Status {
+        self.logger.error(function.name(), args);
+        Status::Error
+    }
+
+    fn event(&self, function: FmiFunction, args: fmt::Arguments<'_>) {
+        self.logger
+            .log_in(function.name(), Status::Ok, LogCategory::Events, args);
+    }
+
+    /// After `fmi2Error` the instance accepts only what the error state allows
+    /// (FMI 2.0.4 §2.1.3): getters, state handling, `fmi2Reset`, freeing.
+    pub(crate) fn enter_error_state(&mut self, status: Status) {
+        match status {
+            Status::Fatal => self.state = FmiState::Fatal,
+            Status::Error if self.state != FmiState::Fatal => self.state = FmiState::Error,
+            _ => {}
+        }
+    }
+
+    fn variable(&self, function: FmiFunction, vr: u32) -> Result<&'static Variable<M>, Status> {
+        M::variables().get(vr as usize).ok_or_else(|| {
+            self.error(
+                function,
+                format_args!(
+                    "unknown value reference {vr} (this FMU has value references 0..{})",
+                    M::variables().len().saturating_sub(1)
+                ),
+            )
+        })
+    }
+
+    pub(crate) fn set_debug_logging(&mut self, logging_on: bool, categories: &[&str]) -> Status {
+        let function = FmiFunction::SetDebugLogging;
+        if categories.is_empty() {
+            self.logger.set_all(logging_on);
+            return Status::Ok;
+        }
+        let mut status = Status::Ok;
+        for name in categories {
+            if *name == LogCategory::ALL_NAME {
+                self.logger.set_all(logging_on);
+            } else if let Some(category) = LogCategory::from_name(name) {
+                self.logger.set(category, logging_on);
+            } else {
+                self.logger.warning(
+                    function.name(),
+                    format_args!(
+                        "unknown log category {name:?} ignored (known: logEvents, logStatusWarning, \
+                         logStatusDiscard, logStatusError, logStatusFatal, logFmiCalls, logAll)"
+                    ),
+                );
+                status = Status::Warning;
+            }
+        }
+        status
+    }
+
+    pub(crate) fn setup_experiment(&mut self, start_time: f64, stop_time: Option<f64>) -> Status {
+        let function = FmiFunction::SetupExperiment;
+        if !start_time.is_finite() {
+            return self.error(
+                function,
+                format_args!("startTime must be finite (got {start_time})"),
+            );
+        }
+        if let Some(stop) = stop_time
+            && (stop.is_nan() || stop < start_time)
+        {
+            return self.error(
+                function,
+                format_args!("stopTime {stop} is before startTime {start_time}"),
+            );
+        }
+        self.start_time = start_time;
+        self.time = start_time;
+        Status::Ok
+    }
+
+    pub(crate) fn enter_initialization_mode(&mut self) -> Status {
+        self.state = FmiState::InitializationMode;
+        self.event(
+            FmiFunction::EnterInitializationMode,
+            format_args!("entered initialization mode"),
+        );
+        Status::Ok
+    }
+
+    /// Checks every parameter against its declared range, then lets the model
+    /// validate the rest and build its initial state.
+    pub(crate) fn exit_initialization_mode(&mut self) -> Status {
+        let function = FmiFunction::ExitInitializationMode;
+        let mut violations = 0;
+        for var in M::variables()
+            .iter()
+            .filter(|v| v.causality == Causality::Parameter)
+        {
+            let violation = match &var.value {
+                Value::Real(r) => {
+                    let value = (r.get)(&self.model);
+                    // A NaN parameter is outside every range.
+                    let below = r.min.is_some_and(|min| value.is_nan() || value < min);
+                    let above = r.max.is_some_and(|max| value.is_nan() || value > max);
+                    (below || above).then(|| {
+                        format!(
+                            "parameter {} = {value} is outside its allowed range [{}, {}]",
+                            var.name,
+                            r.min.map_or("-inf".to_owned(), |v| v.to_string()),
+                            r.max.map_or("inf".to_owned(), |v| v.to_string())
+                        )
+                    })
+                }
+                Value::Integer(i) => {
+                    let value = (i.get)(&self.model);
+                    let below = i.min.is_some_and(|min| value < min);
+                    let above = i.max.is_some_and(|max| value > max);
+                    (below || above).then(|| {
+                        format!(
+                            "parameter {} = {value} is outside its allowed range [{}, {}]",
+                            var.name,
+                            i.min.map_or("-inf".to_owned(), |v| v.to_string()),
+                            i.max.map_or("inf".to_owned(), |v| v.to_string())
+                        )
+                    })
+                }
+                Value::Boolean(_) => None,
+            };
+            if let Some(message) = violation {
+                self.logger
+                    .error(function.name(), format_args!("{message}"));
+                violations += 1;
+            }
+        }
+        if violations > 0 {
+            return Status::Error;
+        }
+        let mut ctx = Context {
+            logger: &self.logger,
+            function: function.name(),
+            resource_dir: self.resource_dir.as_deref(),
+        };
+        if let Err(e) = self
+            .model
+            .exit_initialization_mode(&mut ctx, self.start_time)
+        {
+            return self.error(function, format_args!("{e}"));
+        }
+        self.time = self.start_time;
+        self.initialized = true;
+        self.state = FmiState::StepComplete;
+        self.event(
+            function,
+            format_args!("initialized at t = {}", self.start_time),
+        );
+        Status::Ok
+    }
+
+    pub(crate) fn terminate(&mut self) -> Status {
+        self.state = FmiState::Terminated;
+        self.event(
+            FmiFunction::Terminate,
+            format_args!("terminated at t = {}", self.time),
+        );
+        Status::Ok
+    }
+
+    /// Back to the state after `fmi2Instantiate`, start values included; the
+    /// importer's logging choices are kept.
+    pub(crate) fn reset(&mut self) -> Status {
+        self.model = M::new();
+        self.state = FmiState::Instantiated;
+        self.time = 0.0;
+        self.start_time = 0.0;
+        self.initialized = false;
+        self.event(FmiFunction::Reset, format_args!("reset to start values"));
+        Status::Ok
+    }
+
+    /// Reads `vrs` and hands the i-th value to `store(i, value)`.
+    pub(crate) fn get_values<T: FmiValue>(
+        &self,
+        function: FmiFunction,
+        vrs: &[u32],
+        mut store: impl FnMut(usize, T),
+    ) -> Status {
+        for (i, vr) in vrs.iter().enumerate() {
+            let var = match self.variable(function, *vr) {
+                Ok(var) => var,
+                Err(status) => return status,
+            };
+            let Some(get) = T::getter(&var.value) else {
+                return self.error(
+                    function,
+                    format_args!(
+                        "value reference {vr} ({}) is a {} variable, not {}",
+                        var.name,
+                        var.value.type_name(),
+                        T::TYPE_NAME
+                    ),
+                );
+            };
+            store(i, get(&self.model));
+        }
+        Status::Ok
+    }
+
+    /// Whether `var` may receive `value` now. Errors are logged here.
+    fn check_set<T: FmiValue>(
+        &self,
+        function: FmiFunction,
+        var: &Variable<M>,
+        value: T,
+    ) -> Result<SetAction, Status> {
+        let Some(get) = T::getter(&var.value) else {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "{} is a {} variable, not {}",
+                    var.name,
+                    var.value.type_name(),
+                    T::TYPE_NAME
+                ),
+            ));
+        };
+        if let Some(reason) = value.invalid() {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "value of {} is {reason}; only finite values are accepted",
+                    var.name
+                ),
+            ));
+        }
+        if !var.is_settable() {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "{} cannot be set: its causality is {}",
+                    var.name,
+                    var.causality.as_str()
+                ),
+            ));
+        }
+        match self.state {
+            FmiState::Instantiated | FmiState::InitializationMode => Ok(SetAction::Apply),
+            FmiState::StepComplete => match (var.causality, var.variability) {
+                (Causality::Input, _) | (Causality::Parameter, Variability::Tunable) => {
+                    Ok(SetAction::Apply)
+                }
+                (Causality::Parameter, Variability::Fixed) => {
+                    let current = get(&self.model);
+                    if current == value {
+                        Ok(SetAction::KeepSameValue)
+                    } else {
+                        Err(self.error(
+                            function,
+                            format_args!(
+                                "{} is a fixed parameter: it cannot change after initialization \
+                                 (it is {current}, {value} was requested); use fmi2Reset",
+                                var.name
+                            ),
+                        ))
+                    }
+                }
+                _ => Err(self.error(
+                    function,
+                    format_args!("{} cannot be set after initialization", var.name),
+                )),
+            },
+            other => Err(self.error(
+                function,
+                format_args!("values cannot be set in state {}", other.name()),
+            )),
+        }
+    }
+
+    /// Validates every value (the i-th read by `value_at(i)`) first and applies
+    /// them only if all are valid, so a refused call changes nothing.
+    pub(crate) fn set_values<T: FmiValue>(
+        &mut self,
+        function: FmiFunction,
+        vrs: &[u32],
+        value_at: impl Fn(usize) -> T,
+    ) -> Status {
+        let mut status = Status::Ok;
+        for (i, vr) in vrs.iter().enumerate() {
+            let value = value_at(i);
+            let var = match self.variable(function, *vr) {
+                Ok(var) => var,
+                Err(status) => return status,
+            };
+            match self.check_set(function, var, value) {
+                Ok(SetAction::Apply) => {}
+                Ok(SetAction::KeepSameValue) => {
+                    self.logger.warning(
+                        function.name(),
+                        format_args!(
+                            "fixed parameter {} was written again after initialization with its \
+                             current value {value}; accepted, nothing changes",
+                            var.name
+                        ),
+                    );
+                    status = Status::Warning;
+                }
+                Err(status) => return status,
+            }
+        }
+        for (i, vr) in vrs.iter().enumerate() {
+            let var = &M::variables()[*vr as usize];
+            if self.state == FmiState::StepComplete
+                && var.causality == Causality::Parameter
+                && var.variability == Variability::Fixed
+            {
+                continue;
+            }
+            let set = T::setter(&var.value).expect("checked by check_set");
+            set(&mut self.model, value_at(i));
+        }
+        status
+    }
+
+    pub(crate) fn do_step(&mut self, current_time: f64, step_size: f64) -> Status {
+        let function = FmiFunction::DoStep;
+        if !step_size.is_finite() || step_size <= 0.0 {
+            return self.error(
+                function,
+                format_args!("communicationStepSize must be positive and finite (got {step_size})"),
+            );
+        }
+        if !current_time.is_finite() {
+            return self.error(
+                function,
+                format_args!("currentCommunicationPoint must be finite (got {current_time})"),
+            );
+        }
+        // Importers that keep time in integer nanoseconds (libcosim) or sum steps
+        // in floating point land a rounding error away from the FMU's time.
+        let tolerance = (1e-9 * current_time.abs().max(1.0)).min(0.5 * step_size);
+        if (current_time - self.time).abs() > tolerance {
+            return self.error(
+                function,
+                format_args!(
+                    "currentCommunicationPoint {current_time} does not continue from the FMU's time {} \
+                     (tolerance {tolerance:e}); to go back, restore a state with fmi2SetFMUstate",
+                    self.time
+                ),
+            );
+        }
+        let mut ctx = Context {
+            logger: &self.logger,
+            function: function.name(),
+            resource_dir: self.resource_dir.as_deref(),
+        };
+        match self.model.do_step(&mut ctx, current_time, step_size) {
+            Ok(status) => {
+                self.time = current_time + step_size;
+                status
+            }
+            Err(e) => {
+                self.state = FmiState::StepFailed;
+                self.error(function, format_args!("at t = {current_time}: {e}"))
+            }
+        }
+    }
+
+    pub(crate) fn snapshot(&self) -> SnapshotData<M> {
+        SnapshotData {
+            model: self.model.clone(),
+            time: self.time,
+            initialized: self.initialized,
+        }
+    }
+
+    /// Restores model and time; the FMI state of the instance stays as it is.
+    pub(crate) fn restore(&mut self, function: FmiFunction, data: &SnapshotData<M>) -> Status {
+        if data.initialized != self.initialized {
+            let (taken, now) = if data.initialized {
+                ("after", "before")
+            } else {
+                ("before", "after")
+            };
+            return self.error(
+                function,
+                format_args!(
+                    "the state was taken {taken} initialization and cannot be restored {now} it"
+                ),
+            );
+        }
+        self.model = data.model.clone();
+        self.time = data.time;
+        self.event(
+            function,
+            format_args!("state restored at t = {}", data.time),
+        );
+        Status::Ok
+    }
+}

@@ -1,0 +1,35 @@
+//! FMI 2.0 co-simulation layer, generic over the model.
+//!
+//! This crate knows nothing of piezos. A model implements
+//! [`CoSimModel`](model::CoSimModel) (identity, units, a variable table, start
+//! values, initialization and step); [`export_fmi2!`] exports the standard C entry
+//! points for it; [`model_description::model_description`] writes the
+//! `modelDescription.xml` that matches the binary, from the same table.
+//!
+//! Layers, as in the Reference FMUs: [`abi`] is pure FMI glue (pointers, panics,
+//! the state check), the instance implements the rules of each call, and the model
+//! never sees an FMI type.
+
+pub mod abi;
+mod export;
+pub mod fmu_state;
+mod instance;
+pub mod logging;
+pub mod model;
+pub mod model_description;
+pub mod resources;
+pub mod status;
+pub mod variables;
+
+pub use export::EXPORTED_FUNCTIONS;
+pub use instance::Instance;
+pub use logging::LogCategory;
+pub use model::{
+    BaseUnit, CoSimModel, Context, DefaultExperiment, DisplayUnit, ModelError, ModelInfo,
+    UnitDefinition,
+};
+pub use status::Status;
+pub use variables::{Causality, Variability, Variable};
+
+#[doc(hidden)]
+pub use fmi_sys;

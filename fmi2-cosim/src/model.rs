@@ -1,0 +1,156 @@
+//! What a model provides to the FMI layer: its identity, units, variable table,
+//! start-up values, initialization and step.
+
+use serde::{Serialize, de::DeserializeOwned};
+use std::fmt;
+use std::path::Path;
+
+use crate::logging::{LogCategory, Logger};
+use crate::status::Status;
+use crate::variables::Variable;
+
+/// `DefaultExperiment` of modelDescription.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DefaultExperiment {
+    pub start_time: f64,
+    pub stop_time: f64,
+    /// Preferred communication step size.
+    pub step_size: f64,
+}
+
+/// Identity of the model, written to modelDescription.
+#[derive(Clone, Copy, Debug)]
+pub struct ModelInfo {
+    /// C identifier: the binary's file name and `modelIdentifier`.
+    pub model_identifier: &'static str,
+    pub model_name: &'static str,
+    pub description: &'static str,
+    pub author: &'static str,
+    pub version: &'static str,
+    pub license: &'static str,
+    pub default_experiment: DefaultExperiment,
+}
+
+/// Exponents of the SI base units, with `factor`/`offset` to the base unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BaseUnit {
+    pub kg: i8,
+    pub m: i8,
+    pub s: i8,
+    pub a: i8,
+    pub k: i8,
+    pub mol: i8,
+    pub cd: i8,
+    pub rad: i8,
+    pub factor: f64,
+    pub offset: f64,
+}
+
+impl BaseUnit {
+    pub const NONE: BaseUnit = BaseUnit {
+        kg: 0,
+        m: 0,
+        s: 0,
+        a: 0,
+        k: 0,
+        mol: 0,
+        cd: 0,
+        rad: 0,
+        factor: 1.0,
+        offset: 0.0,
+    };
+}
+
+/// A display unit: `display = factor * value + offset` (FMI 2.0 DisplayUnit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DisplayUnit {
+    pub name: &'static str,
+    pub factor: f64,
+    pub offset: f64,
+}
+
+/// A `<Unit>` of modelDescription.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnitDefinition {
+    pub name: &'static str,
+    pub base: BaseUnit,
+    pub display_units: &'static [DisplayUnit],
+}
+
+/// A failure the model reports; the layer logs it with the function's name and
+/// returns `fmi2Error`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelError(pub String);
+
+impl fmt::Display for ModelError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ModelError {}
+
+/// A model served by the FMI layer. The model knows nothing of C, pointers or
+/// the state machine: the layer calls these methods only in legal states, with
+/// validated arguments.
+///
+/// The whole model value is the FMU state: `Clone` gives `fmi2GetFMUstate`,
+/// serde gives `fmi2SerializeFMUstate` (values only, never pointers).
+pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
+    const INFO: ModelInfo;
+    const UNITS: &'static [UnitDefinition];
+
+    /// The variable table; a variable's value reference is its index.
+    fn variables() -> &'static [Variable<Self>];
+
+    /// A model holding its start values (the same values modelDescription
+    /// declares, because modelDescription is generated from this).
+    fn new() -> Self;
+
+    /// Called by `fmi2ExitInitializationMode` after the declared ranges of all
+    /// parameters were checked: validate the rest and build the initial state.
+    fn exit_initialization_mode(
+        &mut self,
+        ctx: &mut Context<'_>,
+        start_time: f64,
+    ) -> Result<(), ModelError>;
+
+    /// Advance from `current_time` by `step_size` (> 0, finite). Must not
+    /// allocate on its normal path. Returns `Status::Warning` when it logged a
+    /// warning, `Status::Ok` otherwise.
+    fn do_step(
+        &mut self,
+        ctx: &mut Context<'_>,
+        current_time: f64,
+        step_size: f64,
+    ) -> Result<Status, ModelError>;
+}
+
+/// What a model may use of its instance while the layer runs it: logging
+/// through the importer's callback, and the resources folder.
+pub struct Context<'a> {
+    pub(crate) logger: &'a Logger,
+    pub(crate) function: &'static str,
+    pub(crate) resource_dir: Option<&'a Path>,
+}
+
+impl Context<'_> {
+    /// Logs `args`, prefixed with the FMI function being served. Formats into a
+    /// stack buffer: no allocation.
+    pub fn log(&self, status: Status, category: LogCategory, args: fmt::Arguments<'_>) {
+        self.logger.log_in(self.function, status, category, args);
+    }
+
+    pub fn warning(&self, args: fmt::Arguments<'_>) {
+        self.log(Status::Warning, LogCategory::StatusWarning, args);
+    }
+
+    pub fn event(&self, args: fmt::Arguments<'_>) {
+        self.log(Status::Ok, LogCategory::Events, args);
+    }
+
+    /// The FMU's `resources` folder, when the importer gave its location.
+    pub fn resource_dir(&self) -> Option<&Path> {
+        self.resource_dir
+    }
+}

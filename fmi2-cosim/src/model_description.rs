@@ -1,0 +1,437 @@
+//! `modelDescription.xml`, generated from the variable table that the binary
+//! serves, and the GUID derived from it.
+//!
+//! The XML is written with quick-xml rather than serialized through fmi-schema's
+//! FMI 2.0 types because those types drop an empty `dependencies` list (which
+//! would turn "depends on nothing" into "depends on everything") and carry no
+//! `unit`, `displayUnit`, `min` or `max` on a ScalarVariable's `<Real>`. The
+//! tests parse the result back with fmi-schema and check it against the table.
+//!
+//! The GUID is a name-based UUID (v5) of the description itself, rendered with a
+//! placeholder GUID: the same in every build and on every platform, and
+//! different as soon as anything a tool reads from the description changes.
+
+use std::io::Cursor;
+
+use quick_xml::Writer;
+use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, BytesText, Event};
+
+use crate::logging::LogCategory;
+use crate::model::CoSimModel;
+use crate::variables::{Causality, Value, Variable, check_table};
+
+/// Namespace of the name-based GUIDs of this layer's FMUs.
+const GUID_NAMESPACE: uuid::Uuid = uuid::uuid!("5d2b8a6e-3f4c-4e1a-9b7d-2c6f0e8a1d34");
+const GUID_PLACEHOLDER: &str = "{00000000-0000-0000-0000-000000000000}";
+
+/// Formats a Real so that it parses back to the same bits, in plain notation
+/// where that is readable and in exponent notation otherwise.
+pub fn format_real(x: f64) -> String {
+    let magnitude = x.abs();
+    if x == 0.0 || (1e-4..1e7).contains(&magnitude) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
+}
+
+fn start_value<M>(var: &Variable<M>, model: &M) -> String {
+    match &var.value {
+        Value::Real(r) => format_real((r.get)(model)),
+        Value::Integer(i) => (i.get)(model).to_string(),
+        Value::Boolean(b) => (b.get)(model).to_string(),
+    }
+}
+
+/// 1-based indices of the named variables, ascending, space separated.
+fn index_list<M>(table: &[Variable<M>], names: &[&str]) -> String {
+    let mut indices: Vec<usize> = names
+        .iter()
+        .map(|name| {
+            table
+                .iter()
+                .position(|v| v.name == *name)
+                .expect("dependencies were checked by check_table")
+                + 1
+        })
+        .collect();
+    indices.sort_unstable();
+    indices
+        .iter()
+        .map(|i| i.to_string())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+type XmlResult = Result<(), String>;
+
+struct Xml {
+    writer: Writer<Cursor<Vec<u8>>>,
+}
+
+impl Xml {
+    fn new() -> Xml {
+        Xml {
+            writer: Writer::new_with_indent(Cursor::new(Vec::new()), b' ', 2),
+        }
+    }
+
+    fn event(&mut self, event: Event<'_>) -> XmlResult {
+        self.writer.write_event(event).map_err(|e| e.to_string())
+    }
+
+    fn element(name: &str, attributes: &[(&str, &str)]) -> BytesStart<'static> {
+        let mut start = BytesStart::new(name.to_owned());
+        for (key, value) in attributes {
+            start.push_attribute((*key, *value));
+        }
+        start
+    }
+
+    fn empty(&mut self, name: &str, attributes: &[(&str, &str)]) -> XmlResult {
+        self.event(Event::Empty(Xml::element(name, attributes)))
+    }
+
+    fn open(&mut self, name: &str, attributes: &[(&str, &str)]) -> XmlResult {
+        self.event(Event::Start(Xml::element(name, attributes)))
+    }
+
+    fn close(&mut self, name: &str) -> XmlResult {
+        self.event(Event::End(BytesEnd::new(name.to_owned())))
+    }
+
+    fn comment(&mut self, text: &str) -> XmlResult {
+        self.event(Event::Comment(BytesText::new(text)))
+    }
+
+    fn finish(self) -> String {
+        let mut text = String::from_utf8(self.writer.into_inner().into_inner())
+            .expect("quick-xml writes UTF-8");
+        text.push('\n');
+        text
+    }
+}
+
+fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
+    let table = M::variables();
+    check_table(table, M::UNITS)?;
+    let info = M::INFO;
+    let start_model = M::new();
+    let mut xml = Xml::new();
+
+    xml.event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))?;
+    let version = info.version;
+    let generation_tool = concat!("fmi2-cosim ", env!("CARGO_PKG_VERSION"));
+    let structured = if table
+        .iter()
+        .any(|v| v.name.contains('.') || v.name.contains('['))
+    {
+        "structured"
+    } else {
+        "flat"
+    };
+    xml.open(
+        "fmiModelDescription",
+        &[
+            ("fmiVersion", "2.0"),
+            ("modelName", info.model_name),
+            ("guid", guid),
+            ("description", info.description),
+            ("author", info.author),
+            ("version", version),
+            ("license", info.license),
+            ("generationTool", generation_tool),
+            ("variableNamingConvention", structured),
+            ("numberOfEventIndicators", "0"),
+        ],
+    )?;
+    xml.empty(
+        "CoSimulation",
+        &[
+            ("modelIdentifier", info.model_identifier),
+            ("needsExecutionTool", "false"),
+            ("canHandleVariableCommunicationStepSize", "true"),
+            ("canInterpolateInputs", "false"),
+            ("maxOutputDerivativeOrder", "0"),
+            ("canRunAsynchronuously", "false"),
+            ("canBeInstantiatedOnlyOncePerProcess", "false"),
+            ("canNotUseMemoryManagementFunctions", "true"),
+            ("canGetAndSetFMUstate", "true"),
+            ("canSerializeFMUstate", "true"),
+            ("providesDirectionalDerivative", "false"),
+        ],
+    )?;
+
+    xml.open("UnitDefinitions", &[])?;
+    for unit in M::UNITS {
+        xml.open("Unit", &[("name", unit.name)])?;
+        let b = unit.base;
+        let exponents = [
+            ("kg", b.kg),
+            ("m", b.m),
+            ("s", b.s),
+            ("A", b.a),
+            ("K", b.k),
+            ("mol", b.mol),
+            ("cd", b.cd),
+            ("rad", b.rad),
+        ];
+        let mut owned: Vec<(&str, String)> = exponents
+            .iter()
+            .filter(|(_, e)| *e != 0)
+            .map(|(k, e)| (*k, e.to_string()))
+            .collect();
+        if b.factor != 1.0 {
+            owned.push(("factor", format_real(b.factor)));
+        }
+        if b.offset != 0.0 {
+            owned.push(("offset", format_real(b.offset)));
+        }
+        let attributes: Vec<(&str, &str)> = owned.iter().map(|(k, v)| (*k, v.as_str())).collect();
+        xml.empty("BaseUnit", &attributes)?;
+        for display in unit.display_units {
+            let factor = format_real(display.factor);
+            let offset = format_real(display.offset);
+            let mut attributes = vec![("name", display.name), ("factor", factor.as_str())];
+            if display.offset != 0.0 {
+                attributes.push(("offset", offset.as_str()));
+            }
+            xml.empty("DisplayUnit", &attributes)?;
+        }
+        xml.close("Unit")?;
+    }
+    xml.close("UnitDefinitions")?;
+
+    xml.open("LogCategories", &[])?;
+    for category in LogCategory::ALL {
+        xml.empty(
+            "Category",
+            &[
+                ("name", category.name().to_str().expect("ASCII")),
+                ("description", category.description()),
+            ],
+        )?;
+    }
+    xml.empty(
+        "Category",
+        &[
+            ("name", LogCategory::ALL_NAME),
+            ("description", "All of the above"),
+        ],
+    )?;
+    xml.close("LogCategories")?;
+
+    let experiment = info.default_experiment;
+    xml.empty(
+        "DefaultExperiment",
+        &[
+            ("startTime", &format_real(experiment.start_time)),
+            ("stopTime", &format_real(experiment.stop_time)),
+            ("stepSize", &format_real(experiment.step_size)),
+        ],
+    )?;
+
+    xml.open("ModelVariables", &[])?;
+    for (vr, var) in table.iter().enumerate() {
+        xml.comment(&format!(" index {} ", vr + 1))?;
+        let vr_text = vr.to_string();
+        let mut attributes = vec![("name", var.name), ("valueReference", vr_text.as_str())];
+        if !var.description.is_empty() {
+            attributes.push(("description", var.description));
+        }
+        attributes.push(("causality", var.causality.as_str()));
+        attributes.push(("variability", var.variability.as_str()));
+        if let Some(initial) = var.initial() {
+            attributes.push(("initial", initial.as_str()));
+        }
+        xml.open("ScalarVariable", &attributes)?;
+        let start = var.has_start().then(|| start_value(var, &start_model));
+        let mut typed: Vec<(&str, String)> = Vec::new();
+        match &var.value {
+            Value::Real(r) => {
+                if let Some(unit) = r.unit {
+                    typed.push(("unit", unit.to_owned()));
+                }
+                if let Some(display) = r.display_unit {
+                    typed.push(("displayUnit", display.to_owned()));
+                }
+                if let Some(min) = r.min {
+                    typed.push(("min", format_real(min)));
+                }
+                if let Some(max) = r.max {
+                    typed.push(("max", format_real(max)));
+                }
+            }
+            Value::Integer(i) => {
+                if let Some(min) = i.min {
+                    typed.push(("min", min.to_string()));
+                }
+                if let Some(max) = i.max {
+                    typed.push(("max", max.to_string()));
+                }
+            }
+            Value::Boolean(_) => {}
+        }
+        if let Some(start) = start {
+            typed.push(("start", start));
+        }
+        let attributes: Vec<(&str, &str)> = typed.iter().map(|(k, v)| (*k, v.as_str())).collect();
+        xml.empty(var.value.type_name(), &attributes)?;
+        xml.close("ScalarVariable")?;
+    }
+    xml.close("ModelVariables")?;
+
+    xml.open("ModelStructure", &[])?;
+    let outputs: Vec<(usize, &Variable<M>)> = table
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.causality == Causality::Output)
+        .collect();
+    if !outputs.is_empty() {
+        xml.open("Outputs", &[])?;
+        for (i, var) in &outputs {
+            let index = (i + 1).to_string();
+            let deps = index_list(table, var.output_dependencies);
+            xml.empty("Unknown", &[("index", &index), ("dependencies", &deps)])?;
+        }
+        xml.close("Outputs")?;
+    }
+    let initial_unknowns: Vec<(usize, &Variable<M>)> = table
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| {
+            matches!(
+                v.causality,
+                Causality::Output | Causality::CalculatedParameter
+            )
+        })
+        .collect();
+    if !initial_unknowns.is_empty() {
+        xml.open("InitialUnknowns", &[])?;
+        for (i, var) in &initial_unknowns {
+            let index = (i + 1).to_string();
+            let deps = index_list(table, var.initial_dependencies);
+            xml.empty("Unknown", &[("index", &index), ("dependencies", &deps)])?;
+        }
+        xml.close("InitialUnknowns")?;
+    }
+    xml.close("ModelStructure")?;
+    xml.close("fmiModelDescription")?;
+    Ok(xml.finish())
+}
+
+/// The GUID of model `M`: `{` + a UUID v5 of its description + `}`.
+pub fn guid<M: CoSimModel>() -> Result<String, String> {
+    let placeholder_description = render::<M>(GUID_PLACEHOLDER)?;
+    let uuid = uuid::Uuid::new_v5(&GUID_NAMESPACE, placeholder_description.as_bytes());
+    Ok(format!("{{{}}}", uuid.hyphenated()))
+}
+
+/// The complete `modelDescription.xml` of model `M`.
+pub fn model_description<M: CoSimModel>() -> Result<String, String> {
+    render::<M>(&guid::<M>()?)
+}
+
+fn html_escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// An HTML table of every variable (name, causality, variability, unit, start,
+/// range, description), for the FMU's `documentation/index.html`.
+pub fn variables_html<M: CoSimModel>() -> String {
+    let model = M::new();
+    let mut html = String::from(
+        "<table class=\"variables\">\n<thead><tr><th>name</th><th>vr</th><th>causality</th>\
+         <th>variability</th><th>type</th><th>unit</th><th>start</th><th>range</th>\
+         <th>description</th></tr></thead>\n<tbody>\n",
+    );
+    for (vr, var) in M::variables().iter().enumerate() {
+        let (unit, range) = match &var.value {
+            Value::Real(r) => {
+                let unit = match (r.unit, r.display_unit) {
+                    (Some(u), Some(d)) => format!("{u} (shown in {d})"),
+                    (Some(u), None) => u.to_owned(),
+                    _ => String::new(),
+                };
+                let range = match (r.min, r.max) {
+                    (None, None) => String::new(),
+                    (min, max) => format!(
+                        "[{}, {}]",
+                        min.map_or("-inf".into(), format_real),
+                        max.map_or("inf".into(), format_real)
+                    ),
+                };
+                (unit, range)
+            }
+            Value::Integer(i) => {
+                let range = match (i.min, i.max) {
+                    (None, None) => String::new(),
+                    (min, max) => format!(
+                        "[{}, {}]",
+                        min.map_or("-inf".into(), |v| v.to_string()),
+                        max.map_or("inf".into(), |v| v.to_string())
+                    ),
+                };
+                (String::new(), range)
+            }
+            Value::Boolean(_) => (String::new(), String::new()),
+        };
+        let start = if var.has_start() {
+            start_value(var, &model)
+        } else {
+            String::new()
+        };
+        html.push_str(&format!(
+            "<tr><td><code>{}</code></td><td>{vr}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\
+             <td>{}</td><td>{}</td><td>{}</td></tr>\n",
+            html_escape(var.name),
+            var.causality.as_str(),
+            var.variability.as_str(),
+            var.value.type_name(),
+            html_escape(&unit),
+            html_escape(&start),
+            html_escape(&range),
+            html_escape(var.description),
+        ));
+    }
+    html.push_str("</tbody>\n</table>\n");
+    html
+}
+
+#[cfg(test)]
+mod tests {
+    use super::format_real;
+
+    #[test]
+    fn reals_round_trip() {
+        for x in [
+            0.0,
+            1.0,
+            -0.1,
+            1e-4,
+            9.99e6,
+            1e7,
+            1e-20,
+            123456.789,
+            f64::MAX,
+            5e-324,
+        ] {
+            let text = format_real(x);
+            assert_eq!(
+                text.parse::<f64>().unwrap().to_bits(),
+                x.to_bits(),
+                "{x} -> {text}"
+            );
+        }
+    }
+
+    #[test]
+    fn reals_are_readable() {
+        assert_eq!(format_real(0.05), "0.05");
+        assert_eq!(format_real(790.0), "790");
+        assert_eq!(format_real(1.5e-5), "1.5e-5");
+    }
+}

@@ -1,0 +1,424 @@
+//! The variable table: the one source of truth for value references, names,
+//! units, causality, variability, dependencies and (through the accessors and the
+//! model's start-up values) start values.
+//!
+//! The value reference of a variable is its position in the table, so the binary's
+//! dispatch (`table[vr]`) and the generated `modelDescription.xml` cannot disagree.
+
+/// FMI 2.0 causality.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Causality {
+    Parameter,
+    CalculatedParameter,
+    Input,
+    Output,
+    Local,
+}
+
+impl Causality {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Causality::Parameter => "parameter",
+            Causality::CalculatedParameter => "calculatedParameter",
+            Causality::Input => "input",
+            Causality::Output => "output",
+            Causality::Local => "local",
+        }
+    }
+}
+
+/// FMI 2.0 variability.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Variability {
+    Constant,
+    Fixed,
+    Tunable,
+    Discrete,
+    Continuous,
+}
+
+impl Variability {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Variability::Constant => "constant",
+            Variability::Fixed => "fixed",
+            Variability::Tunable => "tunable",
+            Variability::Discrete => "discrete",
+            Variability::Continuous => "continuous",
+        }
+    }
+}
+
+/// FMI 2.0 `initial` attribute.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Initial {
+    Exact,
+    Approx,
+    Calculated,
+}
+
+impl Initial {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Initial::Exact => "exact",
+            Initial::Approx => "approx",
+            Initial::Calculated => "calculated",
+        }
+    }
+}
+
+/// Accessors and attributes of a Real variable.
+pub struct RealVariable<M> {
+    pub get: fn(&M) -> f64,
+    pub set: Option<fn(&mut M, f64)>,
+    pub unit: Option<&'static str>,
+    pub display_unit: Option<&'static str>,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+}
+
+/// Accessors and attributes of an Integer variable.
+pub struct IntegerVariable<M> {
+    pub get: fn(&M) -> i32,
+    pub set: Option<fn(&mut M, i32)>,
+    pub min: Option<i32>,
+    pub max: Option<i32>,
+}
+
+/// Accessors of a Boolean variable.
+pub struct BooleanVariable<M> {
+    pub get: fn(&M) -> bool,
+    pub set: Option<fn(&mut M, bool)>,
+}
+
+/// The typed part of a variable.
+pub enum Value<M> {
+    Real(RealVariable<M>),
+    Integer(IntegerVariable<M>),
+    Boolean(BooleanVariable<M>),
+}
+
+impl<M> Value<M> {
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Value::Real(_) => "Real",
+            Value::Integer(_) => "Integer",
+            Value::Boolean(_) => "Boolean",
+        }
+    }
+
+    fn is_settable(&self) -> bool {
+        match self {
+            Value::Real(r) => r.set.is_some(),
+            Value::Integer(i) => i.set.is_some(),
+            Value::Boolean(b) => b.set.is_some(),
+        }
+    }
+}
+
+/// One row of the variable table.
+pub struct Variable<M> {
+    pub name: &'static str,
+    pub description: &'static str,
+    pub causality: Causality,
+    pub variability: Variability,
+    pub value: Value<M>,
+    /// For outputs: the inputs (by name) that reach this output within one
+    /// communication point, i.e. direct feedthrough. Empty means none.
+    pub output_dependencies: &'static [&'static str],
+    /// For outputs: the inputs and exact parameters (by name) that the value
+    /// after `fmi2ExitInitializationMode` depends on. Empty means none.
+    pub initial_dependencies: &'static [&'static str],
+}
+
+impl<M> Variable<M> {
+    const fn new(
+        name: &'static str,
+        description: &'static str,
+        causality: Causality,
+        variability: Variability,
+        value: Value<M>,
+    ) -> Self {
+        Variable {
+            name,
+            description,
+            causality,
+            variability,
+            value,
+            output_dependencies: &[],
+            initial_dependencies: &[],
+        }
+    }
+
+    /// A continuous Real input (start value read from the model at start-up).
+    pub const fn real_input(
+        name: &'static str,
+        description: &'static str,
+        unit: &'static str,
+        get: fn(&M) -> f64,
+        set: fn(&mut M, f64),
+    ) -> Self {
+        Self::new(
+            name,
+            description,
+            Causality::Input,
+            Variability::Continuous,
+            Value::Real(RealVariable {
+                get,
+                set: Some(set),
+                unit: Some(unit),
+                display_unit: None,
+                min: None,
+                max: None,
+            }),
+        )
+    }
+
+    /// A continuous Real output, computed by the model.
+    pub const fn real_output(
+        name: &'static str,
+        description: &'static str,
+        unit: &'static str,
+        get: fn(&M) -> f64,
+    ) -> Self {
+        Self::new(
+            name,
+            description,
+            Causality::Output,
+            Variability::Continuous,
+            Value::Real(RealVariable {
+                get,
+                set: None,
+                unit: Some(unit),
+                display_unit: None,
+                min: None,
+                max: None,
+            }),
+        )
+    }
+
+    /// A continuous Real local (a diagnostic that is not a port).
+    pub const fn real_local(
+        name: &'static str,
+        description: &'static str,
+        unit: &'static str,
+        get: fn(&M) -> f64,
+    ) -> Self {
+        Self::new(
+            name,
+            description,
+            Causality::Local,
+            Variability::Continuous,
+            Value::Real(RealVariable {
+                get,
+                set: None,
+                unit: Some(unit),
+                display_unit: None,
+                min: None,
+                max: None,
+            }),
+        )
+    }
+
+    /// A Real parameter; `unit` may be empty for a dimensionless or
+    /// non-integer-exponent quantity.
+    pub const fn real_parameter(
+        name: &'static str,
+        description: &'static str,
+        unit: &'static str,
+        variability: Variability,
+        get: fn(&M) -> f64,
+        set: fn(&mut M, f64),
+    ) -> Self {
+        Self::new(
+            name,
+            description,
+            Causality::Parameter,
+            variability,
+            Value::Real(RealVariable {
+                get,
+                set: Some(set),
+                unit: if unit.is_empty() { None } else { Some(unit) },
+                display_unit: None,
+                min: None,
+                max: None,
+            }),
+        )
+    }
+
+    /// An Integer parameter.
+    pub const fn integer_parameter(
+        name: &'static str,
+        description: &'static str,
+        variability: Variability,
+        get: fn(&M) -> i32,
+        set: fn(&mut M, i32),
+    ) -> Self {
+        Self::new(
+            name,
+            description,
+            Causality::Parameter,
+            variability,
+            Value::Integer(IntegerVariable {
+                get,
+                set: Some(set),
+                min: None,
+                max: None,
+            }),
+        )
+    }
+
+    /// A Boolean parameter.
+    pub const fn boolean_parameter(
+        name: &'static str,
+        description: &'static str,
+        variability: Variability,
+        get: fn(&M) -> bool,
+        set: fn(&mut M, bool),
+    ) -> Self {
+        Self::new(
+            name,
+            description,
+            Causality::Parameter,
+            variability,
+            Value::Boolean(BooleanVariable {
+                get,
+                set: Some(set),
+            }),
+        )
+    }
+
+    /// Declares the allowed range of a Real variable (`min`/`max` in
+    /// modelDescription; parameters outside it are refused at
+    /// `fmi2ExitInitializationMode`).
+    pub const fn range(mut self, min: Option<f64>, max: Option<f64>) -> Self {
+        if let Value::Real(ref mut r) = self.value {
+            r.min = min;
+            r.max = max;
+        }
+        self
+    }
+
+    /// Declares the allowed range of an Integer variable.
+    pub const fn integer_range(mut self, min: Option<i32>, max: Option<i32>) -> Self {
+        if let Value::Integer(ref mut i) = self.value {
+            i.min = min;
+            i.max = max;
+        }
+        self
+    }
+
+    /// Declares the display unit of a Real variable (must be a display unit of
+    /// its unit).
+    pub const fn display_unit(mut self, display_unit: &'static str) -> Self {
+        if let Value::Real(ref mut r) = self.value {
+            r.display_unit = Some(display_unit);
+        }
+        self
+    }
+
+    /// Direct feedthrough of an output (inputs by name).
+    pub const fn depends_on(mut self, inputs: &'static [&'static str]) -> Self {
+        self.output_dependencies = inputs;
+        self
+    }
+
+    /// What an output depends on after initialization (inputs and exact
+    /// parameters by name).
+    pub const fn initially_depends_on(mut self, knowns: &'static [&'static str]) -> Self {
+        self.initial_dependencies = knowns;
+        self
+    }
+
+    /// The `initial` attribute, derived from causality as FMI 2.0 requires:
+    /// parameters and their start values are exact; everything the model
+    /// computes is calculated; inputs carry no `initial`.
+    pub fn initial(&self) -> Option<Initial> {
+        match self.causality {
+            Causality::Parameter => Some(Initial::Exact),
+            Causality::Input => None,
+            Causality::Output | Causality::Local | Causality::CalculatedParameter => {
+                Some(Initial::Calculated)
+            }
+        }
+    }
+
+    /// Whether modelDescription carries a start value for the variable.
+    pub fn has_start(&self) -> bool {
+        matches!(self.causality, Causality::Parameter | Causality::Input)
+    }
+
+    /// Whether `fmi2SetXXX` may ever write it.
+    pub fn is_settable(&self) -> bool {
+        self.has_start() && self.variability != Variability::Constant && self.value.is_settable()
+    }
+}
+
+/// Checks that names are unique, that dependencies name existing inputs or
+/// parameters, that settable variables have setters, and that display units
+/// belong to declared units. Used by modelDescription generation and by tests.
+pub fn check_table<M>(
+    table: &[Variable<M>],
+    units: &[crate::model::UnitDefinition],
+) -> Result<(), String> {
+    let mut names = std::collections::HashSet::new();
+    for (vr, var) in table.iter().enumerate() {
+        if !names.insert(var.name) {
+            return Err(format!(
+                "variable name {} (vr {vr}) appears twice",
+                var.name
+            ));
+        }
+        if var.has_start() && var.variability != Variability::Constant && !var.value.is_settable() {
+            return Err(format!("{} has a start value but no setter", var.name));
+        }
+        if let Value::Real(r) = &var.value {
+            if let Some(unit) = r.unit {
+                let Some(def) = units.iter().find(|u| u.name == unit) else {
+                    return Err(format!("{}: unit {unit} is not declared", var.name));
+                };
+                if let Some(du) = r.display_unit
+                    && !def.display_units.iter().any(|d| d.name == du)
+                {
+                    return Err(format!(
+                        "{}: display unit {du} is not a display unit of {unit}",
+                        var.name
+                    ));
+                }
+            } else if r.display_unit.is_some() {
+                return Err(format!("{}: display unit without unit", var.name));
+            }
+        }
+        let is_output = var.causality == Causality::Output;
+        if !is_output
+            && (!var.output_dependencies.is_empty() || !var.initial_dependencies.is_empty())
+        {
+            return Err(format!("{}: only outputs carry dependencies", var.name));
+        }
+        for dep in var.output_dependencies {
+            match table.iter().find(|v| v.name == *dep) {
+                Some(v) if v.causality == Causality::Input => {}
+                Some(_) => {
+                    return Err(format!(
+                        "{}: output dependency {dep} is not an input",
+                        var.name
+                    ));
+                }
+                None => return Err(format!("{}: unknown dependency {dep}", var.name)),
+            }
+        }
+        for dep in var.initial_dependencies {
+            match table.iter().find(|v| v.name == *dep) {
+                Some(v) if matches!(v.causality, Causality::Input | Causality::Parameter) => {}
+                Some(_) => {
+                    return Err(format!(
+                        "{}: initial dependency {dep} is neither an input nor a parameter",
+                        var.name
+                    ));
+                }
+                None => return Err(format!("{}: unknown initial dependency {dep}", var.name)),
+            }
+        }
+    }
+    Ok(())
+}
