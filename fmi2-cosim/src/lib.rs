@@ -11,6 +11,7 @@
 //! never sees an FMI type.
 
 pub mod abi;
+pub mod describe;
 mod export;
 pub mod fmu_state;
 mod instance;

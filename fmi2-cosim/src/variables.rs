@@ -129,6 +129,10 @@ pub struct Variable<M> {
     /// For outputs: the inputs and exact parameters (by name) that the value
     /// after `fmi2ExitInitializationMode` depends on. Empty means none.
     pub initial_dependencies: &'static [&'static str],
+    /// Where the model keeps the value in its own parameter structure (e.g. the
+    /// path in a JSON preset), so that the model's own messages can be mapped to
+    /// the FMI name and the documentation can show both.
+    pub model_path: Option<&'static str>,
 }
 
 impl<M> Variable<M> {
@@ -147,6 +151,7 @@ impl<M> Variable<M> {
             value,
             output_dependencies: &[],
             initial_dependencies: &[],
+            model_path: None,
         }
     }
 
@@ -314,6 +319,12 @@ impl<M> Variable<M> {
         if let Value::Real(ref mut r) = self.value {
             r.display_unit = Some(display_unit);
         }
+        self
+    }
+
+    /// Records where the model keeps the value (see [`Variable::model_path`]).
+    pub const fn model_path(mut self, path: &'static str) -> Self {
+        self.model_path = Some(path);
         self
     }
 

@@ -1,0 +1,83 @@
+# Two commands do all the set-up on a fresh machine:
+#   make demo   builds the FMUs and runs the main job
+#   make test   builds the FMUs and runs every test (Rust and Python/fmpy)
+# They install what they need: libclang (Debian package, for fmi-sys's bindgen)
+# when it is missing, and a .venv with the pinned Python packages of
+# tests/requirements.txt. Rust crates come from Cargo.lock.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+CARGO ?= cargo
+PYTHON3 ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+DIST := dist
+BUILD := build
+RELEASE := target/release
+
+# identifier:cargo-package:describe-binary:library
+PLANT := FlexureStage:fmu-plant:flexure-stage-describe:libfmu_plant.so
+FMU_SPECS := $(PLANT)
+
+.PHONY: all fmus test demo lint rust-test python-test model-descriptions system-deps venv clean
+
+all: fmus
+
+# fmi-sys generates its FMI 2.0 bindings with bindgen, which needs libclang.
+system-deps:
+	@if ! ldconfig -p | grep -q 'libclang[-0-9.]*\.so'; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing libclang-dev (needed by bindgen)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libclang-dev >/dev/null; \
+	  else \
+	    echo "libclang is missing: install it (Debian/Ubuntu: apt-get install libclang-dev)" >&2; exit 1; \
+	  fi; \
+	fi
+
+$(VENV)/.installed: tests/requirements.txt
+	$(PYTHON3) -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r tests/requirements.txt
+	touch $@
+
+venv: $(VENV)/.installed
+
+# Builds the release binaries, writes each FMU's description from its variable
+# table and packs dist/<identifier>.fmu.
+fmus: system-deps
+	$(CARGO) build --release --locked -p fmu-plant -p packaging
+	@for spec in $(FMU_SPECS); do \
+	  IFS=: read -r id pkg describe lib <<< "$$spec"; \
+	  rm -rf $(BUILD)/$$id; \
+	  $(RELEASE)/$$describe $(BUILD)/$$id; \
+	  $(RELEASE)/fmu-pack --description $(BUILD)/$$id --binary $(RELEASE)/$$lib \
+	    --platform linux64 --out $(DIST)/$$id.fmu; \
+	done
+
+# Rewrites the committed modelDescription/*.xml after an interface change
+# (a test fails while they differ from a fresh generation).
+model-descriptions: system-deps
+	$(CARGO) build --release --locked -p fmu-plant
+	@for spec in $(FMU_SPECS); do \
+	  IFS=: read -r id pkg describe lib <<< "$$spec"; \
+	  $(RELEASE)/$$describe $(BUILD)/describe-$$id; \
+	  cp $(BUILD)/describe-$$id/modelDescription.xml modelDescription/$$id.xml; \
+	  echo "modelDescription/$$id.xml"; \
+	done
+
+lint: system-deps
+	$(CARGO) fmt --all --check
+	$(CARGO) clippy --workspace --all-targets --locked -- -D warnings
+
+rust-test: system-deps
+	$(CARGO) test --workspace --release --locked
+
+python-test: fmus venv
+	$(PY) -m pytest tests -q
+
+test: lint rust-test python-test
+
+demo: fmus venv
+	$(PY) tests/fingerprint_report.py --fmu $(DIST)/FlexureStage.fmu --out out/plant
+
+clean:
+	rm -rf $(BUILD) $(DIST) out

@@ -1,0 +1,369 @@
+//! FlexureStage FMU: seed 000's 3-DOF piezo flexure stage (x, y, θz; three
+//! PZTs; first mode 790 Hz in θz), each actuator an asymmetric Bouc-Wen model
+//! with seed 001's coupled hysteresis, as an FMI 2.0 co-simulation slave.
+//!
+//! This crate is the thin join of `fmi2-cosim` (which knows nothing of piezos)
+//! and `piezo-models` (which knows nothing of FMI): a variable table, units, and a
+//! `CoSimModel` implementation that forwards to [`FlexureStage`].
+
+use fmi2_cosim::{
+    BaseUnit, CoSimModel, Context, DefaultExperiment, DisplayUnit, ModelError, ModelInfo, Status,
+    UnitDefinition, Variability, Variable,
+};
+use piezo_models::{FlexureStage, FlexureStageParams};
+use serde::{Deserialize, Serialize};
+
+/// The FMU's model: the parameters the importer sets, the held input
+/// commands, and the stage built from the parameters at initialization.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct FlexureStageFmu {
+    params: FlexureStageParams,
+    commands: [f64; 3],
+    stage: FlexureStage,
+    /// Whether clipping of each amplifier channel was already reported: the
+    /// warning is logged once per channel, not at every step.
+    clip_reported: [bool; 3],
+}
+
+impl FlexureStageFmu {
+    pub fn params(&self) -> &FlexureStageParams {
+        &self.params
+    }
+
+    pub fn stage(&self) -> &FlexureStage {
+        &self.stage
+    }
+}
+
+const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
+
+const UNITS: &[UnitDefinition] = &[
+    UnitDefinition {
+        name: "V",
+        base: BaseUnit { kg: 1, m: 2, s: -3, a: -1, ..BaseUnit::NONE },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "um",
+        base: BaseUnit { m: 1, factor: 1e-6, ..BaseUnit::NONE },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "mm",
+        base: BaseUnit { m: 1, factor: 1e-3, ..BaseUnit::NONE },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "rad",
+        base: BaseUnit { rad: 1, ..BaseUnit::NONE },
+        display_units: &[DisplayUnit { name: "deg", factor: DEG_PER_RAD, offset: 0.0 }],
+    },
+    UnitDefinition {
+        name: "Hz",
+        base: BaseUnit { s: -1, ..BaseUnit::NONE },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "s",
+        base: BaseUnit { s: 1, ..BaseUnit::NONE },
+        display_units: &[],
+    },
+    // µm per volt: m / (kg m² s⁻³ A⁻¹)
+    UnitDefinition {
+        name: "um/V",
+        base: BaseUnit { kg: -1, m: -1, s: 3, a: 1, factor: 1e-6, ..BaseUnit::NONE },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "um/V2",
+        base: BaseUnit { kg: -2, m: -3, s: 6, a: 2, factor: 1e-6, ..BaseUnit::NONE },
+        display_units: &[],
+    },
+];
+
+/// A fixed Real parameter whose value lives at `params.<path>`.
+macro_rules! parameter {
+    ($name:expr, $description:expr, $unit:literal, [$min:expr, $max:expr], $($path:tt)+) => {
+        Variable::real_parameter(
+            $name,
+            $description,
+            $unit,
+            Variability::Fixed,
+            |m: &FlexureStageFmu| m.params.$($path)+,
+            |m: &mut FlexureStageFmu, v: f64| m.params.$($path)+ = v,
+        )
+        .range($min, $max)
+        .model_path(stringify!($($path)+))
+    };
+}
+
+/// One parameter of an asymmetric Bouc-Wen model (seed 001 eq. (3)-(4)):
+/// `y = p·u + q·h`, `dh/du = A − β·sgn(u̇)·|h|^(n−1)·h − γ·|h|^n + δ·u`.
+macro_rules! bouc_wen_parameter {
+    (p, $prefix:literal, $who:literal, $($path:tt)+) => {
+        parameter!(concat!($prefix, ".p"),
+            concat!($who, ": gain p of the input in y = p·u + q·h (seed 001 eq. 4)"),
+            "um/V", [None, None], $($path)+ .p)
+    };
+    (q, $prefix:literal, $who:literal, $($path:tt)+) => {
+        parameter!(concat!($prefix, ".q"),
+            concat!($who, ": gain q of the hysteretic state h in y = p·u + q·h (seed 001 eq. 4)"),
+            "", [None, None], $($path)+ .q)
+    };
+    (a, $prefix:literal, $who:literal, $($path:tt)+) => {
+        parameter!(concat!($prefix, ".A"),
+            concat!($who, ": A, growth of h per volt (seed 001 eq. 3)"),
+            "um/V", [None, None], $($path)+ .a)
+    };
+    (beta, $prefix:literal, $who:literal, $($path:tt)+) => {
+        parameter!(concat!($prefix, ".beta"),
+            concat!($who, ": beta, dissipative term (seed 001 eq. 3) [um^(1-n)/V]"),
+            "", [None, None], $($path)+ .beta)
+    };
+    (gamma, $prefix:literal, $who:literal, $($path:tt)+) => {
+        parameter!(concat!($prefix, ".gamma"),
+            concat!($who, ": gamma, shape term (seed 001 eq. 3) [um^(1-n)/V]"),
+            "", [None, None], $($path)+ .gamma)
+    };
+    (n, $prefix:literal, $who:literal, $($path:tt)+) => {
+        parameter!(concat!($prefix, ".n"),
+            concat!($who, ": exponent n (seed 001 eq. 3)"),
+            "", [Some(1.0), None], $($path)+ .n)
+    };
+    (delta, $prefix:literal, $who:literal, $($path:tt)+) => {
+        parameter!(concat!($prefix, ".delta"),
+            concat!($who, ": asymmetry delta, read as delta·u·du/dt (seed 001 eq. 3)"),
+            "um/V2", [None, None], $($path)+ .delta)
+    };
+}
+
+/// Builds the table as one flat list from single entries (`entry;`) and
+/// Bouc-Wen blocks (`bouc_wen(prefix, who, path);`), in order: a variable's
+/// value reference is its position.
+macro_rules! variable_table {
+    (@acc [$($done:expr,)*]) => { [$($done,)*] };
+    (@acc [$($done:expr,)*] bouc_wen($prefix:literal, $who:literal, $($path:tt)+); $($rest:tt)*) => {
+        variable_table!(@acc [$($done,)*
+            bouc_wen_parameter!(p, $prefix, $who, $($path)+),
+            bouc_wen_parameter!(q, $prefix, $who, $($path)+),
+            bouc_wen_parameter!(a, $prefix, $who, $($path)+),
+            bouc_wen_parameter!(beta, $prefix, $who, $($path)+),
+            bouc_wen_parameter!(gamma, $prefix, $who, $($path)+),
+            bouc_wen_parameter!(n, $prefix, $who, $($path)+),
+            bouc_wen_parameter!(delta, $prefix, $who, $($path)+),
+        ] $($rest)*)
+    };
+    (@acc [$($done:expr,)*] $entry:expr; $($rest:tt)*) => {
+        variable_table!(@acc [$($done,)* $entry,] $($rest)*)
+    };
+    ($($body:tt)*) => { variable_table!(@acc [] $($body)*) };
+}
+
+/// Every variable, in value-reference order: ports first (the names users
+/// wire), then diagnostics, then parameters.
+static VARIABLES: &[Variable<FlexureStageFmu>] = &variable_table! {
+    Variable::real_input(
+        "u1",
+        "Command voltage of the PZT1 amplifier channel (drives y), nominal 0..10 V",
+        "V",
+        |m| m.commands[0],
+        |m, v| m.commands[0] = v,
+    );
+    Variable::real_input(
+        "u2",
+        "Command voltage of the PZT2 amplifier channel (x pair), nominal 0..10 V",
+        "V",
+        |m| m.commands[1],
+        |m, v| m.commands[1] = v,
+    );
+    Variable::real_input(
+        "u3",
+        "Command voltage of the PZT3 amplifier channel (x pair), nominal 0..10 V",
+        "V",
+        |m| m.commands[2],
+        |m, v| m.commands[2] = v,
+    );
+    Variable::real_output("s1", "Laser sensor s1: y displacement", "um", |m| m.stage.sensors()[0]);
+    Variable::real_output("s2", "Laser sensor s2: x + theta_z·L/2", "um", |m| m.stage.sensors()[1]);
+    Variable::real_output("s3", "Laser sensor s3: x − theta_z·L/2", "um", |m| m.stage.sensors()[2]);
+    Variable::real_output("x", "True platform x (no sensor noise)", "um", |m| m.stage.pose().x_um);
+    Variable::real_output("y", "True platform y (no sensor noise)", "um", |m| m.stage.pose().y_um);
+    Variable::<FlexureStageFmu>::real_output("theta_z", "True platform rotation about z (no sensor noise)", "rad", |m| {
+        m.stage.pose().theta_rad
+    })
+    .display_unit("deg");
+    Variable::real_local("amplifier.voltage[1]", "PZT1 amplifier output voltage", "V", |m| {
+        m.stage.amplifier_voltages()[0]
+    });
+    Variable::real_local("amplifier.voltage[2]", "PZT2 amplifier output voltage", "V", |m| {
+        m.stage.amplifier_voltages()[1]
+    });
+    Variable::real_local("amplifier.voltage[3]", "PZT3 amplifier output voltage", "V", |m| {
+        m.stage.amplifier_voltages()[2]
+    });
+    parameter!("amplifier.gain", "Amplifier voltage gain (seed 000 §2: 10)", "",
+        [Some(0.0), None], amplifier.gain);
+    parameter!("amplifier.bandwidth", "Amplifier first-order bandwidth", "Hz",
+        [Some(0.0), None], amplifier.bandwidth_hz);
+    parameter!("amplifier.v_min", "Lowest actuator voltage (the PZTs cannot retract)", "V",
+        [None, None], amplifier.v_min);
+    parameter!("amplifier.v_max", "Highest actuator voltage", "V",
+        [None, None], amplifier.v_max);
+    bouc_wen("pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
+    parameter!("pzt[1].creep_gain", "PZT1 creep: steady drift per volt", "um/V",
+        [Some(0.0), None], actuators[0].creep_gain);
+    parameter!("pzt[1].creep_time", "PZT1 creep time constant", "s",
+        [Some(0.0), None], actuators[0].creep_time);
+    bouc_wen("pzt[2]", "PZT2 hysteresis", actuators[1].hysteresis);
+    parameter!("pzt[2].creep_gain", "PZT2 creep: steady drift per volt", "um/V",
+        [Some(0.0), None], actuators[1].creep_gain);
+    parameter!("pzt[2].creep_time", "PZT2 creep time constant", "s",
+        [Some(0.0), None], actuators[1].creep_time);
+    bouc_wen("pzt[3]", "PZT3 hysteresis", actuators[2].hysteresis);
+    parameter!("pzt[3].creep_gain", "PZT3 creep: steady drift per volt", "um/V",
+        [Some(0.0), None], actuators[2].creep_gain);
+    parameter!("pzt[3].creep_time", "PZT3 creep time constant", "s",
+        [Some(0.0), None], actuators[2].creep_time);
+    bouc_wen("coupling.x_from_pzt1", "Coupling PZT1 voltage -> x", coupling.x_from_pzt1);
+    bouc_wen("coupling.rot_from_pzt1", "Coupling PZT1 voltage -> s2 − s3 (rotation)",
+        coupling.rot_from_pzt1);
+    bouc_wen("coupling.y_from_pzt2", "Coupling PZT2 voltage -> y", coupling.y_from_pzt2);
+    bouc_wen("coupling.y_from_pzt3", "Coupling PZT3 voltage -> y", coupling.y_from_pzt3);
+    parameter!("mode.x.frequency", "Natural frequency of the x mode", "Hz",
+        [Some(0.0), None], modes.x.frequency_hz);
+    parameter!("mode.x.damping", "Damping ratio of the x mode", "",
+        [Some(0.0), Some(1.0)], modes.x.damping_ratio);
+    parameter!("mode.y.frequency", "Natural frequency of the y mode", "Hz",
+        [Some(0.0), None], modes.y.frequency_hz);
+    parameter!("mode.y.damping", "Damping ratio of the y mode", "",
+        [Some(0.0), Some(1.0)], modes.y.damping_ratio);
+    parameter!("mode.theta.frequency",
+        "Natural frequency of the theta_z mode, the first mode (seed 000 §2: 790 Hz)", "Hz",
+        [Some(0.0), None], modes.theta.frequency_hz);
+    parameter!("mode.theta.damping", "Damping ratio of the theta_z mode", "",
+        [Some(0.0), Some(1.0)], modes.theta.damping_ratio);
+    parameter!("L", "Distance between the x sensors s2 and s3: theta_z = (s2 − s3)/L", "mm",
+        [Some(0.0), None], sensor_spacing_mm);
+    Variable::<FlexureStageFmu>::boolean_parameter(
+        "noise.enabled",
+        "Add seeded Gaussian noise to the sensor readings",
+        Variability::Fixed,
+        |m| m.params.noise.enabled,
+        |m, v| m.params.noise.enabled = v,
+    )
+    .model_path("noise.enabled");
+    parameter!("noise.rms", "Sensor noise RMS (Keyence LK-H050 class laser sensor)", "um",
+        [Some(0.0), None], noise.rms_um);
+    Variable::<FlexureStageFmu>::integer_parameter(
+        "noise.seed",
+        "Seed of the sensor noise: the same seed gives the same noise",
+        Variability::Fixed,
+        |m| m.params.noise.seed as i32,
+        |m, v| m.params.noise.seed = v as u32,
+    )
+    .integer_range(Some(0), None)
+    .model_path("noise.seed");
+    parameter!("solver.max_voltage_step",
+        "Largest amplifier-voltage change per integration piece (bounds the hysteresis chord error)",
+        "V", [Some(1e-4), Some(10.0)], solver.max_voltage_step);
+};
+
+/// The FMI name of the parameter the model calls `path` (its serde path, as in
+/// the JSON preset), through the table's `model_path`.
+fn fmi_name(path: &str) -> Option<&'static str> {
+    VARIABLES
+        .iter()
+        .find(|v| v.model_path.is_some_and(|p| p.replace(' ', "") == path))
+        .map(|v| v.name)
+}
+
+impl CoSimModel for FlexureStageFmu {
+    const INFO: ModelInfo = ModelInfo {
+        model_identifier: "FlexureStage",
+        model_name: "FlexureStage",
+        description: "3-DOF piezo-driven flexure stage (x, y, theta_z; three PZTs with asymmetric \
+                      Bouc-Wen hysteresis and coupled hysteresis; first mode 790 Hz in theta_z)",
+        author: "piezo-fmu project",
+        version: env!("CARGO_PKG_VERSION"),
+        license: "MIT OR Apache-2.0",
+        default_experiment: DefaultExperiment {
+            start_time: 0.0,
+            stop_time: 1.0,
+            step_size: 1e-4,
+        },
+    };
+    const UNITS: &'static [UnitDefinition] = UNITS;
+
+    fn variables() -> &'static [Variable<Self>] {
+        VARIABLES
+    }
+
+    fn new() -> Self {
+        let params = FlexureStageParams::default();
+        let stage = FlexureStage::new(params.clone())
+            .expect("the shipped preset validates (tested in piezo-models)");
+        FlexureStageFmu {
+            params,
+            commands: [0.0; 3],
+            stage,
+            clip_reported: [false; 3],
+        }
+    }
+
+    fn exit_initialization_mode(
+        &mut self,
+        ctx: &mut Context<'_>,
+        _start_time: f64,
+    ) -> Result<(), ModelError> {
+        // The stage starts de-energized and at rest, whatever the inputs: the
+        // actuators have no history before t0.
+        self.stage = FlexureStage::new(self.params.clone()).map_err(|e| {
+            let name = fmi_name(&e.parameter).unwrap_or("a parameter");
+            ModelError(format!(
+                "parameter {name} ({}) = {} is not allowed: {}",
+                e.parameter, e.value, e.allowed
+            ))
+        })?;
+        self.clip_reported = [false; 3];
+        ctx.event(format_args!("stage built from the parameters, at rest"));
+        Ok(())
+    }
+
+    fn do_step(
+        &mut self,
+        ctx: &mut Context<'_>,
+        current_time: f64,
+        step_size: f64,
+    ) -> Result<Status, ModelError> {
+        let report = self.stage.step(self.commands, step_size);
+        if !report.state_finite {
+            return Err(ModelError(format!(
+                "the stage state became non-finite during the step to t = {} (commands {:?} V)",
+                current_time + step_size,
+                self.commands
+            )));
+        }
+        let mut status = Status::Ok;
+        for (channel, clipped) in report.clipped.iter().enumerate() {
+            if *clipped && !self.clip_reported[channel] {
+                self.clip_reported[channel] = true;
+                let amp = &self.params.amplifier;
+                ctx.warning(format_args!(
+                    "t = {current_time}: PZT{} command u{} = {} V asks the amplifier for {} V, \
+                     outside the actuator range {}..{} V; the output is clipped (reported once \
+                     per channel)",
+                    channel + 1,
+                    channel + 1,
+                    self.commands[channel],
+                    amp.gain * self.commands[channel],
+                    amp.v_min,
+                    amp.v_max
+                ));
+                status = Status::Warning;
+            }
+        }
+        Ok(status)
+    }
+}
+
+fmi2_cosim::export_fmi2!(FlexureStageFmu);
