@@ -68,7 +68,9 @@ lint: system-deps
 	$(CARGO) fmt --all --check
 	$(CARGO) clippy --workspace --all-targets --locked -- -D warnings
 
+# The ABI tests load the cdylibs, which `cargo test` does not rebuild.
 rust-test: system-deps
+	$(CARGO) build --workspace --release --locked
 	$(CARGO) test --workspace --release --locked
 
 python-test: fmus venv

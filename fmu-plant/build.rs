@@ -10,6 +10,9 @@ fn main() {
     let script = manifest.join("../fmi2-cosim/linker/fmi2-exports.map");
     println!("cargo:rerun-if-changed={}", script.display());
     if env::var("CARGO_CFG_TARGET_OS").as_deref() == Ok("linux") {
-        println!("cargo:rustc-cdylib-link-arg=-Wl,--version-script={}", script.display());
+        println!(
+            "cargo:rustc-cdylib-link-arg=-Wl,--version-script={}",
+            script.display()
+        );
     }
 }

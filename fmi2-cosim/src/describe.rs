@@ -19,14 +19,22 @@ pub fn documentation_html<M: CoSimModel>(template: &str) -> Result<String, Strin
         .replace("{{guid}}", &guid)
         .replace("{{variables}}", &variables_html::<M>());
     if let Some(start) = html.find("{{") {
-        let end = html[start..].find("}}").map_or(html.len(), |e| start + e + 2);
-        return Err(format!("unknown placeholder {} in the documentation template", &html[start..end]));
+        let end = html[start..]
+            .find("}}")
+            .map_or(html.len(), |e| start + e + 2);
+        return Err(format!(
+            "unknown placeholder {} in the documentation template",
+            &html[start..end]
+        ));
     }
     Ok(html)
 }
 
 /// Writes `dir/modelDescription.xml` and `dir/documentation/index.html`.
-pub fn write_description_files<M: CoSimModel>(dir: &Path, documentation_template: &str) -> io::Result<()> {
+pub fn write_description_files<M: CoSimModel>(
+    dir: &Path,
+    documentation_template: &str,
+) -> io::Result<()> {
     let invalid = |e: String| io::Error::new(io::ErrorKind::InvalidData, e);
     let xml = model_description::<M>().map_err(invalid)?;
     let html = documentation_html::<M>(documentation_template).map_err(invalid)?;
@@ -51,7 +59,10 @@ pub fn main<M: CoSimModel>(documentation_template: &str) -> std::process::ExitCo
     match write_description_files::<M>(Path::new(dir), documentation_template) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("{program}: cannot write the description of {} into {dir}: {e}", M::INFO.model_identifier);
+            eprintln!(
+                "{program}: cannot write the description of {} into {dir}: {e}",
+                M::INFO.model_identifier
+            );
             std::process::ExitCode::FAILURE
         }
     }

@@ -40,43 +40,84 @@ const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
 const UNITS: &[UnitDefinition] = &[
     UnitDefinition {
         name: "V",
-        base: BaseUnit { kg: 1, m: 2, s: -3, a: -1, ..BaseUnit::NONE },
+        base: BaseUnit {
+            kg: 1,
+            m: 2,
+            s: -3,
+            a: -1,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
     UnitDefinition {
         name: "um",
-        base: BaseUnit { m: 1, factor: 1e-6, ..BaseUnit::NONE },
+        base: BaseUnit {
+            m: 1,
+            factor: 1e-6,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
     UnitDefinition {
         name: "mm",
-        base: BaseUnit { m: 1, factor: 1e-3, ..BaseUnit::NONE },
+        base: BaseUnit {
+            m: 1,
+            factor: 1e-3,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
     UnitDefinition {
         name: "rad",
-        base: BaseUnit { rad: 1, ..BaseUnit::NONE },
-        display_units: &[DisplayUnit { name: "deg", factor: DEG_PER_RAD, offset: 0.0 }],
+        base: BaseUnit {
+            rad: 1,
+            ..BaseUnit::NONE
+        },
+        display_units: &[DisplayUnit {
+            name: "deg",
+            factor: DEG_PER_RAD,
+            offset: 0.0,
+        }],
     },
     UnitDefinition {
         name: "Hz",
-        base: BaseUnit { s: -1, ..BaseUnit::NONE },
+        base: BaseUnit {
+            s: -1,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
     UnitDefinition {
         name: "s",
-        base: BaseUnit { s: 1, ..BaseUnit::NONE },
+        base: BaseUnit {
+            s: 1,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
     // µm per volt: m / (kg m² s⁻³ A⁻¹)
     UnitDefinition {
         name: "um/V",
-        base: BaseUnit { kg: -1, m: -1, s: 3, a: 1, factor: 1e-6, ..BaseUnit::NONE },
+        base: BaseUnit {
+            kg: -1,
+            m: -1,
+            s: 3,
+            a: 1,
+            factor: 1e-6,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
     UnitDefinition {
         name: "um/V2",
-        base: BaseUnit { kg: -2, m: -3, s: 6, a: 2, factor: 1e-6, ..BaseUnit::NONE },
+        base: BaseUnit {
+            kg: -2,
+            m: -3,
+            s: 6,
+            a: 2,
+            factor: 1e-6,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
 ];

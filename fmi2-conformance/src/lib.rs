@@ -1,0 +1,595 @@
+//! Importer-side conformance harness for FMI 2.0 co-simulation binaries.
+//!
+//! It does what an importer does: `dlopen` of the built library, every symbol
+//! resolved through the official typedefs of `fmi2FunctionTypes.h` (fmi-sys's
+//! bindgen output, so a signature drift is a type error here), a logger that
+//! formats messages the way printf-style importers do, and calls in every
+//! order. Each check is a plain function that panics with a reason; an FMU
+//! crate runs them all with [`conformance_tests!`].
+//!
+//! The legality table in [`allowed_in`] is written from the standard (FMI 2.0.4,
+//! section 4.2.4), independently of the layer under test.
+
+use std::ffi::{CStr, CString, c_char, c_int, c_void};
+use std::path::{Path, PathBuf};
+use std::ptr;
+use std::sync::Mutex;
+
+use fmi_schema::fmi2::{Causality, Fmi2ModelDescription, ScalarVariableElement, Variability};
+use fmi_schema::traits::FmiModelDescription;
+use fmi_sys::fmi2 as sys;
+use fmi_sys::fmi2::Fmi2Binding;
+
+pub mod checks;
+
+pub const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
+pub const WARNING: sys::fmi2Status = sys::fmi2Status_fmi2Warning;
+pub const DISCARD: sys::fmi2Status = sys::fmi2Status_fmi2Discard;
+pub const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
+
+/// One message the FMU sent to the logger, after printf-style formatting.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LogRecord {
+    pub instance_name: String,
+    pub status: i32,
+    pub category: String,
+    pub message: String,
+}
+
+/// Where the log messages of one instance go (its `componentEnvironment`).
+#[derive(Default)]
+pub struct LogSink {
+    records: Mutex<Vec<LogRecord>>,
+}
+
+unsafe extern "C" {
+    /// The variadic logger in c/logger_shim.c.
+    fn conformance_logger(
+        environment: *mut c_void,
+        instance_name: *const c_char,
+        status: c_int,
+        category: *const c_char,
+        message: *const c_char,
+        ...
+    );
+}
+
+fn lossy(s: *const c_char) -> String {
+    if s.is_null() {
+        "(NULL)".to_owned()
+    } else {
+        unsafe { CStr::from_ptr(s) }.to_string_lossy().into_owned()
+    }
+}
+
+/// Called by the C shim with the formatted message.
+#[unsafe(no_mangle)]
+extern "C" fn conformance_record(
+    environment: *mut c_void,
+    instance_name: *const c_char,
+    status: c_int,
+    category: *const c_char,
+    message: *const c_char,
+) {
+    if environment.is_null() {
+        return;
+    }
+    let sink = unsafe { &*(environment as *const LogSink) };
+    let record = LogRecord {
+        instance_name: lossy(instance_name),
+        status,
+        category: lossy(category),
+        message: lossy(message),
+    };
+    sink.records
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push(record);
+}
+
+/// The importer-side description of a variable.
+#[derive(Clone, Debug)]
+pub struct VariableInfo {
+    pub name: String,
+    pub vr: u32,
+    pub causality: Causality,
+    pub variability: Option<Variability>,
+    pub kind: &'static str,
+    pub start: Option<f64>,
+}
+
+/// A loaded FMU binary and its modelDescription.
+pub struct Fmu {
+    pub binding: Fmi2Binding,
+    pub library_path: PathBuf,
+    pub guid: String,
+    pub description: Fmi2ModelDescription,
+    pub variables: Vec<VariableInfo>,
+}
+
+impl Fmu {
+    /// Loads `library` (dlopen) and parses `model_description` with fmi-schema.
+    pub fn load(library: &Path, model_description: &str) -> Fmu {
+        let binding = unsafe { Fmi2Binding::new(library) }
+            .unwrap_or_else(|e| panic!("cannot load {}: {e}", library.display()));
+        let description = Fmi2ModelDescription::deserialize(model_description)
+            .unwrap_or_else(|e| panic!("modelDescription does not parse with fmi-schema: {e}"));
+        let variables = description
+            .model_variables
+            .variables
+            .iter()
+            .map(|v| {
+                let (kind, start) = match &v.elem {
+                    ScalarVariableElement::Real(r) => ("Real", r.start),
+                    ScalarVariableElement::Integer(i) => ("Integer", i.start.map(f64::from)),
+                    ScalarVariableElement::Boolean(b) => {
+                        ("Boolean", b.start.map(|b| if b { 1.0 } else { 0.0 }))
+                    }
+                    ScalarVariableElement::String => ("String", None),
+                    ScalarVariableElement::Enumeration => ("Enumeration", None),
+                };
+                VariableInfo {
+                    name: v.name.clone(),
+                    vr: v.value_reference,
+                    causality: v.causality.clone(),
+                    variability: v.variability,
+                    kind,
+                    start,
+                }
+            })
+            .collect();
+        Fmu {
+            binding,
+            library_path: library.to_owned(),
+            guid: description.guid.clone(),
+            description,
+            variables,
+        }
+    }
+
+    pub fn variable(&self, name: &str) -> &VariableInfo {
+        self.variables
+            .iter()
+            .find(|v| v.name == name)
+            .unwrap_or_else(|| panic!("no variable {name} in modelDescription"))
+    }
+
+    pub fn with_causality(&self, causality: Causality) -> impl Iterator<Item = &VariableInfo> {
+        self.variables
+            .iter()
+            .filter(move |v| v.causality == causality)
+    }
+
+    /// The first Real input.
+    pub fn real_input(&self) -> &VariableInfo {
+        self.with_causality(Causality::Input)
+            .find(|v| v.kind == "Real")
+            .expect("the FMU has a Real input")
+    }
+
+    /// The first fixed Real parameter.
+    pub fn fixed_real_parameter(&self) -> &VariableInfo {
+        self.with_causality(Causality::Parameter)
+            .find(|v| v.kind == "Real" && v.variability == Some(Variability::Fixed))
+            .expect("the FMU has a fixed Real parameter")
+    }
+
+    /// A value reference that no variable has.
+    pub fn unknown_vr(&self) -> u32 {
+        self.variables.iter().map(|v| v.vr).max().unwrap_or(0) + 1000
+    }
+
+    /// Instantiates with a fresh log sink.
+    pub fn instantiate(&self, name: &str, logging_on: bool) -> Instance<'_> {
+        self.try_instantiate(name, &self.guid, None, logging_on)
+            .unwrap_or_else(|log| panic!("fmi2Instantiate returned NULL: {log:#?}"))
+    }
+
+    /// Instantiates with the given GUID and resource location; `Err` carries
+    /// the log when the FMU refused.
+    pub fn try_instantiate(
+        &self,
+        name: &str,
+        guid: &str,
+        resource_location: Option<&str>,
+        logging_on: bool,
+    ) -> Result<Instance<'_>, Vec<LogRecord>> {
+        let sink = Box::new(LogSink::default());
+        let callbacks = Box::new(callbacks_for(&sink));
+        let name_c = CString::new(name).expect("no NUL");
+        let guid_c = CString::new(guid).expect("no NUL");
+        let location_c = resource_location.map(|l| CString::new(l).expect("no NUL"));
+        let c = unsafe {
+            self.binding.fmi2Instantiate(
+                name_c.as_ptr(),
+                sys::fmi2Type_fmi2CoSimulation,
+                guid_c.as_ptr(),
+                location_c.as_ref().map_or(ptr::null(), |l| l.as_ptr()),
+                &*callbacks,
+                0,
+                logging_on as sys::fmi2Boolean,
+            )
+        };
+        if c.is_null() {
+            return Err(sink.take());
+        }
+        Ok(Instance {
+            fmu: self,
+            c,
+            sink,
+            _callbacks: callbacks,
+            time: 0.0,
+        })
+    }
+}
+
+/// Callbacks whose logger writes into `sink`.
+pub fn callbacks_for(sink: &LogSink) -> sys::fmi2CallbackFunctions {
+    let logger: unsafe extern "C" fn(
+        *mut c_void,
+        *const c_char,
+        c_int,
+        *const c_char,
+        *const c_char,
+        ...
+    ) = conformance_logger;
+    sys::fmi2CallbackFunctions {
+        // SAFETY: the shim has the C signature of fmi2CallbackLogger (the
+        // status enum is passed as an int-sized integer).
+        logger: Some(unsafe { std::mem::transmute(logger) }),
+        allocateMemory: None,
+        freeMemory: None,
+        stepFinished: None,
+        componentEnvironment: sink as *const LogSink as *mut c_void,
+    }
+}
+
+impl LogSink {
+    pub fn take(&self) -> Vec<LogRecord> {
+        std::mem::take(&mut *self.records.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+}
+
+/// A live instance; freed on drop.
+pub struct Instance<'a> {
+    pub fmu: &'a Fmu,
+    pub c: sys::fmi2Component,
+    sink: Box<LogSink>,
+    _callbacks: Box<sys::fmi2CallbackFunctions>,
+    /// The communication point the harness will pass to the next doStep.
+    pub time: f64,
+}
+
+/// The states the harness drives an instance into.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum State {
+    Instantiated,
+    InitializationMode,
+    StepComplete,
+    Terminated,
+    Error,
+}
+
+impl State {
+    pub const ALL: [State; 5] = [
+        State::Instantiated,
+        State::InitializationMode,
+        State::StepComplete,
+        State::Terminated,
+        State::Error,
+    ];
+}
+
+impl Instance<'_> {
+    fn b(&self) -> &Fmi2Binding {
+        &self.fmu.binding
+    }
+
+    /// Messages logged since the last call.
+    pub fn take_log(&self) -> Vec<LogRecord> {
+        self.sink.take()
+    }
+
+    pub fn setup(&mut self, start: f64) -> sys::fmi2Status {
+        self.time = start;
+        unsafe { self.b().fmi2SetupExperiment(self.c, 0, 0.0, start, 0, 0.0) }
+    }
+
+    pub fn enter_init(&self) -> sys::fmi2Status {
+        unsafe { self.b().fmi2EnterInitializationMode(self.c) }
+    }
+
+    pub fn exit_init(&self) -> sys::fmi2Status {
+        unsafe { self.b().fmi2ExitInitializationMode(self.c) }
+    }
+
+    /// setupExperiment(0), enter and exit initialization; panics unless OK.
+    pub fn initialize(&mut self) {
+        assert_eq!(
+            self.setup(0.0),
+            OK,
+            "fmi2SetupExperiment: {:#?}",
+            self.take_log()
+        );
+        assert_eq!(
+            self.enter_init(),
+            OK,
+            "fmi2EnterInitializationMode: {:#?}",
+            self.take_log()
+        );
+        assert_eq!(
+            self.exit_init(),
+            OK,
+            "fmi2ExitInitializationMode: {:#?}",
+            self.take_log()
+        );
+    }
+
+    pub fn terminate(&self) -> sys::fmi2Status {
+        unsafe { self.b().fmi2Terminate(self.c) }
+    }
+
+    pub fn reset(&mut self) -> sys::fmi2Status {
+        self.time = 0.0;
+        unsafe { self.b().fmi2Reset(self.c) }
+    }
+
+    /// Drives a fresh instance into `state`.
+    pub fn drive_to(&mut self, state: State) {
+        match state {
+            State::Instantiated => {}
+            State::InitializationMode => {
+                assert_eq!(self.setup(0.0), OK);
+                assert_eq!(self.enter_init(), OK);
+            }
+            State::StepComplete => self.initialize(),
+            State::Terminated => {
+                self.initialize();
+                assert_eq!(self.terminate(), OK);
+            }
+            State::Error => {
+                self.initialize();
+                // Entering initialization mode again is illegal after it.
+                assert_eq!(self.enter_init(), ERROR);
+            }
+        }
+        self.take_log();
+    }
+
+    pub fn set_real(&self, vrs: &[u32], values: &[f64]) -> sys::fmi2Status {
+        assert_eq!(vrs.len(), values.len());
+        unsafe {
+            self.b()
+                .fmi2SetReal(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        }
+    }
+
+    pub fn get_real(&self, vrs: &[u32]) -> (sys::fmi2Status, Vec<f64>) {
+        let mut values = vec![f64::NAN; vrs.len()];
+        let status = unsafe {
+            self.b()
+                .fmi2GetReal(self.c, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
+        };
+        (status, values)
+    }
+
+    pub fn get_real_one(&self, vr: u32) -> f64 {
+        let (status, values) = self.get_real(&[vr]);
+        assert_eq!(status, OK, "fmi2GetReal({vr}): {:#?}", self.take_log());
+        values[0]
+    }
+
+    pub fn do_step(&mut self, h: f64) -> sys::fmi2Status {
+        let status = unsafe { self.b().fmi2DoStep(self.c, self.time, h, 1) };
+        if status <= WARNING {
+            self.time += h;
+        }
+        status
+    }
+
+    pub fn do_step_at(&self, t: f64, h: f64) -> sys::fmi2Status {
+        unsafe { self.b().fmi2DoStep(self.c, t, h, 1) }
+    }
+
+    /// Values of every Real output, in modelDescription order.
+    pub fn outputs(&self) -> Vec<f64> {
+        let vrs: Vec<u32> = self
+            .fmu
+            .with_causality(Causality::Output)
+            .filter(|v| v.kind == "Real")
+            .map(|v| v.vr)
+            .collect();
+        let (status, values) = self.get_real(&vrs);
+        assert_eq!(status, OK, "fmi2GetReal(outputs): {:#?}", self.take_log());
+        values
+    }
+
+    pub fn get_state(&self) -> (sys::fmi2Status, sys::fmi2FMUstate) {
+        let mut state: sys::fmi2FMUstate = ptr::null_mut();
+        let status = unsafe { self.b().fmi2GetFMUstate(self.c, &mut state) };
+        (status, state)
+    }
+
+    pub fn set_state(&self, state: sys::fmi2FMUstate) -> sys::fmi2Status {
+        unsafe { self.b().fmi2SetFMUstate(self.c, state) }
+    }
+
+    pub fn free_state(&self, state: &mut sys::fmi2FMUstate) -> sys::fmi2Status {
+        unsafe { self.b().fmi2FreeFMUstate(self.c, state) }
+    }
+
+    pub fn serialize(&self, state: sys::fmi2FMUstate) -> (sys::fmi2Status, Vec<u8>) {
+        let mut size = 0usize;
+        let status = unsafe {
+            self.b()
+                .fmi2SerializedFMUstateSize(self.c, state, &mut size)
+        };
+        if status != OK {
+            return (status, Vec::new());
+        }
+        let mut bytes = vec![0u8; size];
+        let status = unsafe {
+            self.b()
+                .fmi2SerializeFMUstate(self.c, state, bytes.as_mut_ptr().cast(), size)
+        };
+        (status, bytes)
+    }
+
+    pub fn deserialize(&self, bytes: &[u8]) -> (sys::fmi2Status, sys::fmi2FMUstate) {
+        let mut state: sys::fmi2FMUstate = ptr::null_mut();
+        let status = unsafe {
+            self.b()
+                .fmi2DeSerializeFMUstate(self.c, bytes.as_ptr().cast(), bytes.len(), &mut state)
+        };
+        (status, state)
+    }
+
+    pub fn set_debug_logging(&self, on: bool, categories: &[&str]) -> sys::fmi2Status {
+        let owned: Vec<CString> = categories
+            .iter()
+            .map(|c| CString::new(*c).unwrap())
+            .collect();
+        let pointers: Vec<*const c_char> = owned.iter().map(|c| c.as_ptr()).collect();
+        unsafe {
+            self.b().fmi2SetDebugLogging(
+                self.c,
+                on as sys::fmi2Boolean,
+                pointers.len(),
+                if pointers.is_empty() {
+                    ptr::null()
+                } else {
+                    pointers.as_ptr()
+                },
+            )
+        }
+    }
+}
+
+impl Drop for Instance<'_> {
+    fn drop(&mut self) {
+        unsafe { self.fmu.binding.fmi2FreeInstance(self.c) };
+    }
+}
+
+/// Whether the standard allows `function` in `state` (FMI 2.0.4, co-simulation
+/// state machine). Written from the standard, not from the layer under test.
+pub fn allowed_in(function: &str, state: State) -> bool {
+    use State::*;
+    let states: &[State] = match function {
+        "fmi2SetDebugLogging"
+        | "fmi2Reset"
+        | "fmi2GetFMUstate"
+        | "fmi2SetFMUstate"
+        | "fmi2FreeFMUstate"
+        | "fmi2SerializedFMUstateSize"
+        | "fmi2SerializeFMUstate"
+        | "fmi2DeSerializeFMUstate" => &[
+            Instantiated,
+            InitializationMode,
+            StepComplete,
+            Terminated,
+            Error,
+        ],
+        "fmi2SetupExperiment" | "fmi2EnterInitializationMode" => &[Instantiated],
+        "fmi2ExitInitializationMode" => &[InitializationMode],
+        "fmi2Terminate" | "fmi2DoStep" => &[StepComplete],
+        "fmi2GetReal"
+        | "fmi2GetInteger"
+        | "fmi2GetBoolean"
+        | "fmi2GetString"
+        | "fmi2GetDirectionalDerivative" => &[InitializationMode, StepComplete, Terminated, Error],
+        "fmi2SetReal"
+        | "fmi2SetInteger"
+        | "fmi2SetBoolean"
+        | "fmi2SetString"
+        | "fmi2SetRealInputDerivatives" => &[Instantiated, InitializationMode, StepComplete],
+        "fmi2GetRealOutputDerivatives" => &[StepComplete, Terminated, Error],
+        "fmi2CancelStep" => &[],
+        "fmi2GetStatus"
+        | "fmi2GetRealStatus"
+        | "fmi2GetIntegerStatus"
+        | "fmi2GetBooleanStatus"
+        | "fmi2GetStringStatus" => &[StepComplete, Terminated],
+        other => panic!("no legality entry for {other}"),
+    };
+    states.contains(&state)
+}
+
+/// Path of a cdylib built in the same target directory as the running test
+/// (`target/<profile>/lib<name>.so`), refused when any source file under
+/// `source_dirs` (relative to the workspace root) is newer: `cargo test`
+/// rebuilds the rlib the test links, not the cdylib it loads, so a stale
+/// binary would be tested silently.
+pub fn cdylib_path(crate_name: &str, workspace_root: &Path, source_dirs: &[&str]) -> PathBuf {
+    let exe = std::env::current_exe().expect("the test knows its path");
+    // target/<profile>/deps/<test binary>
+    let profile_dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("test binaries live in target/<profile>/deps");
+    let file = format!(
+        "{}{}{}",
+        std::env::consts::DLL_PREFIX,
+        crate_name,
+        std::env::consts::DLL_SUFFIX
+    );
+    let path = profile_dir.join(file);
+    let built = std::fs::metadata(&path)
+        .and_then(|m| m.modified())
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e}; build the cdylib first (cargo build -p <fmu crate>)",
+                path.display()
+            )
+        });
+    for dir in source_dirs {
+        if let Some(newer) = newer_file(&workspace_root.join(dir), built) {
+            panic!(
+                "{} is older than {}: rebuild it (cargo build) before running the ABI tests",
+                path.display(),
+                newer.display()
+            );
+        }
+    }
+    path
+}
+
+fn newer_file(dir: &Path, than: std::time::SystemTime) -> Option<PathBuf> {
+    let entries = std::fs::read_dir(dir).ok()?;
+    for entry in entries.flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            if let Some(found) = newer_file(&path, than) {
+                return Some(found);
+            }
+        } else if path
+            .extension()
+            .is_some_and(|e| e == "rs" || e == "json" || e == "map")
+            && entry
+                .metadata()
+                .and_then(|m| m.modified())
+                .is_ok_and(|m| m > than)
+        {
+            return Some(path);
+        }
+    }
+    None
+}
+
+/// Defines one `#[test]` per conformance check for an FMU: `$library` is the
+/// path of the built binary, `$description` its modelDescription text.
+#[macro_export]
+macro_rules! conformance_tests {
+    ($library:expr, $description:expr; $($check:ident),* $(,)?) => {
+        fn __conformance_fmu() -> &'static $crate::Fmu {
+            static FMU: ::std::sync::OnceLock<$crate::Fmu> = ::std::sync::OnceLock::new();
+            FMU.get_or_init(|| $crate::Fmu::load(&$library, &$description))
+        }
+        $(
+            #[test]
+            fn $check() {
+                $crate::checks::$check(__conformance_fmu());
+            }
+        )*
+    };
+}
