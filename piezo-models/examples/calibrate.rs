@@ -1,0 +1,283 @@
+//! Calibrates the FlexureStage preset to the stage of seed 000.
+//!
+//! Starting from `presets/flexure_stage.json`, it keeps every loop *shape*
+//! (A, β, γ, n, δ of each Bouc-Wen model, the modes, amplifier and creep) and
+//! solves for the output scales and the sensor spacing that reproduce the
+//! figures of seed 000, using the measurement procedures of
+//! `piezo_models::fingerprint`:
+//!
+//! 1. PZT1 scale ← y stroke 12.22 µm (seed 000 §2);
+//! 2. PZT2 scale, PZT3 scale and L ← x stroke 12.74 µm and rotation range
+//!    0.0103° anticlockwise / 0.0088° clockwise (seed 000 §2);
+//! 3. scales of x_from_pzt1, rot_from_pzt1, y_from_pzt2, y_from_pzt3 ← the
+//!    coupling spans of seed 000 Table 3 (2.2065, 2.7435, 1.2482, 1.6784 µm).
+//!
+//! A scale multiplies p and q of a Bouc-Wen model together, which scales its
+//! output exactly (for any n) and keeps its shape. The steps are independent
+//! in this order: the coupling models are at rest in steps 1-2 (their driving
+//! voltages are 0 there), and the x home used in step 3 depends only on step 2.
+//! The results are rounded to 6 significant digits and measured again.
+//!
+//! Usage: `cargo run --release -p piezo-models --example calibrate [-- --write]`
+//! (`--write` replaces the preset file; otherwise the JSON is printed).
+
+use piezo_models::fingerprint::{self, Axis, Fingerprints};
+use piezo_models::{BoucWenParams, FlexureStageParams};
+
+const STROKE_X_UM: f64 = 12.74;
+const STROKE_Y_UM: f64 = 12.22;
+const ANTICLOCKWISE_DEG: f64 = 0.0103;
+const CLOCKWISE_DEG: f64 = 0.0088;
+const S2_FROM_Y_UM: f64 = 2.2065;
+const S3_FROM_Y_UM: f64 = 2.7435;
+const Y_FROM_X_UM: f64 = 1.2482;
+const Y_FROM_ROTATION_UM: f64 = 1.6784;
+
+fn scaled(bw: BoucWenParams, factor: f64) -> BoucWenParams {
+    BoucWenParams {
+        p: bw.p * factor,
+        q: bw.q * factor,
+        ..bw
+    }
+}
+
+/// Newton's method on relative multipliers (start 1) with a forward-difference
+/// Jacobian; stops when every residual is below `tolerance`.
+fn solve<const N: usize>(
+    name: &str,
+    residual: impl Fn(&[f64; N]) -> [f64; N],
+    tolerance: f64,
+) -> [f64; N] {
+    let mut x = [1.0; N];
+    let mut r = residual(&x);
+    for iteration in 0..20 {
+        let worst = r.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        eprintln!("{name}: iteration {iteration}, multipliers {x:?}, worst residual {worst:.3e}");
+        if worst < tolerance {
+            return x;
+        }
+        let mut jacobian = [[0.0; N]; N];
+        for j in 0..N {
+            let step = 1e-4 * x[j].abs().max(1e-3);
+            let mut xj = x;
+            xj[j] += step;
+            let rj = residual(&xj);
+            for i in 0..N {
+                jacobian[i][j] = (rj[i] - r[i]) / step;
+            }
+        }
+        let dx = gauss(jacobian, r.map(|v| -v));
+        for j in 0..N {
+            x[j] += dx[j];
+        }
+        r = residual(&x);
+    }
+    panic!("{name}: Newton did not converge");
+}
+
+/// Solves A·x = b by Gaussian elimination with partial pivoting.
+fn gauss<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> [f64; N] {
+    for col in 0..N {
+        let pivot = (col..N)
+            .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
+            .unwrap();
+        a.swap(col, pivot);
+        b.swap(col, pivot);
+        let pivot_row = a[col];
+        for row in col + 1..N {
+            let f = a[row][col] / pivot_row[col];
+            for (x, p) in a[row][col..].iter_mut().zip(&pivot_row[col..]) {
+                *x -= f * p;
+            }
+            b[row] -= f * b[col];
+        }
+    }
+    let mut x = [0.0; N];
+    for row in (0..N).rev() {
+        let tail: f64 = (row + 1..N).map(|k| a[row][k] * x[k]).sum();
+        x[row] = (b[row] - tail) / a[row][row];
+    }
+    x
+}
+
+fn round6(v: f64) -> f64 {
+    if v == 0.0 {
+        return 0.0;
+    }
+    let digits = 5 - v.abs().log10().floor() as i32;
+    let factor = 10f64.powi(digits);
+    (v * factor).round() / factor
+}
+
+fn round_model(bw: &mut BoucWenParams) {
+    bw.p = round6(bw.p);
+    bw.q = round6(bw.q);
+}
+
+fn calibrate(base: &FlexureStageParams) -> FlexureStageParams {
+    // 1. PZT1 from the y stroke.
+    let [s1] = solve(
+        "PZT1",
+        |m| {
+            let mut p = base.clone();
+            p.actuators[0].hysteresis = scaled(base.actuators[0].hysteresis, m[0]);
+            [fingerprint::stroke(&p, Axis::Y) / STROKE_Y_UM - 1.0]
+        },
+        1e-7,
+    );
+    let mut params = base.clone();
+    params.actuators[0].hysteresis = scaled(base.actuators[0].hysteresis, s1);
+
+    // 2. PZT2, PZT3 and L from the x stroke and the rotation range.
+    let with_x_pair = |m: &[f64; 3]| {
+        let mut p = params.clone();
+        p.actuators[1].hysteresis = scaled(params.actuators[1].hysteresis, m[0]);
+        p.actuators[2].hysteresis = scaled(params.actuators[2].hysteresis, m[1]);
+        p.sensor_spacing_mm = params.sensor_spacing_mm * m[2];
+        p
+    };
+    let x_pair = solve(
+        "x pair and L",
+        |m| {
+            let p = with_x_pair(m);
+            let u_home = fingerprint::x_home_command(&p);
+            let (acw, cw) = fingerprint::rotation_range_deg(&p, u_home);
+            [
+                fingerprint::stroke(&p, Axis::X) / STROKE_X_UM - 1.0,
+                acw / ANTICLOCKWISE_DEG - 1.0,
+                cw / CLOCKWISE_DEG - 1.0,
+            ]
+        },
+        1e-7,
+    );
+    params = with_x_pair(&x_pair);
+    params.sensor_spacing_mm = round6(params.sensor_spacing_mm);
+    for act in &mut params.actuators {
+        round_model(&mut act.hysteresis);
+    }
+
+    // 3. Coupling scales from the Table 3 spans.
+    let u_home = fingerprint::x_home_command(&params);
+    let with_couplings = |m: &[f64; 4]| {
+        let mut p = params.clone();
+        let c = &mut p.coupling;
+        c.x_from_pzt1 = scaled(params.coupling.x_from_pzt1, m[0]);
+        c.rot_from_pzt1 = scaled(params.coupling.rot_from_pzt1, m[1]);
+        c.y_from_pzt2 = scaled(params.coupling.y_from_pzt2, m[2]);
+        c.y_from_pzt3 = scaled(params.coupling.y_from_pzt3, m[3]);
+        p
+    };
+    let couplings = solve(
+        "couplings",
+        |m| {
+            let c = fingerprint::coupling_sweeps(&with_couplings(m), u_home);
+            [
+                c.s2_from_y.span_um / S2_FROM_Y_UM - 1.0,
+                c.s3_from_y.span_um / S3_FROM_Y_UM - 1.0,
+                c.y_from_x.span_um / Y_FROM_X_UM - 1.0,
+                c.y_from_rotation.span_um / Y_FROM_ROTATION_UM - 1.0,
+            ]
+        },
+        1e-6,
+    );
+    params = with_couplings(&couplings);
+    let c = &mut params.coupling;
+    for bw in [
+        &mut c.x_from_pzt1,
+        &mut c.rot_from_pzt1,
+        &mut c.y_from_pzt2,
+        &mut c.y_from_pzt3,
+    ] {
+        round_model(bw);
+    }
+    params
+}
+
+fn report(f: &Fingerprints, params: &FlexureStageParams) {
+    let pct = |measured: f64, target: f64| 100.0 * (measured / target - 1.0);
+    let c = &f.couplings;
+    println!("| fingerprint | target | measured | deviation |");
+    println!("|---|---|---|---|");
+    for (name, target, measured) in [
+        ("x stroke [µm]", STROKE_X_UM, f.stroke_x_um),
+        ("y stroke [µm]", STROKE_Y_UM, f.stroke_y_um),
+        (
+            "rotation anticlockwise [°]",
+            ANTICLOCKWISE_DEG,
+            f.rotation_range_deg.0,
+        ),
+        (
+            "rotation clockwise [°]",
+            CLOCKWISE_DEG,
+            f.rotation_range_deg.1,
+        ),
+        (
+            "θ resonance [Hz]",
+            params.modes.theta.frequency_hz,
+            f.theta_resonance_hz,
+        ),
+        (
+            "s2 span from y sweep [µm]",
+            S2_FROM_Y_UM,
+            c.s2_from_y.span_um,
+        ),
+        (
+            "s3 span from y sweep [µm]",
+            S3_FROM_Y_UM,
+            c.s3_from_y.span_um,
+        ),
+        ("y span from x sweep [µm]", Y_FROM_X_UM, c.y_from_x.span_um),
+        (
+            "y span from rotation sweep [µm]",
+            Y_FROM_ROTATION_UM,
+            c.y_from_rotation.span_um,
+        ),
+    ] {
+        println!(
+            "| {name} | {target} | {measured:.6} | {:+.3} % |",
+            pct(measured, target)
+        );
+    }
+    println!();
+    println!("x home command u_home = {:.6} V", f.x_home_command);
+    for (name, shape) in [("x", f.loop_x), ("y", f.loop_y)] {
+        println!(
+            "major loop {name}: span {:.4} µm, max width {:.4} µm = {:.2} % of span, asymmetry {:.3}",
+            shape.span_um,
+            shape.max_width_um,
+            100.0 * shape.width_ratio,
+            shape.asymmetry
+        );
+    }
+    println!(
+        "sweep amplitudes: y {:.6} V, x {:.6} V, rotation ±{:.6} V",
+        c.y_sweep_amplitude, c.x_sweep_amplitude, c.rotation_sweep_amplitude
+    );
+    for (name, k) in [
+        ("s2 from y", c.s2_from_y),
+        ("s3 from y", c.s3_from_y),
+        ("y from x", c.y_from_x),
+        ("y from rotation", c.y_from_rotation),
+    ] {
+        println!(
+            "coupling {name}: loop width {:.2} % of span",
+            100.0 * k.width_ratio
+        );
+    }
+}
+
+fn main() {
+    let write = std::env::args().any(|a| a == "--write");
+    let base = FlexureStageParams::default();
+    let params = calibrate(&base);
+    params.validate().expect("calibrated parameters are valid");
+    report(&fingerprint::measure(&params), &params);
+    let json = serde_json::to_string_pretty(&params).expect("parameters serialise") + "\n";
+    if write {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/presets/flexure_stage.json");
+        std::fs::write(path, json).expect("preset written");
+        eprintln!("wrote {path}");
+    } else {
+        println!("{json}");
+    }
+}

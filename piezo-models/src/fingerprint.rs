@@ -1,0 +1,631 @@
+//! The measurement procedures behind the calibration of [`FlexureStage`] to the
+//! stage of seed 000 (§2 figures, Table 3 coupling spans).
+//!
+//! Each procedure drives a fresh stage from rest the way an FMI master would:
+//! commands held over fixed steps of [`SAMPLE_PERIOD`] (seed 000's 10 kHz
+//! controller), the command of step k being the demand evaluated at the end of
+//! that step, t_k = k·SAMPLE_PERIOD, and readings taken from the sensors after
+//! each step (x = (s2 + s3)/2, y = s1, θ = (s2 − s3)/L). The same procedures are
+//! meant to be repeated through the FMU, so every one is spelled out in its doc
+//! comment. They are shared by the fingerprint tests and the calibration
+//! example (`examples/calibrate.rs`).
+
+use crate::flexure_stage::{FlexureStage, FlexureStageParams};
+
+/// Communication step of every procedure except the resonance record [s].
+pub const SAMPLE_PERIOD: f64 = 1e-4;
+/// Duration of every quasi-static ramp between two command sets [s].
+pub const RAMP_TIME: f64 = 1.0;
+/// Command of full stroke [V] (100 V after the amplifier gain of 10).
+pub const FULL_COMMAND: f64 = 10.0;
+/// Seed 000 §2 / Table 3: the driven axis spans 10 µm in the coupling sweeps.
+pub const SWEEP_SPAN_UM: f64 = 10.0;
+/// Seed 000 §3.2 / eq. (16): rotation sweep amplitude ±9.2e-3°.
+pub const ROTATION_SWEEP_AMPLITUDE_DEG: f64 = 9.2e-3;
+
+/// Axis driven in a stroke or loop measurement.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Axis {
+    /// u2 = u3 driven, x = (s2 + s3)/2 read.
+    X,
+    /// u1 driven, y = s1 read.
+    Y,
+}
+
+/// One sample after a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    /// Time since the start of the recorded segment (end of the step) [s].
+    pub t: f64,
+    /// Commands held during the step [V].
+    pub commands: [f64; 3],
+    /// s1, s2, s3 after the step [µm].
+    pub sensors: [f64; 3],
+}
+
+/// A stage with its current commands, stepped at a fixed period.
+pub struct Rig {
+    stage: FlexureStage,
+    commands: [f64; 3],
+    spacing_um: f64,
+}
+
+impl Rig {
+    /// A stage at rest with zero commands.
+    pub fn new(params: &FlexureStageParams) -> Self {
+        let stage = FlexureStage::new(params.clone()).expect("valid stage parameters");
+        Self {
+            spacing_um: params.sensor_spacing_mm * 1e3,
+            stage,
+            commands: [0.0; 3],
+        }
+    }
+
+    pub fn stage(&self) -> &FlexureStage {
+        &self.stage
+    }
+
+    /// x = (s2 + s3)/2 [µm].
+    pub fn x(&self) -> f64 {
+        let s = self.stage.sensors();
+        0.5 * (s[1] + s[2])
+    }
+
+    /// y = s1 [µm].
+    pub fn y(&self) -> f64 {
+        self.stage.sensors()[0]
+    }
+
+    /// θ = (s2 − s3)/L [rad].
+    pub fn theta(&self) -> f64 {
+        let s = self.stage.sensors();
+        (s[1] - s[2]) / self.spacing_um
+    }
+
+    /// θ = (s2 − s3)/L in degrees.
+    pub fn theta_deg(&self) -> f64 {
+        self.theta().to_degrees()
+    }
+
+    /// Runs `duration` seconds in steps of `period`, the commands of step k being
+    /// `demand(k·period)`, and records every step.
+    pub fn run(
+        &mut self,
+        duration: f64,
+        period: f64,
+        demand: impl Fn(f64) -> [f64; 3],
+    ) -> Vec<Sample> {
+        let steps = (duration / period).round() as usize;
+        let mut samples = Vec::with_capacity(steps);
+        for k in 1..=steps {
+            let t = k as f64 * period;
+            self.commands = demand(t);
+            self.stage.step(self.commands, period);
+            samples.push(Sample {
+                t,
+                commands: self.commands,
+                sensors: self.stage.sensors(),
+            });
+        }
+        samples
+    }
+
+    /// Linear ramp from the current commands to `target` over [`RAMP_TIME`] at
+    /// [`SAMPLE_PERIOD`] (the last step holds exactly `target`).
+    pub fn ramp_to(&mut self, target: [f64; 3]) {
+        let start = self.commands;
+        self.run(RAMP_TIME, SAMPLE_PERIOD, |t| {
+            let f = t / RAMP_TIME;
+            [0, 1, 2].map(|i| start[i] + (target[i] - start[i]) * f)
+        });
+        self.commands = target;
+    }
+
+    /// Holds the current commands for `duration` seconds at [`SAMPLE_PERIOD`].
+    pub fn hold(&mut self, duration: f64) {
+        let held = self.commands;
+        self.run(duration, SAMPLE_PERIOD, |_| held);
+    }
+}
+
+/// Quasi-static stroke of an axis at the full command (seed 000 §2: x 12.74 µm,
+/// y 12.22 µm): from rest, the driven command(s) ramp linearly 0 → 10 V over
+/// 1 s (10 000 steps of 100 µs) with the other commands at 0; the stroke is the
+/// axis reading after the last step.
+pub fn stroke(params: &FlexureStageParams, axis: Axis) -> f64 {
+    let mut rig = Rig::new(params);
+    match axis {
+        Axis::X => {
+            rig.ramp_to([0.0, FULL_COMMAND, FULL_COMMAND]);
+            rig.x()
+        }
+        Axis::Y => {
+            rig.ramp_to([FULL_COMMAND, 0.0, 0.0]);
+            rig.y()
+        }
+    }
+}
+
+/// x after ramping u2 = u3 from rest to `u` over 1 s (u1 = 0).
+fn x_after_ramp(params: &FlexureStageParams, u: f64) -> f64 {
+    let mut rig = Rig::new(params);
+    rig.ramp_to([0.0, u, u]);
+    rig.x()
+}
+
+/// The x home command u_home (seed 000 §3.2: home at half of the x stroke):
+/// the u2 = u3 command whose 1 s ramp from rest ends at x = stroke(X)/2,
+/// solved to |x − stroke/2| ≤ 1e-9 µm.
+pub fn x_home_command(params: &FlexureStageParams) -> f64 {
+    let half = 0.5 * stroke(params, Axis::X);
+    solve_increasing(|u| x_after_ramp(params, u) - half, 0.0, FULL_COMMAND, 1e-9)
+}
+
+/// A rig at the x home: from rest, u2 = u3 ramped 0 → `u_home` over 1 s, u1 = 0.
+pub fn rig_at_x_home(params: &FlexureStageParams, u_home: f64) -> Rig {
+    let mut rig = Rig::new(params);
+    rig.ramp_to([0.0, u_home, u_home]);
+    rig
+}
+
+/// Rotation range (seed 000 §2: 0.0103° anticlockwise, 0.0088° clockwise),
+/// returned as (anticlockwise, clockwise) in degrees, both positive.
+///
+/// From rest: ramp to the x home (0, u_home, u_home); ramp to (0, 10, 0) and
+/// read θ⁺; ramp back to (0, u_home, u_home); ramp to (0, 0, 10) and read θ⁻.
+/// Every ramp is linear over 1 s; θ = (s2 − s3)/L is measured from the
+/// orientation at rest (θ = 0). Anticlockwise = θ⁺, clockwise = −θ⁻.
+pub fn rotation_range_deg(params: &FlexureStageParams, u_home: f64) -> (f64, f64) {
+    let mut rig = rig_at_x_home(params, u_home);
+    rig.ramp_to([0.0, FULL_COMMAND, 0.0]);
+    let anticlockwise = rig.theta_deg();
+    rig.ramp_to([0.0, u_home, u_home]);
+    rig.ramp_to([0.0, 0.0, FULL_COMMAND]);
+    (anticlockwise, -rig.theta_deg())
+}
+
+/// Step of the differential command in the resonance test [V].
+pub const RESONANCE_STEP_COMMAND: f64 = 0.1;
+/// Sample period of the resonance record [s].
+pub const RESONANCE_SAMPLE_PERIOD: f64 = 1e-5;
+/// Length of the resonance record [s].
+pub const RESONANCE_RECORD_TIME: f64 = 0.25;
+
+/// θ record of a small rotation step from the x home: rig at the x home, hold
+/// 0.5 s (the modes settle), then commands (0, u_home + 0.1, u_home − 0.1)
+/// held while θ = (s2 − s3)/L is sampled every 10 µs for 0.25 s (25 000
+/// samples, steps of 10 µs).
+pub fn rotation_step_record(params: &FlexureStageParams, u_home: f64) -> Vec<f64> {
+    let mut rig = rig_at_x_home(params, u_home);
+    rig.hold(0.5);
+    let held = [
+        0.0,
+        u_home + RESONANCE_STEP_COMMAND,
+        u_home - RESONANCE_STEP_COMMAND,
+    ];
+    let spacing = rig.spacing_um;
+    rig.run(RESONANCE_RECORD_TIME, RESONANCE_SAMPLE_PERIOD, |_| held)
+        .iter()
+        .map(|s| (s.sensors[1] - s.sensors[2]) / spacing)
+        .collect()
+}
+
+/// Frequency of the largest peak of |DFT(θ − mean θ)| of `record` (sampled at
+/// `period`), scanned from 300 Hz to 2000 Hz every 0.5 Hz (a direct DFT, so
+/// the resolution is not limited to 1/record length).
+pub fn spectral_peak_hz(record: &[f64], period: f64) -> f64 {
+    let mean = record.iter().sum::<f64>() / record.len() as f64;
+    let mut best = (0.0, f64::NEG_INFINITY);
+    let mut f = 300.0;
+    while f <= 2000.0 {
+        // Rotating phasor: e^{−j2πf·k·period} by repeated multiplication.
+        let (step_im, step_re) = (-std::f64::consts::TAU * f * period).sin_cos();
+        let (mut re, mut im) = (1.0, 0.0);
+        let (mut sum_re, mut sum_im) = (0.0, 0.0);
+        for &v in record {
+            sum_re += (v - mean) * re;
+            sum_im += (v - mean) * im;
+            (re, im) = (re * step_re - im * step_im, re * step_im + im * step_re);
+        }
+        let magnitude = sum_re * sum_re + sum_im * sum_im;
+        if magnitude > best.1 {
+            best = (f, magnitude);
+        }
+        f += 0.5;
+    }
+    best.0
+}
+
+/// θ resonance (seed 000 §2: 790 Hz): [`spectral_peak_hz`] of
+/// [`rotation_step_record`].
+pub fn theta_resonance_hz(params: &FlexureStageParams, u_home: f64) -> f64 {
+    spectral_peak_hz(
+        &rotation_step_record(params, u_home),
+        RESONANCE_SAMPLE_PERIOD,
+    )
+}
+
+/// Shape of a hysteresis loop over one cycle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoopShape {
+    /// max − min of the output over the cycle [µm].
+    pub span_um: f64,
+    /// Largest |w(u)|, w = descending − ascending branch at the same input [µm].
+    pub max_width_um: f64,
+    /// max_width / span.
+    pub width_ratio: f64,
+    /// max over d of |w(c + d) − w(c − d)| / max|w|, c the mid input
+    /// (0 for a loop point-symmetric about its centre).
+    pub asymmetry: f64,
+}
+
+/// Loop width w(u) = y_desc(u) − y_asc(u) of one cycle that runs from a minimum
+/// of `input` through its maximum back to a minimum, evaluated by linear
+/// interpolation on each branch at the 19 inputs u_min + j·(u_max − u_min)/20,
+/// j = 1..19. Returns (u, w) pairs.
+pub fn loop_widths(input: &[f64], output: &[f64]) -> Vec<(f64, f64)> {
+    let (ascending, descending) = branches(input, output);
+    let lo = input.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = input.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (1..20)
+        .map(|j| {
+            let u = lo + (hi - lo) * j as f64 / 20.0;
+            (u, interpolate(&descending, u) - interpolate(&ascending, u))
+        })
+        .collect()
+}
+
+/// One branch of a loop: (input, output) points sorted by increasing input.
+pub type Branch = Vec<(f64, f64)>;
+
+/// The two branches of one min → max → min cycle, (ascending, descending),
+/// split at the maximum of `input`.
+pub fn branches(input: &[f64], output: &[f64]) -> (Branch, Branch) {
+    let top = argmax(input);
+    let ascending = (0..=top).map(|k| (input[k], output[k])).collect();
+    let descending = (top..input.len())
+        .rev()
+        .map(|k| (input[k], output[k]))
+        .collect();
+    (ascending, descending)
+}
+
+/// Loop shape of (input, output) over one min → max → min cycle.
+pub fn loop_shape(input: &[f64], output: &[f64]) -> LoopShape {
+    let widths = loop_widths(input, output);
+    let span = span(output);
+    let max_width = widths.iter().map(|w| w.1.abs()).fold(0.0, f64::max);
+    let n = widths.len();
+    let asymmetry = (0..n / 2)
+        .map(|j| (widths[j].1 - widths[n - 1 - j].1).abs())
+        .fold(0.0, f64::max)
+        / max_width;
+    LoopShape {
+        span_um: span,
+        max_width_um: max_width,
+        width_ratio: max_width / span,
+        asymmetry,
+    }
+}
+
+/// Open-loop major loop of an axis (u1 → y, or u2 = u3 → x), 0 → 10 → 0 V at
+/// 1 Hz after one preconditioning cycle: from rest, the driven command(s)
+/// follow u(t) = 5·(1 − cos 2πt) V for t ∈ (0, 2] s (others 0); the loop is
+/// the axis reading versus the command over the second cycle, t ∈ [1, 2] s.
+pub fn major_loop(params: &FlexureStageParams, axis: Axis) -> LoopShape {
+    let mut rig = Rig::new(params);
+    let wave = |t: f64| 0.5 * FULL_COMMAND * (1.0 - (std::f64::consts::TAU * t).cos());
+    let samples = rig.run(2.0, SAMPLE_PERIOD, |t| match axis {
+        Axis::X => [0.0, wave(t), wave(t)],
+        Axis::Y => [wave(t), 0.0, 0.0],
+    });
+    let cycle = window(&samples, 1.0, 2.0);
+    let channel = if axis == Axis::X { 1 } else { 0 };
+    let input: Vec<f64> = cycle.iter().map(|s| s.commands[channel]).collect();
+    let output: Vec<f64> = cycle
+        .iter()
+        .map(|s| match axis {
+            Axis::X => 0.5 * (s.sensors[1] + s.sensors[2]),
+            Axis::Y => s.sensors[0],
+        })
+        .collect();
+    loop_shape(&input, &output)
+}
+
+/// A coupled displacement recorded in one of the coupling sweeps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coupling {
+    /// Span (max − min) of the coupled displacement over the measured cycle [µm].
+    pub span_um: f64,
+    /// Largest loop width of the coupled displacement versus the driving
+    /// command, divided by its span.
+    pub width_ratio: f64,
+}
+
+/// The four couplings of seed 000 Table 3 (without decoupling).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CouplingSweeps {
+    /// Command amplitude a of the y sweep u1 = a(1 − cos 2πt)/2 [V].
+    pub y_sweep_amplitude: f64,
+    /// Command amplitude a of the x sweep u2 = u3 = a(1 − cos 2πt)/2 [V].
+    pub x_sweep_amplitude: f64,
+    /// Differential amplitude D of the rotation sweep [V].
+    pub rotation_sweep_amplitude: f64,
+    /// s2 during the y sweep (target span 2.2065 µm).
+    pub s2_from_y: Coupling,
+    /// s3 during the y sweep (target span 2.7435 µm).
+    pub s3_from_y: Coupling,
+    /// y during the x sweep (target span 1.2482 µm).
+    pub y_from_x: Coupling,
+    /// y during the rotation sweep (target span 1.6784 µm).
+    pub y_from_rotation: Coupling,
+}
+
+/// y sweep: from rest, ramp to the x home; then u1 = a·(1 − cos 2πt)/2 for
+/// t ∈ (0, 2] s with u2 = u3 = u_home; measured cycle t ∈ [1, 2] s.
+fn y_sweep(params: &FlexureStageParams, u_home: f64, a: f64) -> Vec<Sample> {
+    let mut rig = rig_at_x_home(params, u_home);
+    let samples = rig.run(2.0, SAMPLE_PERIOD, |t| {
+        [
+            0.5 * a * (1.0 - (std::f64::consts::TAU * t).cos()),
+            u_home,
+            u_home,
+        ]
+    });
+    window(&samples, 1.0, 2.0)
+}
+
+/// x sweep: from rest, u2 = u3 = a·(1 − cos 2πt)/2 for t ∈ (0, 2] s with
+/// u1 = 0 (the y home); measured cycle t ∈ [1, 2] s.
+fn x_sweep(params: &FlexureStageParams, a: f64) -> Vec<Sample> {
+    let mut rig = Rig::new(params);
+    let samples = rig.run(2.0, SAMPLE_PERIOD, |t| {
+        let u = 0.5 * a * (1.0 - (std::f64::consts::TAU * t).cos());
+        [0.0, u, u]
+    });
+    window(&samples, 1.0, 2.0)
+}
+
+/// Rotation sweep: from rest, ramp to the x home; then u2 = u_home + D sin 2πt,
+/// u3 = u_home − D sin 2πt for t ∈ (0, 2.75] s with u1 = 0; measured cycle
+/// t ∈ [1.75, 2.75] s (minimum to minimum of the differential command).
+fn rotation_sweep(params: &FlexureStageParams, u_home: f64, d: f64) -> Vec<Sample> {
+    let mut rig = rig_at_x_home(params, u_home);
+    let samples = rig.run(2.75, SAMPLE_PERIOD, |t| {
+        let s = d * (std::f64::consts::TAU * t).sin();
+        [0.0, u_home + s, u_home - s]
+    });
+    window(&samples, 1.75, 2.75)
+}
+
+fn coupling(input: &[f64], output: &[f64]) -> Coupling {
+    let shape = loop_shape(input, output);
+    Coupling {
+        span_um: shape.span_um,
+        width_ratio: shape.width_ratio,
+    }
+}
+
+/// The coupling spans of seed 000 Table 3, open loop. Each sweep drives one
+/// axis with a 1 Hz wave whose amplitude is solved (span to 1e-7 µm, θ span
+/// to 1e-9°) so
+/// that the driven axis spans 10 µm (x, y) or 2 × 9.2e-3° (θ) over the
+/// measured cycle, while the other actuators hold their home commands (y home
+/// u1 = 0, x home u2 = u3 = u_home); see `y_sweep`, `x_sweep` and
+/// `rotation_sweep` in this module for the exact demands. Coupled readings:
+/// s2 and s3 versus u1 (y sweep), y versus u2 (x sweep), y versus
+/// D sin 2πt (rotation sweep).
+pub fn coupling_sweeps(params: &FlexureStageParams, u_home: f64) -> CouplingSweeps {
+    let spacing = params.sensor_spacing_mm * 1e3;
+    let y_of = |s: &Sample| s.sensors[0];
+    let x_of = |s: &Sample| 0.5 * (s.sensors[1] + s.sensors[2]);
+    let theta_deg_of = |s: &Sample| ((s.sensors[1] - s.sensors[2]) / spacing).to_degrees();
+
+    let a_y = solve_increasing(
+        |a| span_of(&y_sweep(params, u_home, a), y_of) - SWEEP_SPAN_UM,
+        0.0,
+        FULL_COMMAND,
+        1e-7,
+    );
+    let ys = y_sweep(params, u_home, a_y);
+    let u1: Vec<f64> = ys.iter().map(|s| s.commands[0]).collect();
+    let s2: Vec<f64> = ys.iter().map(|s| s.sensors[1]).collect();
+    let s3: Vec<f64> = ys.iter().map(|s| s.sensors[2]).collect();
+
+    let a_x = solve_increasing(
+        |a| span_of(&x_sweep(params, a), x_of) - SWEEP_SPAN_UM,
+        0.0,
+        FULL_COMMAND,
+        1e-7,
+    );
+    let xs = x_sweep(params, a_x);
+    let u2: Vec<f64> = xs.iter().map(|s| s.commands[1]).collect();
+    let y_x: Vec<f64> = xs.iter().map(y_of).collect();
+
+    let d_max = u_home.min(FULL_COMMAND - u_home);
+    let d = solve_increasing(
+        |d| {
+            span_of(&rotation_sweep(params, u_home, d), theta_deg_of)
+                - 2.0 * ROTATION_SWEEP_AMPLITUDE_DEG
+        },
+        0.0,
+        d_max,
+        1e-9,
+    );
+    let rs = rotation_sweep(params, u_home, d);
+    let differential: Vec<f64> = rs
+        .iter()
+        .map(|s| 0.5 * (s.commands[1] - s.commands[2]))
+        .collect();
+    let y_r: Vec<f64> = rs.iter().map(y_of).collect();
+
+    CouplingSweeps {
+        y_sweep_amplitude: a_y,
+        x_sweep_amplitude: a_x,
+        rotation_sweep_amplitude: d,
+        s2_from_y: coupling(&u1, &s2),
+        s3_from_y: coupling(&u1, &s3),
+        y_from_x: coupling(&u2, &y_x),
+        y_from_rotation: coupling(&differential, &y_r),
+    }
+}
+
+/// Every fingerprint of the calibrated stage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fingerprints {
+    pub stroke_x_um: f64,
+    pub stroke_y_um: f64,
+    pub x_home_command: f64,
+    /// (anticlockwise, clockwise) [deg].
+    pub rotation_range_deg: (f64, f64),
+    pub theta_resonance_hz: f64,
+    pub loop_x: LoopShape,
+    pub loop_y: LoopShape,
+    pub couplings: CouplingSweeps,
+}
+
+/// Runs every procedure of this module.
+pub fn measure(params: &FlexureStageParams) -> Fingerprints {
+    let u_home = x_home_command(params);
+    Fingerprints {
+        stroke_x_um: stroke(params, Axis::X),
+        stroke_y_um: stroke(params, Axis::Y),
+        x_home_command: u_home,
+        rotation_range_deg: rotation_range_deg(params, u_home),
+        theta_resonance_hz: theta_resonance_hz(params, u_home),
+        loop_x: major_loop(params, Axis::X),
+        loop_y: major_loop(params, Axis::Y),
+        couplings: coupling_sweeps(params, u_home),
+    }
+}
+
+/// The samples with t in [from, to] (both ends included, 1 µs slack for rounding).
+fn window(samples: &[Sample], from: f64, to: f64) -> Vec<Sample> {
+    samples
+        .iter()
+        .filter(|s| s.t >= from - 1e-6 && s.t <= to + 1e-6)
+        .copied()
+        .collect()
+}
+
+fn span(values: &[f64]) -> f64 {
+    let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let min = values.iter().copied().fold(f64::INFINITY, f64::min);
+    max - min
+}
+
+fn span_of(samples: &[Sample], reading: impl Fn(&Sample) -> f64) -> f64 {
+    span(&samples.iter().map(reading).collect::<Vec<_>>())
+}
+
+fn argmax(values: &[f64]) -> usize {
+    let mut best = 0;
+    for (k, v) in values.iter().enumerate() {
+        if *v > values[best] {
+            best = k;
+        }
+    }
+    best
+}
+
+/// Linear interpolation of y at x on points sorted by increasing x (a branch;
+/// repeated x are tolerated), clamped at the ends.
+pub fn interpolate(points: &[(f64, f64)], x: f64) -> f64 {
+    let j = points.partition_point(|p| p.0 < x);
+    if j == 0 {
+        return points[0].1;
+    }
+    if j == points.len() {
+        return points[j - 1].1;
+    }
+    let (x0, y0) = points[j - 1];
+    let (x1, y1) = points[j];
+    if x1 == x0 {
+        y1
+    } else {
+        y0 + (y1 - y0) * (x - x0) / (x1 - x0)
+    }
+}
+
+/// Root of an increasing function on [lo, hi] by the Illinois variant of
+/// regula falsi, to |f| ≤ tolerance (or a bracket narrower than 1e-12).
+pub fn solve_increasing(f: impl Fn(f64) -> f64, lo: f64, hi: f64, tolerance: f64) -> f64 {
+    let (mut a, mut b) = (lo, hi);
+    let (mut fa, mut fb) = (f(a), f(b));
+    if fa >= 0.0 {
+        return a;
+    }
+    if fb <= 0.0 {
+        return b;
+    }
+    let mut side = 0;
+    for _ in 0..200 {
+        let c = (a * fb - b * fa) / (fb - fa);
+        let fc = f(c);
+        if fc.abs() <= tolerance || (b - a) < 1e-12 {
+            return c;
+        }
+        if fc < 0.0 {
+            a = c;
+            fa = fc;
+            if side == -1 {
+                fb *= 0.5;
+            }
+            side = -1;
+        } else {
+            b = c;
+            fb = fc;
+            if side == 1 {
+                fa *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    0.5 * (a + b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interpolation_and_loop_width_of_a_known_loop() {
+        // An ellipse-like loop: ascending y = u − 0.1·sin(πu), descending
+        // y = u + 0.1·sin(πu), u in [0, 1]: width 0.2·sin(πu), symmetric.
+        let n = 1000;
+        let mut input = Vec::new();
+        let mut output = Vec::new();
+        for k in 0..=n {
+            let u = k as f64 / n as f64;
+            input.push(u);
+            output.push(u - 0.1 * (std::f64::consts::PI * u).sin());
+        }
+        for k in (0..n).rev() {
+            let u = k as f64 / n as f64;
+            input.push(u);
+            output.push(u + 0.1 * (std::f64::consts::PI * u).sin());
+        }
+        let shape = loop_shape(&input, &output);
+        assert!((shape.max_width_um - 0.2).abs() < 1e-6);
+        assert!((shape.span_um - 1.0).abs() < 1e-12);
+        assert!(shape.asymmetry < 1e-6);
+    }
+
+    #[test]
+    fn spectral_peak_finds_a_damped_sine() {
+        let period = 1e-5;
+        let record: Vec<f64> = (0..25_000)
+            .map(|k| {
+                let t = k as f64 * period;
+                (-60.0 * t).exp() * (std::f64::consts::TAU * 812.3 * t).sin()
+            })
+            .collect();
+        assert!((spectral_peak_hz(&record, period) - 812.3).abs() <= 0.5);
+    }
+
+    #[test]
+    fn solver_finds_the_root() {
+        let root = solve_increasing(|x| x * x * x - 2.0, 0.0, 3.0, 1e-12);
+        assert!((root - 2f64.cbrt()).abs() < 1e-10);
+    }
+}

@@ -1,0 +1,132 @@
+//! The default parameters reproduce the stage of seed 000 (§2 and Table 3).
+//!
+//! Every test measures its figure in simulation with the procedures of
+//! `piezo_models::fingerprint`, prints it (run with `--nocapture` to see) and
+//! asserts the tolerance. Common to all procedures: a fresh stage from rest,
+//! noise off (the default), commands held over steps of 100 µs (10 kHz), the
+//! command of step k being the demand at the end of the step, t = k·100 µs;
+//! readings from the sensors after each step: x = (s2 + s3)/2, y = s1,
+//! θ = (s2 − s3)/L. Commands are in volts before the amplifier (gain 10).
+//!
+//! x home: u_home is the u2 = u3 command whose linear ramp from rest over 1 s
+//! (u1 = 0) ends at x = (x stroke)/2, solved to 1e-9 µm in x (u_home ≈ 5.0966 V).
+
+use piezo_models::FlexureStageParams;
+use piezo_models::fingerprint::{self, Axis};
+
+fn relative_error(measured: f64, target: f64) -> f64 {
+    (measured / target - 1.0).abs()
+}
+
+/// Quasi-static x stroke, target 12.74 µm ± 5 % (seed 000 §2). From rest,
+/// u2 = u3 ramp linearly 0 → 10 V over 1 s (10 000 steps), u1 = 0; the stroke
+/// is x after the last step.
+#[test]
+fn x_stroke_at_full_command() {
+    let stroke = fingerprint::stroke(&FlexureStageParams::default(), Axis::X);
+    println!("x stroke: {stroke:.6} µm (target 12.74 µm)");
+    assert!(relative_error(stroke, 12.74) < 0.05);
+}
+
+/// Quasi-static y stroke, target 12.22 µm ± 5 % (seed 000 §2). From rest, u1
+/// ramps linearly 0 → 10 V over 1 s, u2 = u3 = 0; the stroke is y after the
+/// last step.
+#[test]
+fn y_stroke_at_full_command() {
+    let stroke = fingerprint::stroke(&FlexureStageParams::default(), Axis::Y);
+    println!("y stroke: {stroke:.6} µm (target 12.22 µm)");
+    assert!(relative_error(stroke, 12.22) < 0.05);
+}
+
+/// Rotation range, targets 0.0103° anticlockwise and 0.0088° clockwise, ± 10 %
+/// (seed 000 §2). From rest, four linear ramps of 1 s each: to the x home
+/// (0, u_home, u_home); to (0, 10, 0), read θ⁺; back to (0, u_home, u_home);
+/// to (0, 0, 10), read θ⁻. θ is measured from the orientation at rest;
+/// anticlockwise = θ⁺ (> 0), clockwise = −θ⁻.
+#[test]
+fn rotation_range_from_x_home() {
+    let params = FlexureStageParams::default();
+    let u_home = fingerprint::x_home_command(&params);
+    let (anticlockwise, clockwise) = fingerprint::rotation_range_deg(&params, u_home);
+    println!("x home command: {u_home:.6} V");
+    println!(
+        "rotation: {anticlockwise:.6}° anticlockwise (target 0.0103°), {clockwise:.6}° clockwise (target 0.0088°)"
+    );
+    assert!(anticlockwise > 0.0 && clockwise > 0.0);
+    assert!(relative_error(anticlockwise, 0.0103) < 0.10);
+    assert!(relative_error(clockwise, 0.0088) < 0.10);
+}
+
+/// θ resonance, target 790 Hz ± 2 % (seed 000 §2). At the x home (ramp 1 s),
+/// hold 0.5 s, then hold (0, u_home + 0.1, u_home − 0.1) while θ is sampled
+/// every 10 µs (steps of 10 µs) for 0.25 s; the resonance is the frequency of
+/// the largest |DFT(θ − mean θ)|, scanned from 300 to 2000 Hz every 0.5 Hz.
+#[test]
+fn theta_resonance_is_the_spectral_peak_of_a_rotation_step() {
+    let params = FlexureStageParams::default();
+    let u_home = fingerprint::x_home_command(&params);
+    let peak = fingerprint::theta_resonance_hz(&params, u_home);
+    println!("θ resonance: {peak:.1} Hz (target 790 Hz)");
+    assert!(relative_error(peak, 790.0) < 0.02);
+}
+
+/// Open-loop major loops (u1 → y; u2 = u3 → x): from rest, the driven
+/// command(s) follow 5·(1 − cos 2πt) V for 2 s (0 → 10 → 0 V at 1 Hz), the
+/// others 0; the loop is the axis reading versus the command over the second
+/// cycle, t ∈ [1, 2] s. Width w(u) = descending − ascending branch, by linear
+/// interpolation at 19 commands 0.5, 1.0, …, 9.5 V. Required: max |w| between
+/// 8 % and 15 % of the loop's span (max − min of the reading), and asymmetry
+/// max_d |w(5 + d) − w(5 − d)| / max |w| > 0.1 (not point-symmetric).
+#[test]
+fn major_loops_are_asymmetric_with_a_realistic_width() {
+    let params = FlexureStageParams::default();
+    for (name, axis) in [("x", Axis::X), ("y", Axis::Y)] {
+        let shape = fingerprint::major_loop(&params, axis);
+        println!(
+            "{name} major loop: span {:.4} µm, max width {:.4} µm ({:.2} % of span), asymmetry {:.3}",
+            shape.span_um,
+            shape.max_width_um,
+            100.0 * shape.width_ratio,
+            shape.asymmetry
+        );
+        assert!((0.08..=0.15).contains(&shape.width_ratio), "{name}");
+        assert!(shape.asymmetry > 0.1, "{name}");
+    }
+}
+
+/// Cross-axis coupling spans without decoupling (seed 000 Table 3), each ± 15 %,
+/// and each coupling a hysteresis loop (width ≥ 5 % of its span). Sweeps at
+/// 1 Hz, the amplitude solved so that the driven axis spans 10 µm (or θ spans
+/// 2 × 9.2e-3°) over the measured cycle; the other actuators at home:
+/// - y sweep: ramp to the x home (1 s), then u1 = a(1 − cos 2πt)/2 for 2 s,
+///   u2 = u3 = u_home; measured t ∈ [1, 2] s; spans of s2 (2.2065 µm) and s3
+///   (2.7435 µm); loops s2, s3 versus u1;
+/// - x sweep: from rest, u2 = u3 = a(1 − cos 2πt)/2 for 2 s, u1 = 0; measured
+///   t ∈ [1, 2] s; span of y (1.2482 µm); loop y versus u2;
+/// - rotation sweep: ramp to the x home, then u2 = u_home + D sin 2πt,
+///   u3 = u_home − D sin 2πt for 2.75 s, u1 = 0; measured t ∈ [1.75, 2.75] s;
+///   span of y (1.6784 µm); loop y versus D sin 2πt.
+#[test]
+fn coupling_spans_match_table_3_and_are_hysteretic() {
+    let params = FlexureStageParams::default();
+    let u_home = fingerprint::x_home_command(&params);
+    let c = fingerprint::coupling_sweeps(&params, u_home);
+    println!(
+        "sweep amplitudes: y a = {:.6} V, x a = {:.6} V, rotation D = {:.6} V",
+        c.y_sweep_amplitude, c.x_sweep_amplitude, c.rotation_sweep_amplitude
+    );
+    for (name, coupling, target) in [
+        ("s2 from y sweep", c.s2_from_y, 2.2065),
+        ("s3 from y sweep", c.s3_from_y, 2.7435),
+        ("y from x sweep", c.y_from_x, 1.2482),
+        ("y from rotation sweep", c.y_from_rotation, 1.6784),
+    ] {
+        println!(
+            "{name}: span {:.6} µm (target {target} µm), loop width {:.2} % of span",
+            coupling.span_um,
+            100.0 * coupling.width_ratio
+        );
+        assert!(relative_error(coupling.span_um, target) < 0.15, "{name}");
+        assert!(coupling.width_ratio >= 0.05, "{name}");
+    }
+}
