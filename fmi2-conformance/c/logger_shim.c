@@ -6,10 +6,10 @@
 #include <stdarg.h>
 #include <stdio.h>
 
-extern void conformance_record(void *environment, const char *instance_name, int status,
+extern void conformance_record(void *environment, const char *instance_name, unsigned int status,
                                const char *category, const char *message);
 
-void conformance_logger(void *environment, const char *instance_name, int status,
+void conformance_logger(void *environment, const char *instance_name, unsigned int status,
                         const char *category, const char *message, ...) {
     char buffer[4096];
     va_list args;

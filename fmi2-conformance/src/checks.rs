@@ -581,12 +581,9 @@ pub fn null_arrays(fmu: &Fmu) {
         );
         assert_eq!(b.fmi2SetDebugLogging(inst.c, 1, 0, ptr::null()), OK);
     }
-    for (name, status) in [("vr[] NULL", unsafe {
-        b.fmi2GetReal(inst.c, ptr::null(), 1, [0.0].as_mut_ptr())
-    })] {
-        assert_eq!(status, ERROR, "{name}");
-        assert_logged(&inst.take_log(), "fmi2GetReal", "vr[] is NULL");
-    }
+    let status = unsafe { b.fmi2GetReal(inst.c, ptr::null(), 1, [0.0].as_mut_ptr()) };
+    assert_eq!(status, ERROR, "vr[] NULL with nvr = 1 accepted");
+    assert_logged(&inst.take_log(), "fmi2GetReal", "vr[] is NULL");
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
     assert_eq!(
@@ -937,7 +934,37 @@ pub fn logging_follows_debug_logging(fmu: &Fmu) {
             .any(|r| r.category == "logFmiCalls" && r.message.starts_with("fmi2DoStep")),
         "no trace of fmi2DoStep with logFmiCalls on: {log:#?}"
     );
+    // Every call is traced, not only the data calls.
+    let (_, mut state) = inst.get_state();
+    assert_eq!(inst.set_state(state), OK);
+    assert_eq!(inst.free_state(&mut state), OK);
+    assert_eq!(inst.terminate(), OK);
+    assert_eq!(inst.reset(), OK);
+    inst.initialize();
+    let traced: Vec<String> = inst
+        .take_log()
+        .into_iter()
+        .filter(|r| r.category == "logFmiCalls")
+        .map(|r| r.message)
+        .collect();
+    for function in [
+        "fmi2GetFMUstate",
+        "fmi2SetFMUstate",
+        "fmi2FreeFMUstate",
+        "fmi2Terminate",
+        "fmi2Reset",
+        "fmi2SetupExperiment",
+        "fmi2EnterInitializationMode",
+        "fmi2ExitInitializationMode",
+    ] {
+        assert!(
+            traced.iter().any(|m| m.starts_with(function)),
+            "{function} was not traced with logFmiCalls on: {traced:#?}"
+        );
+    }
     assert_eq!(inst.set_debug_logging(false, &[]), OK);
+    // That call itself was traced while tracing was still on.
+    inst.take_log();
     assert_eq!(inst.do_step(1e-4), OK);
     assert!(
         inst.take_log().is_empty(),

@@ -53,11 +53,18 @@ unsafe fn instance<'a, M: CoSimModel>(c: sys::fmi2Component) -> Option<&'a mut I
     Some(unsafe { &mut *(c as *mut Instance<M>) })
 }
 
-/// Runs `body` on the instance if `function` is legal in its state.
+/// Runs `body` on the instance if `function` is legal in its state. With
+/// `logFmiCalls` on, the call is traced with `arguments` (formatted lazily, so
+/// tracing costs nothing while it is off).
 ///
 /// # Safety
 /// As for [`instance`].
-unsafe fn call<M, F>(c: sys::fmi2Component, function: FmiFunction, body: F) -> sys::fmi2Status
+unsafe fn call<M, F>(
+    c: sys::fmi2Component,
+    function: FmiFunction,
+    arguments: std::fmt::Arguments<'_>,
+    body: F,
+) -> sys::fmi2Status
 where
     M: CoSimModel,
     F: FnOnce(&mut Instance<M>) -> Status,
@@ -65,6 +72,7 @@ where
     let Some(inst) = (unsafe { instance::<M>(c) }) else {
         return ERROR;
     };
+    trace(inst, function, arguments);
     if !function.allowed_states().contains(inst.state) {
         inst.logger.error(
             function.name(),
@@ -127,10 +135,15 @@ unsafe fn arrays<'a, T>(
     Ok((unsafe { std::slice::from_raw_parts(vr, n) }, values))
 }
 
+/// Traces a call as `fmi2X: (arguments)` when `logFmiCalls` is on.
 fn trace<M: CoSimModel>(inst: &Instance<M>, function: FmiFunction, args: std::fmt::Arguments<'_>) {
     if inst.logger.is_enabled(LogCategory::FmiCalls) {
-        inst.logger
-            .log_in(function.name(), Status::Ok, LogCategory::FmiCalls, args);
+        inst.logger.log_in(
+            function.name(),
+            Status::Ok,
+            LogCategory::FmiCalls,
+            format_args!("({args})"),
+        );
     }
 }
 
@@ -239,6 +252,18 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         }
     };
     let instance = Instance::<M>::new(logger, resource_dir, guid);
+    if instance.logger.is_enabled(LogCategory::FmiCalls) {
+        instance.logger.log_in(
+            NAME,
+            Status::Ok,
+            LogCategory::FmiCalls,
+            format_args!(
+                "(instanceName = {:?}, fmuResourceLocation = {:?}, loggingOn = {logging_on})",
+                name.as_deref().unwrap_or_default(),
+                location.as_deref()
+            ),
+        );
+    }
     instance.logger.log_in(
         NAME,
         Status::Ok,
@@ -254,6 +279,7 @@ pub unsafe fn free_instance<M: CoSimModel>(c: sys::fmi2Component) {
     let Some(inst) = (unsafe { instance::<M>(c) }) else {
         return;
     };
+    trace(inst, FmiFunction::FreeInstance, format_args!(""));
     // Poison the magic so that a second free of the same pointer is refused
     // as long as the memory has not been reused.
     inst.magic = 0;
@@ -271,28 +297,33 @@ pub unsafe fn set_debug_logging<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetDebugLogging;
     unsafe {
-        call::<M, _>(c, function, |inst| {
-            if n_categories > 0 && categories.is_null() {
-                return inst.error(
-                    function,
-                    format_args!("categories[] is NULL but nCategories = {n_categories}"),
-                );
-            }
-            let raw: &[sys::fmi2String] = if n_categories == 0 {
-                &[]
-            } else {
-                std::slice::from_raw_parts(categories, n_categories)
-            };
-            if raw.iter().any(|p| p.is_null()) {
-                return inst.error(function, format_args!("a category name is NULL"));
-            }
-            let names: Vec<std::borrow::Cow<'_, str>> = raw
-                .iter()
-                .map(|p| string_arg(*p).expect("checked"))
-                .collect();
-            let names: Vec<&str> = names.iter().map(|n| n.as_ref()).collect();
-            inst.set_debug_logging(logging_on != 0, &names)
-        })
+        call::<M, _>(
+            c,
+            function,
+            format_args!("loggingOn = {logging_on}, nCategories = {n_categories}"),
+            |inst| {
+                if n_categories > 0 && categories.is_null() {
+                    return inst.error(
+                        function,
+                        format_args!("categories[] is NULL but nCategories = {n_categories}"),
+                    );
+                }
+                let raw: &[sys::fmi2String] = if n_categories == 0 {
+                    &[]
+                } else {
+                    std::slice::from_raw_parts(categories, n_categories)
+                };
+                if raw.iter().any(|p| p.is_null()) {
+                    return inst.error(function, format_args!("a category name is NULL"));
+                }
+                let names: Vec<std::borrow::Cow<'_, str>> = raw
+                    .iter()
+                    .map(|p| string_arg(*p).expect("checked"))
+                    .collect();
+                let names: Vec<&str> = names.iter().map(|n| n.as_ref()).collect();
+                inst.set_debug_logging(logging_on != 0, &names)
+            },
+        )
     }
 }
 
@@ -309,9 +340,14 @@ pub unsafe fn setup_experiment<M: CoSimModel>(
     // The tolerance is not used: the models integrate their linear parts exactly
     // and bound the rest by their own solver parameters.
     unsafe {
-        call::<M, _>(c, FmiFunction::SetupExperiment, |inst| {
-            inst.setup_experiment(start_time, (stop_time_defined != 0).then_some(stop_time))
-        })
+        call::<M, _>(
+            c,
+            FmiFunction::SetupExperiment,
+            format_args!(
+                "startTime = {start_time}, stopTimeDefined = {stop_time_defined}, stopTime = {stop_time}"
+            ),
+            |inst| inst.setup_experiment(start_time, (stop_time_defined != 0).then_some(stop_time)),
+        )
     }
 }
 
@@ -319,9 +355,12 @@ pub unsafe fn setup_experiment<M: CoSimModel>(
 /// `c` as for every FMI function.
 pub unsafe fn enter_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, FmiFunction::EnterInitializationMode, |i| {
-            i.enter_initialization_mode()
-        })
+        call::<M, _>(
+            c,
+            FmiFunction::EnterInitializationMode,
+            format_args!(""),
+            |i| i.enter_initialization_mode(),
+        )
     }
 }
 
@@ -329,22 +368,29 @@ pub unsafe fn enter_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) ->
 /// `c` as for every FMI function.
 pub unsafe fn exit_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, FmiFunction::ExitInitializationMode, |i| {
-            i.exit_initialization_mode()
-        })
+        call::<M, _>(
+            c,
+            FmiFunction::ExitInitializationMode,
+            format_args!(""),
+            |i| i.exit_initialization_mode(),
+        )
     }
 }
 
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn terminate<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
-    unsafe { call::<M, _>(c, FmiFunction::Terminate, |i| i.terminate()) }
+    unsafe {
+        call::<M, _>(c, FmiFunction::Terminate, format_args!(""), |i| {
+            i.terminate()
+        })
+    }
 }
 
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn reset<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
-    unsafe { call::<M, _>(c, FmiFunction::Reset, |i| i.reset()) }
+    unsafe { call::<M, _>(c, FmiFunction::Reset, format_args!(""), |i| i.reset()) }
 }
 
 /// # Safety
@@ -359,7 +405,7 @@ unsafe fn get<M: CoSimModel, T: FmiValue, C>(
     to_c: fn(T) -> C,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!("nvr = {nvr}"), |inst| {
             let (vrs, values) = match arrays(inst, function, vr, nvr, values.cast_const(), "value")
             {
                 Ok(v) => v,
@@ -370,7 +416,6 @@ unsafe fn get<M: CoSimModel, T: FmiValue, C>(
             } else {
                 std::slice::from_raw_parts_mut(values.cast_mut(), nvr)
             };
-            trace(inst, function, format_args!("nvr = {nvr}"));
             inst.get_values(function, vrs, |i, value: T| out[i] = to_c(value))
         })
     }
@@ -388,7 +433,7 @@ unsafe fn set<M: CoSimModel, T: FmiValue, C: Copy>(
     from_c: fn(C) -> T,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!("nvr = {nvr}"), |inst| {
             let (vrs, values) = match arrays(inst, function, vr, nvr, values, "value") {
                 Ok(v) => v,
                 Err(status) => return status,
@@ -398,7 +443,6 @@ unsafe fn set<M: CoSimModel, T: FmiValue, C: Copy>(
             } else {
                 std::slice::from_raw_parts(values, nvr)
             };
-            trace(inst, function, format_args!("nvr = {nvr}"));
             inst.set_values(function, vrs, |i| from_c(raw[i]))
         })
     }
@@ -575,7 +619,7 @@ pub unsafe fn get_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetFmuState;
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!("FMUstate = {state:?}"), |inst| {
             if state.is_null() {
                 return inst.error(function, format_args!("FMUstate is NULL"));
             }
@@ -592,13 +636,18 @@ pub unsafe fn set_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetFmuState;
     unsafe {
-        call::<M, _>(c, function, |inst| match snapshot::<M>(state) {
-            Some(snapshot) => inst.restore(function, &snapshot.data),
-            None => inst.error(
-                function,
-                format_args!("FMUstate is NULL or not a state of this FMU"),
-            ),
-        })
+        call::<M, _>(
+            c,
+            function,
+            format_args!("FMUstate = {state:?}"),
+            |inst| match snapshot::<M>(state) {
+                Some(snapshot) => inst.restore(function, &snapshot.data),
+                None => inst.error(
+                    function,
+                    format_args!("FMUstate is NULL or not a state of this FMU"),
+                ),
+            },
+        )
     }
 }
 
@@ -610,7 +659,7 @@ pub unsafe fn free_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::FreeFmuState;
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!("FMUstate = {state:?}"), |inst| {
             if state.is_null() {
                 return inst.error(function, format_args!("FMUstate is NULL"));
             }
@@ -658,7 +707,7 @@ pub unsafe fn serialized_fmu_state_size<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SerializedFmuStateSize;
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!("FMUstate = {state:?}"), |inst| {
             if size.is_null() {
                 return inst.error(function, format_args!("size is NULL"));
             }
@@ -689,32 +738,37 @@ pub unsafe fn serialize_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SerializeFmuState;
     unsafe {
-        call::<M, _>(c, function, |inst| {
-            let Some(snapshot) = snapshot::<M>(state) else {
-                return inst.error(
-                    function,
-                    format_args!("FMUstate is NULL or not a state of this FMU"),
-                );
-            };
-            let bytes = match encoded(inst, function, snapshot) {
-                Ok(bytes) => bytes,
-                Err(status) => return status,
-            };
-            if size != bytes.len() {
-                return inst.error(
+        call::<M, _>(
+            c,
+            function,
+            format_args!("FMUstate = {state:?}, size = {size}"),
+            |inst| {
+                let Some(snapshot) = snapshot::<M>(state) else {
+                    return inst.error(
+                        function,
+                        format_args!("FMUstate is NULL or not a state of this FMU"),
+                    );
+                };
+                let bytes = match encoded(inst, function, snapshot) {
+                    Ok(bytes) => bytes,
+                    Err(status) => return status,
+                };
+                if size != bytes.len() {
+                    return inst.error(
                     function,
                     format_args!(
                         "size is {size} but the state needs {} bytes (ask fmi2SerializedFMUstateSize)",
                         bytes.len()
                     ),
                 );
-            }
-            if serialized.is_null() {
-                return inst.error(function, format_args!("serializedState is NULL"));
-            }
-            ptr::copy_nonoverlapping(bytes.as_ptr(), serialized.cast::<u8>(), size);
-            Status::Ok
-        })
+                }
+                if serialized.is_null() {
+                    return inst.error(function, format_args!("serializedState is NULL"));
+                }
+                ptr::copy_nonoverlapping(bytes.as_ptr(), serialized.cast::<u8>(), size);
+                Status::Ok
+            },
+        )
     }
 }
 
@@ -728,7 +782,7 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::DeSerializeFmuState;
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!("size = {size}"), |inst| {
             if state.is_null() {
                 return inst.error(function, format_args!("FMUstate is NULL"));
             }
@@ -762,7 +816,7 @@ unsafe fn not_offered<M: CoSimModel>(
     capability: &'static str,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!(""), |inst| {
             inst.error(
                 function,
                 format_args!("not offered by this FMU (modelDescription declares {capability})"),
@@ -830,17 +884,14 @@ pub unsafe fn do_step<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::DoStep;
     unsafe {
-        call::<M, _>(c, function, |inst| {
-            trace(
-                inst,
-                function,
-                format_args!(
-                    "currentCommunicationPoint = {current_communication_point}, \
-                     communicationStepSize = {communication_step_size}"
-                ),
-            );
-            inst.do_step(current_communication_point, communication_step_size)
-        })
+        call::<M, _>(
+            c,
+            function,
+            format_args!(
+                "currentCommunicationPoint = {current_communication_point}, communicationStepSize = {communication_step_size}"
+            ),
+            |inst| inst.do_step(current_communication_point, communication_step_size),
+        )
     }
 }
 
@@ -858,7 +909,7 @@ unsafe fn status_query<M: CoSimModel, T>(
     answer: impl FnOnce(&Instance<M>, sys::fmi2StatusKind) -> Option<T>,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, |inst| {
+        call::<M, _>(c, function, format_args!("status kind {kind}"), |inst| {
             if value.is_null() {
                 return inst.error(function, format_args!("value is NULL"));
             }
