@@ -44,7 +44,11 @@ fn model_identifier(xml: &str, path: &Path) -> Result<String, String> {
     let mut reader = Reader::from_str(xml);
     loop {
         let event = reader.read_event().map_err(|e| {
-            format!("{}: byte {}: not well-formed XML: {e}", path.display(), reader.buffer_position())
+            format!(
+                "{}: byte {}: not well-formed XML: {e}",
+                path.display(),
+                reader.buffer_position()
+            )
         })?;
         match event {
             Event::Start(e) | Event::Empty(e) if e.name().as_ref() == "CoSimulation" => {
@@ -57,7 +61,10 @@ fn model_identifier(xml: &str, path: &Path) -> Result<String, String> {
                         return Ok(value.into_owned());
                     }
                 }
-                return Err(format!("{}: <CoSimulation> has no modelIdentifier", path.display()));
+                return Err(format!(
+                    "{}: <CoSimulation> has no modelIdentifier",
+                    path.display()
+                ));
             }
             Event::Eof => {
                 return Err(format!("{}: no <CoSimulation> element", path.display()));
@@ -72,7 +79,9 @@ fn extension(platform: &str) -> Result<&'static str, String> {
         "linux64" | "linux32" => Ok("so"),
         "win64" | "win32" => Ok("dll"),
         "darwin64" => Ok("dylib"),
-        other => Err(format!("unknown FMI platform {other:?} (linux64, win64, darwin64)")),
+        other => Err(format!(
+            "unknown FMI platform {other:?} (linux64, win64, darwin64)"
+        )),
     }
 }
 
@@ -116,7 +125,8 @@ fn pack(args: &Args) -> Result<(), String> {
         return Err("give one --platform per --binary".into());
     }
     let description = args.description.join("modelDescription.xml");
-    let xml = fs::read_to_string(&description).map_err(|e| format!("{}: {e}", description.display()))?;
+    let xml =
+        fs::read_to_string(&description).map_err(|e| format!("{}: {e}", description.display()))?;
     let identifier = model_identifier(&xml, &description)?;
     if let Some(parent) = args.out.parent() {
         fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
