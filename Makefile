@@ -74,7 +74,7 @@ rust-test: system-deps
 	$(CARGO) test --workspace --release --locked
 
 python-test: fmus venv
-	$(PY) -m pytest tests -q
+	$(PY) -m pytest tests -q -rP
 
 test: lint rust-test python-test
 
