@@ -91,6 +91,64 @@ pub struct BooleanVariable<M> {
     pub set: Option<fn(&mut M, bool)>,
 }
 
+// Variables hold only function pointers, static strings and numbers, so they
+// are Copy whatever the model type (a derive would demand `M: Copy`). That lets
+// const code assemble a table from blocks (see `concat`).
+impl<M> Clone for RealVariable<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<M> Copy for RealVariable<M> {}
+impl<M> Clone for IntegerVariable<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<M> Copy for IntegerVariable<M> {}
+impl<M> Clone for BooleanVariable<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<M> Copy for BooleanVariable<M> {}
+impl<M> Clone for Value<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<M> Copy for Value<M> {}
+impl<M> Clone for Variable<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<M> Copy for Variable<M> {}
+
+/// Concatenates blocks of variables into one table at compile time, so a
+/// model can declare its table as `static T: [Variable<M>; N] = concat(&[&A, &B])`
+/// and build repeated blocks (one per actuator, one per model) with a macro
+/// that returns an array. `N` must equal the total length (checked at compile
+/// time when used in a static).
+pub const fn concat<M, const N: usize>(blocks: &[&[Variable<M>]]) -> [Variable<M>; N] {
+    assert!(!blocks.is_empty() && !blocks[0].is_empty(), "the first block is empty");
+    let mut table = [blocks[0][0]; N];
+    let mut filled = 0;
+    let mut b = 0;
+    while b < blocks.len() {
+        let mut i = 0;
+        while i < blocks[b].len() {
+            assert!(filled < N, "the blocks hold more variables than N");
+            table[filled] = blocks[b][i];
+            filled += 1;
+            i += 1;
+        }
+        b += 1;
+    }
+    assert!(filled == N, "the blocks hold fewer variables than N");
+    table
+}
+
 /// The typed part of a variable.
 pub enum Value<M> {
     Real(RealVariable<M>),

@@ -138,153 +138,267 @@ macro_rules! parameter {
     };
 }
 
-/// One parameter of an asymmetric Bouc-Wen model (seed 001 eq. (3)-(4)):
-/// `y = p·u + q·h`, `dh/du = A − β·sgn(u̇)·|h|^(n−1)·h − γ·|h|^n + δ·u`.
-macro_rules! bouc_wen_parameter {
-    (p, $prefix:literal, $who:literal, $($path:tt)+) => {
-        parameter!(concat!($prefix, ".p"),
-            concat!($who, ": gain p of the input in y = p·u + q·h (seed 001 eq. 4)"),
-            "um/V", [None, None], $($path)+ .p)
-    };
-    (q, $prefix:literal, $who:literal, $($path:tt)+) => {
-        parameter!(concat!($prefix, ".q"),
-            concat!($who, ": gain q of the hysteretic state h in y = p·u + q·h (seed 001 eq. 4)"),
-            "", [None, None], $($path)+ .q)
-    };
-    (a, $prefix:literal, $who:literal, $($path:tt)+) => {
-        parameter!(concat!($prefix, ".A"),
-            concat!($who, ": A, growth of h per volt (seed 001 eq. 3)"),
-            "um/V", [None, None], $($path)+ .a)
-    };
-    (beta, $prefix:literal, $who:literal, $($path:tt)+) => {
-        parameter!(concat!($prefix, ".beta"),
-            concat!($who, ": beta, dissipative term (seed 001 eq. 3) [um^(1-n)/V]"),
-            "", [None, None], $($path)+ .beta)
-    };
-    (gamma, $prefix:literal, $who:literal, $($path:tt)+) => {
-        parameter!(concat!($prefix, ".gamma"),
-            concat!($who, ": gamma, shape term (seed 001 eq. 3) [um^(1-n)/V]"),
-            "", [None, None], $($path)+ .gamma)
-    };
-    (n, $prefix:literal, $who:literal, $($path:tt)+) => {
-        parameter!(concat!($prefix, ".n"),
-            concat!($who, ": exponent n (seed 001 eq. 3)"),
-            "", [Some(1.0), None], $($path)+ .n)
-    };
-    (delta, $prefix:literal, $who:literal, $($path:tt)+) => {
-        parameter!(concat!($prefix, ".delta"),
-            concat!($who, ": asymmetry delta, read as delta·u·du/dt (seed 001 eq. 3)"),
-            "um/V2", [None, None], $($path)+ .delta)
+/// The seven parameters of one asymmetric Bouc-Wen model (seed 001 eq. (3)-(4)),
+/// `y = p·u + q·h`, `dh/du = A − β·sgn(u̇)·|h|^(n−1)·h − γ·|h|^n + δ·u`, as
+/// an array of table entries.
+macro_rules! bouc_wen_parameters {
+    ($prefix:literal, $who:literal, $($path:tt)+) => {
+        [
+            parameter!(concat!($prefix, ".p"),
+                concat!($who, ": gain p of the input in y = p·u + q·h (seed 001 eq. 4)"),
+                "um/V", [None, None], $($path)+ .p),
+            parameter!(concat!($prefix, ".q"),
+                concat!($who, ": gain q of the hysteretic state h in y = p·u + q·h (seed 001 eq. 4)"),
+                "", [None, None], $($path)+ .q),
+            parameter!(concat!($prefix, ".A"),
+                concat!($who, ": A, growth of h per volt (seed 001 eq. 3)"),
+                "um/V", [None, None], $($path)+ .a),
+            parameter!(concat!($prefix, ".beta"),
+                concat!($who, ": beta, dissipative term (seed 001 eq. 3) [um^(1-n)/V]"),
+                "", [None, None], $($path)+ .beta),
+            parameter!(concat!($prefix, ".gamma"),
+                concat!($who, ": gamma, shape term (seed 001 eq. 3) [um^(1-n)/V]"),
+                "", [None, None], $($path)+ .gamma),
+            parameter!(concat!($prefix, ".n"),
+                concat!($who, ": exponent n (seed 001 eq. 3)"),
+                "", [Some(1.0), None], $($path)+ .n),
+            parameter!(concat!($prefix, ".delta"),
+                concat!($who, ": asymmetry delta, read as delta·u·du/dt (seed 001 eq. 3)"),
+                "um/V2", [None, None], $($path)+ .delta),
+        ]
     };
 }
 
-/// Builds the table as one flat list from single entries (`entry;`) and
-/// Bouc-Wen blocks (`bouc_wen(prefix, who, path);`), in order: a variable's
-/// value reference is its position.
-macro_rules! variable_table {
-    (@acc [$($done:expr,)*]) => { [$($done,)*] };
-    (@acc [$($done:expr,)*] bouc_wen($prefix:literal, $who:literal, $($path:tt)+); $($rest:tt)*) => {
-        variable_table!(@acc [$($done,)*
-            bouc_wen_parameter!(p, $prefix, $who, $($path)+),
-            bouc_wen_parameter!(q, $prefix, $who, $($path)+),
-            bouc_wen_parameter!(a, $prefix, $who, $($path)+),
-            bouc_wen_parameter!(beta, $prefix, $who, $($path)+),
-            bouc_wen_parameter!(gamma, $prefix, $who, $($path)+),
-            bouc_wen_parameter!(n, $prefix, $who, $($path)+),
-            bouc_wen_parameter!(delta, $prefix, $who, $($path)+),
-        ] $($rest)*)
-    };
-    (@acc [$($done:expr,)*] $entry:expr; $($rest:tt)*) => {
-        variable_table!(@acc [$($done,)* $entry,] $($rest)*)
-    };
-    ($($body:tt)*) => { variable_table!(@acc [] $($body)*) };
-}
-
-/// Every variable, in value-reference order: ports first (the names users
-/// wire), then diagnostics, then parameters.
-static VARIABLES: &[Variable<FlexureStageFmu>] = &variable_table! {
+/// Ports first (the names users wire), then diagnostics.
+const PORTS: [Variable<FlexureStageFmu>; 12] = [
     Variable::real_input(
         "u1",
         "Command voltage of the PZT1 amplifier channel (drives y), nominal 0..10 V",
         "V",
         |m| m.commands[0],
         |m, v| m.commands[0] = v,
-    );
+    ),
     Variable::real_input(
         "u2",
         "Command voltage of the PZT2 amplifier channel (x pair), nominal 0..10 V",
         "V",
         |m| m.commands[1],
         |m, v| m.commands[1] = v,
-    );
+    ),
     Variable::real_input(
         "u3",
         "Command voltage of the PZT3 amplifier channel (x pair), nominal 0..10 V",
         "V",
         |m| m.commands[2],
         |m, v| m.commands[2] = v,
-    );
-    Variable::real_output("s1", "Laser sensor s1: y displacement", "um", |m| m.stage.sensors()[0]);
-    Variable::real_output("s2", "Laser sensor s2: x + theta_z·L/2", "um", |m| m.stage.sensors()[1]);
-    Variable::real_output("s3", "Laser sensor s3: x − theta_z·L/2", "um", |m| m.stage.sensors()[2]);
-    Variable::real_output("x", "True platform x (no sensor noise)", "um", |m| m.stage.pose().x_um);
-    Variable::real_output("y", "True platform y (no sensor noise)", "um", |m| m.stage.pose().y_um);
-    Variable::<FlexureStageFmu>::real_output("theta_z", "True platform rotation about z (no sensor noise)", "rad", |m| {
-        m.stage.pose().theta_rad
-    })
-    .display_unit("deg");
-    Variable::real_local("amplifier.voltage[1]", "PZT1 amplifier output voltage", "V", |m| {
-        m.stage.amplifier_voltages()[0]
-    });
-    Variable::real_local("amplifier.voltage[2]", "PZT2 amplifier output voltage", "V", |m| {
-        m.stage.amplifier_voltages()[1]
-    });
-    Variable::real_local("amplifier.voltage[3]", "PZT3 amplifier output voltage", "V", |m| {
-        m.stage.amplifier_voltages()[2]
-    });
-    parameter!("amplifier.gain", "Amplifier voltage gain (seed 000 §2: 10)", "",
-        [Some(0.0), None], amplifier.gain);
-    parameter!("amplifier.bandwidth", "Amplifier first-order bandwidth", "Hz",
-        [Some(0.0), None], amplifier.bandwidth_hz);
-    parameter!("amplifier.v_min", "Lowest actuator voltage (the PZTs cannot retract)", "V",
-        [None, None], amplifier.v_min);
-    parameter!("amplifier.v_max", "Highest actuator voltage", "V",
-        [None, None], amplifier.v_max);
-    bouc_wen("pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
-    parameter!("pzt[1].creep_gain", "PZT1 creep: steady drift per volt", "um/V",
-        [Some(0.0), None], actuators[0].creep_gain);
-    parameter!("pzt[1].creep_time", "PZT1 creep time constant", "s",
-        [Some(0.0), None], actuators[0].creep_time);
-    bouc_wen("pzt[2]", "PZT2 hysteresis", actuators[1].hysteresis);
-    parameter!("pzt[2].creep_gain", "PZT2 creep: steady drift per volt", "um/V",
-        [Some(0.0), None], actuators[1].creep_gain);
-    parameter!("pzt[2].creep_time", "PZT2 creep time constant", "s",
-        [Some(0.0), None], actuators[1].creep_time);
-    bouc_wen("pzt[3]", "PZT3 hysteresis", actuators[2].hysteresis);
-    parameter!("pzt[3].creep_gain", "PZT3 creep: steady drift per volt", "um/V",
-        [Some(0.0), None], actuators[2].creep_gain);
-    parameter!("pzt[3].creep_time", "PZT3 creep time constant", "s",
-        [Some(0.0), None], actuators[2].creep_time);
-    bouc_wen("coupling.x_from_pzt1", "Coupling PZT1 voltage -> x", coupling.x_from_pzt1);
-    bouc_wen("coupling.rot_from_pzt1", "Coupling PZT1 voltage -> s2 − s3 (rotation)",
-        coupling.rot_from_pzt1);
-    bouc_wen("coupling.y_from_pzt2", "Coupling PZT2 voltage -> y", coupling.y_from_pzt2);
-    bouc_wen("coupling.y_from_pzt3", "Coupling PZT3 voltage -> y", coupling.y_from_pzt3);
-    parameter!("mode.x.frequency", "Natural frequency of the x mode", "Hz",
-        [Some(0.0), None], modes.x.frequency_hz);
-    parameter!("mode.x.damping", "Damping ratio of the x mode", "",
-        [Some(0.0), Some(1.0)], modes.x.damping_ratio);
-    parameter!("mode.y.frequency", "Natural frequency of the y mode", "Hz",
-        [Some(0.0), None], modes.y.frequency_hz);
-    parameter!("mode.y.damping", "Damping ratio of the y mode", "",
-        [Some(0.0), Some(1.0)], modes.y.damping_ratio);
-    parameter!("mode.theta.frequency",
-        "Natural frequency of the theta_z mode, the first mode (seed 000 §2: 790 Hz)", "Hz",
-        [Some(0.0), None], modes.theta.frequency_hz);
-    parameter!("mode.theta.damping", "Damping ratio of the theta_z mode", "",
-        [Some(0.0), Some(1.0)], modes.theta.damping_ratio);
-    parameter!("L", "Distance between the x sensors s2 and s3: theta_z = (s2 − s3)/L", "mm",
-        [Some(0.0), None], sensor_spacing_mm);
+    ),
+    Variable::real_output("s1", "Laser sensor s1: y displacement", "um", |m| {
+        m.stage.sensors()[0]
+    }),
+    Variable::real_output("s2", "Laser sensor s2: x + theta_z·L/2", "um", |m| {
+        m.stage.sensors()[1]
+    }),
+    Variable::real_output("s3", "Laser sensor s3: x − theta_z·L/2", "um", |m| {
+        m.stage.sensors()[2]
+    }),
+    Variable::real_output("x", "True platform x (no sensor noise)", "um", |m| {
+        m.stage.pose().x_um
+    }),
+    Variable::real_output("y", "True platform y (no sensor noise)", "um", |m| {
+        m.stage.pose().y_um
+    }),
+    Variable::<FlexureStageFmu>::real_output(
+        "theta_z",
+        "True platform rotation about z (no sensor noise)",
+        "rad",
+        |m| m.stage.pose().theta_rad,
+    )
+    .display_unit("deg"),
+    Variable::real_local(
+        "amplifier.voltage[1]",
+        "PZT1 amplifier output voltage",
+        "V",
+        |m| m.stage.amplifier_voltages()[0],
+    ),
+    Variable::real_local(
+        "amplifier.voltage[2]",
+        "PZT2 amplifier output voltage",
+        "V",
+        |m| m.stage.amplifier_voltages()[1],
+    ),
+    Variable::real_local(
+        "amplifier.voltage[3]",
+        "PZT3 amplifier output voltage",
+        "V",
+        |m| m.stage.amplifier_voltages()[2],
+    ),
+];
+
+const AMPLIFIER: [Variable<FlexureStageFmu>; 4] = [
+    parameter!(
+        "amplifier.gain",
+        "Amplifier voltage gain (seed 000 §2: 10)",
+        "",
+        [Some(0.0), None],
+        amplifier.gain
+    ),
+    parameter!(
+        "amplifier.bandwidth",
+        "Amplifier first-order bandwidth",
+        "Hz",
+        [Some(0.0), None],
+        amplifier.bandwidth_hz
+    ),
+    parameter!(
+        "amplifier.v_min",
+        "Lowest actuator voltage (the PZTs cannot retract)",
+        "V",
+        [None, None],
+        amplifier.v_min
+    ),
+    parameter!(
+        "amplifier.v_max",
+        "Highest actuator voltage",
+        "V",
+        [None, None],
+        amplifier.v_max
+    ),
+];
+
+const PZT1_HYSTERESIS: [Variable<FlexureStageFmu>; 7] =
+    bouc_wen_parameters!("pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
+
+const PZT1_CREEP: [Variable<FlexureStageFmu>; 2] = [
+    parameter!(
+        "pzt[1].creep_gain",
+        "PZT1 creep: steady drift per volt",
+        "um/V",
+        [Some(0.0), None],
+        actuators[0].creep_gain
+    ),
+    parameter!(
+        "pzt[1].creep_time",
+        "PZT1 creep time constant",
+        "s",
+        [Some(0.0), None],
+        actuators[0].creep_time
+    ),
+];
+
+const PZT2_HYSTERESIS: [Variable<FlexureStageFmu>; 7] =
+    bouc_wen_parameters!("pzt[2]", "PZT2 hysteresis", actuators[1].hysteresis);
+
+const PZT2_CREEP: [Variable<FlexureStageFmu>; 2] = [
+    parameter!(
+        "pzt[2].creep_gain",
+        "PZT2 creep: steady drift per volt",
+        "um/V",
+        [Some(0.0), None],
+        actuators[1].creep_gain
+    ),
+    parameter!(
+        "pzt[2].creep_time",
+        "PZT2 creep time constant",
+        "s",
+        [Some(0.0), None],
+        actuators[1].creep_time
+    ),
+];
+
+const PZT3_HYSTERESIS: [Variable<FlexureStageFmu>; 7] =
+    bouc_wen_parameters!("pzt[3]", "PZT3 hysteresis", actuators[2].hysteresis);
+
+const PZT3_CREEP: [Variable<FlexureStageFmu>; 2] = [
+    parameter!(
+        "pzt[3].creep_gain",
+        "PZT3 creep: steady drift per volt",
+        "um/V",
+        [Some(0.0), None],
+        actuators[2].creep_gain
+    ),
+    parameter!(
+        "pzt[3].creep_time",
+        "PZT3 creep time constant",
+        "s",
+        [Some(0.0), None],
+        actuators[2].creep_time
+    ),
+];
+
+const COUPLING_X_FROM_PZT1_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
+    "coupling.x_from_pzt1",
+    "Coupling PZT1 voltage -> x",
+    coupling.x_from_pzt1
+);
+
+const COUPLING_ROT_FROM_PZT1_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
+    "coupling.rot_from_pzt1",
+    "Coupling PZT1 voltage -> s2 − s3 (rotation)",
+    coupling.rot_from_pzt1
+);
+
+const COUPLING_Y_FROM_PZT2_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
+    "coupling.y_from_pzt2",
+    "Coupling PZT2 voltage -> y",
+    coupling.y_from_pzt2
+);
+
+const COUPLING_Y_FROM_PZT3_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
+    "coupling.y_from_pzt3",
+    "Coupling PZT3 voltage -> y",
+    coupling.y_from_pzt3
+);
+
+const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
+    parameter!(
+        "mode.x.frequency",
+        "Natural frequency of the x mode",
+        "Hz",
+        [Some(0.0), None],
+        modes.x.frequency_hz
+    ),
+    parameter!(
+        "mode.x.damping",
+        "Damping ratio of the x mode",
+        "",
+        [Some(0.0), Some(1.0)],
+        modes.x.damping_ratio
+    ),
+    parameter!(
+        "mode.y.frequency",
+        "Natural frequency of the y mode",
+        "Hz",
+        [Some(0.0), None],
+        modes.y.frequency_hz
+    ),
+    parameter!(
+        "mode.y.damping",
+        "Damping ratio of the y mode",
+        "",
+        [Some(0.0), Some(1.0)],
+        modes.y.damping_ratio
+    ),
+    parameter!(
+        "mode.theta.frequency",
+        "Natural frequency of the theta_z mode, the first mode (seed 000 §2: 790 Hz)",
+        "Hz",
+        [Some(0.0), None],
+        modes.theta.frequency_hz
+    ),
+    parameter!(
+        "mode.theta.damping",
+        "Damping ratio of the theta_z mode",
+        "",
+        [Some(0.0), Some(1.0)],
+        modes.theta.damping_ratio
+    ),
+    parameter!(
+        "L",
+        "Distance between the x sensors s2 and s3: theta_z = (s2 − s3)/L",
+        "mm",
+        [Some(0.0), None],
+        sensor_spacing_mm
+    ),
     Variable::<FlexureStageFmu>::boolean_parameter(
         "noise.enabled",
         "Add seeded Gaussian noise to the sensor readings",
@@ -292,9 +406,14 @@ static VARIABLES: &[Variable<FlexureStageFmu>] = &variable_table! {
         |m| m.params.noise.enabled,
         |m, v| m.params.noise.enabled = v,
     )
-    .model_path("noise.enabled");
-    parameter!("noise.rms", "Sensor noise RMS (Keyence LK-H050 class laser sensor)", "um",
-        [Some(0.0), None], noise.rms_um);
+    .model_path("noise.enabled"),
+    parameter!(
+        "noise.rms",
+        "Sensor noise RMS (Keyence LK-H050 class laser sensor)",
+        "um",
+        [Some(0.0), None],
+        noise.rms_um
+    ),
     Variable::<FlexureStageFmu>::integer_parameter(
         "noise.seed",
         "Seed of the sensor noise: the same seed gives the same noise",
@@ -303,11 +422,32 @@ static VARIABLES: &[Variable<FlexureStageFmu>] = &variable_table! {
         |m, v| m.params.noise.seed = v as u32,
     )
     .integer_range(Some(0), None)
-    .model_path("noise.seed");
-    parameter!("solver.max_voltage_step",
+    .model_path("noise.seed"),
+    parameter!(
+        "solver.max_voltage_step",
         "Largest amplifier-voltage change per integration piece (bounds the hysteresis chord error)",
-        "V", [Some(1e-4), Some(10.0)], solver.max_voltage_step);
-};
+        "V",
+        [Some(1e-4), Some(10.0)],
+        solver.max_voltage_step
+    ),
+];
+
+/// Every variable, in value-reference order.
+static VARIABLES: [Variable<FlexureStageFmu>; 82] = fmi2_cosim::variables::concat(&[
+    &PORTS,
+    &AMPLIFIER,
+    &PZT1_HYSTERESIS,
+    &PZT1_CREEP,
+    &PZT2_HYSTERESIS,
+    &PZT2_CREEP,
+    &PZT3_HYSTERESIS,
+    &PZT3_CREEP,
+    &COUPLING_X_FROM_PZT1_HYSTERESIS,
+    &COUPLING_ROT_FROM_PZT1_HYSTERESIS,
+    &COUPLING_Y_FROM_PZT2_HYSTERESIS,
+    &COUPLING_Y_FROM_PZT3_HYSTERESIS,
+    &STRUCTURE_SENSORS_SOLVER,
+]);
 
 /// The FMI name of the parameter the model calls `path` (its serde path, as in
 /// the JSON preset), through the table's `model_path`.
@@ -336,7 +476,7 @@ impl CoSimModel for FlexureStageFmu {
     const UNITS: &'static [UnitDefinition] = UNITS;
 
     fn variables() -> &'static [Variable<Self>] {
-        VARIABLES
+        &VARIABLES
     }
 
     fn new() -> Self {
