@@ -3,23 +3,29 @@
 //! Plain structs and functions: the asymmetric Bouc-Wen hysteresis of seed 001
 //! ([`AsymmetricBoucWen`]), the amplifier, creep, structural modes and sensor
 //! noise, and the 3-DOF stage of seed 000 that combines them
-//! ([`FlexureStage`]). `MODEL.md` beside this crate gives the equations, the
+//! ([`FlexureStage`]); and the control math of seed 000, starting with the
+//! modified inverse Prandtl-Ishlinskii feedforward ([`ModifiedInversePi`]).
+//! `MODEL.md` beside this crate gives the equations, the
 //! integration scheme and the calibration.
 
 pub mod amplifier;
 pub mod bouc_wen;
 pub mod creep;
+pub mod decoupling;
 pub mod fingerprint;
 pub mod flexure_stage;
+pub mod inverse_pi;
 pub mod oscillator;
 pub mod sensor_noise;
 
 pub use amplifier::{Amplifier, AmplifierParams};
 pub use bouc_wen::{AsymmetricBoucWen, BoucWenParams, simulate};
 pub use creep::Creep;
+pub use decoupling::{DecoupledReferences, DecouplingParams, decouple};
 pub use flexure_stage::{
     ActuatorParams, CouplingParams, FlexureStage, FlexureStageParams, ParamError, Pose,
     SolverParams, StepReport,
 };
+pub use inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 pub use oscillator::{ModeParams, ModeSet, Oscillator};
 pub use sensor_noise::{SensorNoise, SensorNoiseParams};

@@ -1,0 +1,359 @@
+//! The modified inverse Prandtl-Ishlinskii model of seed 000 §3.1 (eq. 1-5):
+//! the feedforward that turns a demanded displacement into a command voltage.
+//!
+//! ```text
+//! u(t) = G(y) + Σ_{i=1..10} w_h,i · H_{r_i}[z](t)        eq. (3)
+//! z(t) = Σ_{j=1..6}  w_s,j · S_{d_j}[y](t)
+//! w_h,i = k_i · ẏ + b_i                                    eq. (4)
+//! G(y) = a1·y³ + a2·y² + a3·y + a4
+//! d = c·[0, 1, 3, 5, 7, 9],  r = [0, 0.25, 0.5, 1, 1.5, 2.25, 3, 4, 5, 6.5]·u1max/10   eq. (5)
+//! ```
+//!
+//! y is the demanded displacement [µm], ẏ its rate [µm/s], u the command [V].
+//! The backlash operators (eq. 1) keep one memory each; eq. 1's initial value
+//! `max(u(0) − r, min(u(0) + r, 0))` is the backlash update from a memory of 0,
+//! so the memories start at 0 and the first sample needs no special case.
+//!
+//! Given c, w_s and u1max the model is linear in (a, k, b): see
+//! [`linear_regressors`], which identification uses to solve that part exactly.
+
+use serde::{Deserialize, Serialize};
+
+use crate::flexure_stage::ParamError;
+
+pub const BACKLASH_OPERATORS: usize = 10;
+pub const DEAD_ZONE_OPERATORS: usize = 6;
+/// Number of coefficients of the linear part: a (4), k (10), b (10).
+pub const LINEAR_COEFFICIENTS: usize = 4 + 2 * BACKLASH_OPERATORS;
+
+/// eq. (5): dead-zone thresholds in units of c.
+const DEAD_ZONE_PATTERN: [f64; DEAD_ZONE_OPERATORS] = [0.0, 1.0, 3.0, 5.0, 7.0, 9.0];
+/// eq. (5): backlash thresholds in units of u1max/10.
+const BACKLASH_PATTERN: [f64; BACKLASH_OPERATORS] =
+    [0.0, 0.25, 0.5, 1.0, 1.5, 2.25, 3.0, 4.0, 5.0, 6.5];
+
+/// Backlash (play) operator, eq. (1): the output follows the input with a
+/// play of ±r around its previous value.
+pub fn backlash(input: f64, threshold: f64, previous: f64) -> f64 {
+    (input - threshold).max((input + threshold).min(previous))
+}
+
+/// One-sided dead-zone operator, eq. (2).
+pub fn dead_zone(input: f64, threshold: f64) -> f64 {
+    if threshold > 0.0 {
+        (input - threshold).max(0.0)
+    } else {
+        input
+    }
+}
+
+/// Parameters of one modified inverse P-I model (one per actuator channel).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InversePiParams {
+    /// Slopes of the backlash weights with the demanded rate, eq. (4) [V·s/µm²].
+    pub k: [f64; BACKLASH_OPERATORS],
+    /// Intercepts of the backlash weights, eq. (4) [V/µm].
+    pub b: [f64; BACKLASH_OPERATORS],
+    /// Dead-zone weights w_s [1].
+    pub ws: [f64; DEAD_ZONE_OPERATORS],
+    /// Scale of the dead-zone thresholds, eq. (5) [µm].
+    pub c: f64,
+    /// Largest magnitude of the dead-zone superposition z over the working
+    /// range; scales the backlash thresholds, eq. (5) [µm].
+    pub u1max: f64,
+    /// Cubic input function G(y) = a1·y³ + a2·y² + a3·y + a4 [V/µm³, V/µm², V/µm, V].
+    pub a: [f64; 4],
+}
+
+impl InversePiParams {
+    pub fn dead_zone_thresholds(&self) -> [f64; DEAD_ZONE_OPERATORS] {
+        dead_zone_thresholds(self.c)
+    }
+
+    pub fn backlash_thresholds(&self) -> [f64; BACKLASH_OPERATORS] {
+        backlash_thresholds(self.u1max)
+    }
+
+    /// The cubic input function G(y).
+    pub fn cubic(&self, y: f64) -> f64 {
+        let [a1, a2, a3, a4] = self.a;
+        ((a1 * y + a2) * y + a3) * y + a4
+    }
+
+    /// Checks that every value is finite and the threshold scales positive;
+    /// `name` prefixes the parameter paths in the error.
+    pub fn validate(&self, name: &str) -> Result<(), ParamError> {
+        let finite = |field: &str, values: &[f64]| -> Result<(), ParamError> {
+            for (i, v) in values.iter().enumerate() {
+                if !v.is_finite() {
+                    return Err(ParamError {
+                        parameter: format!("{name}.{field}[{i}]"),
+                        value: *v,
+                        allowed: "finite".to_owned(),
+                    });
+                }
+            }
+            Ok(())
+        };
+        finite("k", &self.k)?;
+        finite("b", &self.b)?;
+        finite("ws", &self.ws)?;
+        finite("a", &self.a)?;
+        for (field, value) in [("c", self.c), ("u1max", self.u1max)] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(ParamError {
+                    parameter: format!("{name}.{field}"),
+                    value,
+                    allowed: format!("{field} > 0 (finite)"),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// eq. (5): d = c·[0, 1, 3, 5, 7, 9].
+pub fn dead_zone_thresholds(c: f64) -> [f64; DEAD_ZONE_OPERATORS] {
+    DEAD_ZONE_PATTERN.map(|p| c * p)
+}
+
+/// eq. (5): r = [0, 0.25, …, 6.5]·u1max/10.
+pub fn backlash_thresholds(u1max: f64) -> [f64; BACKLASH_OPERATORS] {
+    BACKLASH_PATTERN.map(|p| p * u1max / 10.0)
+}
+
+/// The dead-zone superposition z = Σ w_s,j·S_{d_j}[y].
+pub fn dead_zone_superposition(y: f64, ws: &[f64; DEAD_ZONE_OPERATORS], c: f64) -> f64 {
+    dead_zone_thresholds(c)
+        .iter()
+        .zip(ws)
+        .map(|(d, w)| w * dead_zone(y, *d))
+        .sum()
+}
+
+/// The u1max of eq. (5) for a working range y ∈ [0, y_max]: the largest |z|.
+/// z is piecewise linear in y with breaks at the dead-zone thresholds, so its
+/// extremes lie at 0, y_max or a threshold inside the range.
+pub fn u1max_over_range(ws: &[f64; DEAD_ZONE_OPERATORS], c: f64, y_max: f64) -> f64 {
+    let mut candidates = vec![0.0, y_max];
+    candidates.extend(dead_zone_thresholds(c).into_iter().filter(|d| *d < y_max));
+    candidates
+        .into_iter()
+        .map(|y| dead_zone_superposition(y, ws, c).abs())
+        .fold(0.0, f64::max)
+}
+
+/// The backlash memories of one model.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+struct BacklashMemories([f64; BACKLASH_OPERATORS]);
+
+impl BacklashMemories {
+    /// Advances every operator with input z; returns their outputs.
+    fn advance(
+        &mut self,
+        z: f64,
+        thresholds: &[f64; BACKLASH_OPERATORS],
+    ) -> [f64; BACKLASH_OPERATORS] {
+        for (memory, r) in self.0.iter_mut().zip(thresholds) {
+            *memory = backlash(z, *r, *memory);
+        }
+        self.0
+    }
+}
+
+/// A modified inverse P-I model with its operator memories (streaming use:
+/// one call of [`evaluate`](Self::evaluate) per sample, no allocation).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModifiedInversePi {
+    params: InversePiParams,
+    dead_zone_thresholds: [f64; DEAD_ZONE_OPERATORS],
+    backlash_thresholds: [f64; BACKLASH_OPERATORS],
+    memories: BacklashMemories,
+}
+
+impl ModifiedInversePi {
+    pub fn new(params: InversePiParams) -> Self {
+        ModifiedInversePi {
+            dead_zone_thresholds: params.dead_zone_thresholds(),
+            backlash_thresholds: params.backlash_thresholds(),
+            params,
+            memories: BacklashMemories::default(),
+        }
+    }
+
+    pub fn params(&self) -> &InversePiParams {
+        &self.params
+    }
+
+    /// Back to the de-energized start (all memories 0).
+    pub fn reset(&mut self) {
+        self.memories = BacklashMemories::default();
+    }
+
+    /// One sample of eq. (3)-(5): the command [V] for demanded displacement
+    /// `y` [µm] moving at `y_rate` [µm/s]; advances the backlash memories.
+    pub fn evaluate(&mut self, y: f64, y_rate: f64) -> f64 {
+        let p = &self.params;
+        let z: f64 = self
+            .dead_zone_thresholds
+            .iter()
+            .zip(&p.ws)
+            .map(|(d, w)| w * dead_zone(y, *d))
+            .sum();
+        let h = self.memories.advance(z, &self.backlash_thresholds);
+        let weighted: f64 = (0..BACKLASH_OPERATORS)
+            .map(|i| (p.k[i] * y_rate + p.b[i]) * h[i])
+            .sum();
+        p.cubic(y) + weighted
+    }
+}
+
+/// Backward-difference rates of a sampled trajectory (the first rate is 0).
+pub fn backward_rates(y: &[f64], sample_period: f64) -> Vec<f64> {
+    (0..y.len())
+        .map(|n| {
+            if n == 0 {
+                0.0
+            } else {
+                (y[n] - y[n - 1]) / sample_period
+            }
+        })
+        .collect()
+}
+
+/// The model over a sampled trajectory, from the de-energized start, with
+/// rates by backward difference.
+pub fn inverse_pi_trajectory(params: &InversePiParams, y: &[f64], sample_period: f64) -> Vec<f64> {
+    let mut model = ModifiedInversePi::new(*params);
+    y.iter()
+        .zip(backward_rates(y, sample_period))
+        .map(|(y, rate)| model.evaluate(*y, rate))
+        .collect()
+}
+
+/// Regressors of the part of eq. (3) that is linear once c, w_s and u1max are
+/// fixed: row n is [y³, y², y, 1, ẏ·H_1 … ẏ·H_10, H_1 … H_10], so that
+/// u_n = row_n · [a1 … a4, k1 … k10, b1 … b10].
+pub fn linear_regressors(
+    c: f64,
+    ws: &[f64; DEAD_ZONE_OPERATORS],
+    u1max: f64,
+    y: &[f64],
+    sample_period: f64,
+) -> Vec<[f64; LINEAR_COEFFICIENTS]> {
+    let thresholds = backlash_thresholds(u1max);
+    let mut memories = BacklashMemories::default();
+    y.iter()
+        .zip(backward_rates(y, sample_period))
+        .map(|(&y, rate)| {
+            let h = memories.advance(dead_zone_superposition(y, ws, c), &thresholds);
+            let mut row = [0.0; LINEAR_COEFFICIENTS];
+            row[..4].copy_from_slice(&[y * y * y, y * y, y, 1.0]);
+            for i in 0..BACKLASH_OPERATORS {
+                row[4 + i] = rate * h[i];
+                row[4 + BACKLASH_OPERATORS + i] = h[i];
+            }
+            row
+        })
+        .collect()
+}
+
+/// The coefficient vector [a, k, b] matching [`linear_regressors`].
+pub fn linear_coefficients(params: &InversePiParams) -> [f64; LINEAR_COEFFICIENTS] {
+    let mut theta = [0.0; LINEAR_COEFFICIENTS];
+    theta[..4].copy_from_slice(&params.a);
+    theta[4..4 + BACKLASH_OPERATORS].copy_from_slice(&params.k);
+    theta[4 + BACKLASH_OPERATORS..].copy_from_slice(&params.b);
+    theta
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn backlash_follows_eq_1() {
+        // Rising past the play, reversing inside it, then falling past it.
+        let r = 0.5;
+        let mut h = backlash(0.0, r, 0.0);
+        assert_eq!(h, 0.0, "eq. 1 initial value at u(0) = 0");
+        let mut out = Vec::new();
+        for u in [0.4, 1.0, 2.0, 1.8, 1.5, 1.0, 0.0] {
+            h = backlash(u, r, h);
+            out.push(h);
+        }
+        assert_eq!(out, vec![0.0, 0.5, 1.5, 1.5, 1.5, 1.5, 0.5]);
+        // Initial value of eq. 1 for u(0) outside the play: max(u−r, min(u+r, 0)).
+        assert_eq!(backlash(2.0, r, 0.0), 1.5);
+        assert_eq!(backlash(-2.0, r, 0.0), -1.5);
+        // r = 0 is the identity.
+        assert_eq!(backlash(3.7, 0.0, 1.0), 3.7);
+    }
+
+    #[test]
+    fn dead_zone_follows_eq_2() {
+        assert_eq!(dead_zone(5.0, 0.0), 5.0);
+        assert_eq!(dead_zone(-1.0, 0.0), -1.0);
+        assert_eq!(dead_zone(5.0, 3.0), 2.0);
+        assert_eq!(dead_zone(2.0, 3.0), 0.0);
+    }
+
+    #[test]
+    fn u1max_is_the_largest_magnitude_of_z() {
+        let ws = [1.0, -2.0, 0.0, 0.0, 0.0, 0.0];
+        // z = y − 2·max(y − 1, 0): peak 1 at y = 1, then falls to −1 at y = 3.
+        assert_eq!(u1max_over_range(&ws, 1.0, 3.0), 1.0);
+        assert_eq!(u1max_over_range(&ws, 1.0, 4.0), 2.0);
+    }
+
+    #[test]
+    fn regressors_reproduce_the_model() {
+        let params = InversePiParams {
+            k: [0.1, -0.2, 0.05, 0.0, 0.3, -0.1, 0.02, 0.04, -0.06, 0.08],
+            b: [1.0, 0.5, -0.3, 0.2, 0.1, 0.4, -0.2, 0.3, 0.1, -0.05],
+            ws: [0.9, 0.05, -0.02, 0.01, 0.03, -0.01],
+            c: 1.1,
+            u1max: 11.0,
+            a: [1e-4, -0.02, 0.9, -0.1],
+        };
+        let y: Vec<f64> = (0..400)
+            .map(|n| 6.0 + 5.0 * (n as f64 * 0.05).sin())
+            .collect();
+        let direct = inverse_pi_trajectory(&params, &y, 1e-3);
+        let theta = linear_coefficients(&params);
+        let rows = linear_regressors(params.c, &params.ws, params.u1max, &y, 1e-3);
+        for (n, (row, u)) in rows.iter().zip(&direct).enumerate() {
+            let via_rows: f64 = row.iter().zip(&theta).map(|(r, t)| r * t).sum();
+            assert!(
+                (via_rows - u).abs() <= 1e-12 * u.abs().max(1.0),
+                "sample {n}: {via_rows} vs {u}"
+            );
+        }
+    }
+}
+
+/// The inverse models of the x pair (PZT2 and PZT3 share one) and of y (PZT1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InversePiModels {
+    pub x: InversePiParams,
+    pub y: InversePiParams,
+}
+
+/// Seed 000's identified models as printed, the single source of
+/// [`InversePiModels::paper`].
+const PAPER_JSON: &str = include_str!("../presets/inverse_pi_paper.json");
+
+impl InversePiModels {
+    /// Seed 000's models, as printed: Table 1 (x: k_i and w_s,i in units of
+    /// 10⁻² as its column headers say; y: k_i in units of 10⁻³; b_i and y's
+    /// w_s,i as printed), c_x = 1.033 and c_y = 0.716 (§3.1), G from eq. (8)
+    /// and (9). The paper does not print u1max; it is taken as the largest
+    /// |z| over the working range y ∈ [0, stroke] (12.74 µm for x, 12.22 µm
+    /// for y, §2), see [`u1max_over_range`]: the largest z itself would be 0
+    /// for y, whose first dead-zone weight is negative.
+    pub fn paper() -> Self {
+        serde_json::from_str(PAPER_JSON).expect("presets/inverse_pi_paper.json parses (tested)")
+    }
+}

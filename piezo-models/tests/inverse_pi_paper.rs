@@ -1,0 +1,82 @@
+//! Seed 000's modified inverse P-I model (eq. 3-5) with the `paper` x model,
+//! on a short trajectory worked out by hand from the equations.
+//!
+//! Trajectory y = 1, 3, 6, 4 µm sampled every T = 1 s, so the backward-difference
+//! rates are ẏ = 0, 2, 3, −2 µm/s.
+//!
+//! Paper x model (Table 1, eq. 8, c = 1.033, u1max = 0.55348442):
+//!   d = c·[0, 1, 3, 5, 7, 9] = [0, 1.033, 3.099, 5.165, 7.231, 9.297]
+//!   r = [0, .25, .5, 1, 1.5, 2.25, 3, 4, 5, 6.5]·u1max/10
+//!     = [0, 0.0138371105, 0.027674221, 0.055348442, 0.083022663, 0.1245339945,
+//!        0.166045326, 0.221393768, 0.27674221, 0.359764873]
+//!
+//! n = 1, y = 1: z = w_s1·1 = −0.01351 (1 < d_2). Backlash from memory 0:
+//!   H_1 = z; H_i = max(z − r_i, min(z + r_i, 0)) = 0 for i ≥ 2 (|z| < r_2).
+//!   G(1) = 0.119e-4 − 2.518e-2 + 1.005 − 0.272 = 0.7078319.
+//!   u = G + (k_1·0 + b_1)·H_1 = 0.7078319 + (−1.415)(−0.01351) = 0.72694855.
+//! n = 2, y = 3: z = −0.01351·3 + 0.0566·(3 − 1.033) = 0.0708022.
+//!   H = [0.0708022, 0.0569650895, 0.043127979, 0.015453758, 0, …] (z − r_i where
+//!   positive, else the memory 0). G(3) = 2.5167013. u = 2.55823680882104.
+//! n = 3, y = 6: z = −0.01351·6 + 0.0566·4.967 + 0.02915·2.901 + (−0.02259)·0.835
+//!   = 0.2657737; H_i = z − r_i for i ≤ 8 (0.044379932 for i = 8), H_9 = H_10 = 0.
+//!   G(6) = 4.8540904. u = 6.03186157929948.
+//! n = 4, y = 4 (reversal): z = 0.14015635. Operators whose play covers the
+//!   reversal keep their memory: H = [0.14015635, 0.1539934605, 0.167830571,
+//!   0.195504792, 0.182751037, 0.1412397055, 0.099728374, 0.044379932, 0, 0].
+//!   G(4) = 3.3458816. u = 4.48138517154276 (ẏ = −2 changes every weight).
+//! (Exact rational arithmetic, rounded for printing.)
+
+use piezo_models::inverse_pi::{InversePiModels, ModifiedInversePi, inverse_pi_trajectory};
+
+const Y: [f64; 4] = [1.0, 3.0, 6.0, 4.0];
+const RATES: [f64; 4] = [0.0, 2.0, 3.0, -2.0];
+const HAND_COMPUTED_U: [f64; 4] = [
+    0.72694855,
+    2.55823680882104,
+    6.03186157929948,
+    4.48138517154276,
+];
+
+#[test]
+fn paper_x_model_matches_the_hand_computed_samples() {
+    let models = InversePiModels::paper();
+    let mut model = ModifiedInversePi::new(models.x);
+    for n in 0..4 {
+        let u = model.evaluate(Y[n], RATES[n]);
+        let expected = HAND_COMPUTED_U[n];
+        assert!(
+            (u - expected).abs() <= 1e-12 * expected.abs(),
+            "sample {}: model {u} V, by hand {expected} V",
+            n + 1
+        );
+    }
+    // The trajectory helper derives the same rates by backward difference.
+    let u = inverse_pi_trajectory(&models.x, &Y, 1.0);
+    for n in 0..4 {
+        assert!((u[n] - HAND_COMPUTED_U[n]).abs() <= 1e-12 * HAND_COMPUTED_U[n].abs());
+    }
+}
+
+#[test]
+fn paper_thresholds_follow_eq_5() {
+    let x = InversePiModels::paper().x;
+    let d = x.dead_zone_thresholds();
+    for (got, want) in d.iter().zip([0.0, 1.033, 3.099, 5.165, 7.231, 9.297]) {
+        assert!((got - want).abs() < 1e-12, "{d:?}");
+    }
+    let r = x.backlash_thresholds();
+    assert!((r[9] - 0.359764873).abs() < 1e-12, "{r:?}");
+    assert_eq!(r[0], 0.0);
+}
+
+#[test]
+fn paper_models_validate_and_reset_restores_the_start() {
+    let models = InversePiModels::paper();
+    models.x.validate("x").unwrap();
+    models.y.validate("y").unwrap();
+    let mut model = ModifiedInversePi::new(models.y);
+    let first = model.evaluate(2.0, 0.0);
+    model.evaluate(8.0, 5.0);
+    model.reset();
+    assert_eq!(model.evaluate(2.0, 0.0), first);
+}
