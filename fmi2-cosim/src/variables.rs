@@ -131,7 +131,10 @@ impl<M> Copy for Variable<M> {}
 /// that returns an array. `N` must equal the total length (checked at compile
 /// time when used in a static).
 pub const fn concat<M, const N: usize>(blocks: &[&[Variable<M>]]) -> [Variable<M>; N] {
-    assert!(!blocks.is_empty() && !blocks[0].is_empty(), "the first block is empty");
+    assert!(
+        !blocks.is_empty() && !blocks[0].is_empty(),
+        "the first block is empty"
+    );
     let mut table = [blocks[0][0]; N];
     let mut filled = 0;
     let mut b = 0;
