@@ -17,7 +17,8 @@ RELEASE := target/release
 
 # identifier:cargo-package:describe-binary:library
 PLANT := FlexureStage:fmu-plant:flexure-stage-describe:libfmu_plant.so
-FMU_SPECS := $(PLANT)
+CONTROLLER := PiezoController:fmu-controller:piezo-controller-describe:libfmu_controller.so
+FMU_SPECS := $(PLANT) $(CONTROLLER)
 
 .PHONY: all fmus test demo lint rust-test python-test model-descriptions system-deps venv clean
 
@@ -44,7 +45,7 @@ venv: $(VENV)/.installed
 # Builds the release binaries, writes each FMU's description from its variable
 # table and packs dist/<identifier>.fmu.
 fmus: system-deps
-	$(CARGO) build --release --locked -p fmu-plant -p packaging
+	$(CARGO) build --release --locked -p fmu-plant -p fmu-controller -p packaging
 	@for spec in $(FMU_SPECS); do \
 	  IFS=: read -r id pkg describe lib <<< "$$spec"; \
 	  rm -rf $(BUILD)/$$id; \
@@ -56,7 +57,7 @@ fmus: system-deps
 # Rewrites the committed modelDescription/*.xml after an interface change
 # (a test fails while they differ from a fresh generation).
 model-descriptions: system-deps
-	$(CARGO) build --release --locked -p fmu-plant
+	$(CARGO) build --release --locked -p fmu-plant -p fmu-controller
 	@for spec in $(FMU_SPECS); do \
 	  IFS=: read -r id pkg describe lib <<< "$$spec"; \
 	  $(RELEASE)/$$describe $(BUILD)/describe-$$id; \

@@ -25,6 +25,7 @@ use fmi_sys::fmi2 as sys;
 use fmi_sys::fmi2::Fmi2Binding;
 
 pub mod checks;
+pub mod table;
 
 pub const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
 pub const WARNING: sys::fmi2Status = sys::fmi2Status_fmi2Warning;

@@ -20,6 +20,7 @@ pub mod model;
 pub mod model_description;
 pub mod resources;
 pub mod status;
+pub mod units;
 pub mod variables;
 
 pub use export::EXPORTED_FUNCTIONS;

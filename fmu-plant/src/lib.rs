@@ -7,8 +7,8 @@
 //! `CoSimModel` implementation that forwards to [`FlexureStage`].
 
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, DisplayUnit, ModelError, ModelInfo, Status,
-    UnitDefinition, Variability, Variable,
+    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    UnitDefinition, Variability, Variable, units,
 };
 use piezo_models::{FlexureStage, FlexureStageParams};
 use serde::{Deserialize, Serialize};
@@ -35,66 +35,13 @@ impl FlexureStageFmu {
     }
 }
 
-const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
-
 const UNITS: &[UnitDefinition] = &[
-    UnitDefinition {
-        name: "V",
-        base: BaseUnit {
-            kg: 1,
-            m: 2,
-            s: -3,
-            a: -1,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
-    UnitDefinition {
-        name: "um",
-        base: BaseUnit {
-            m: 1,
-            factor: 1e-6,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
-    UnitDefinition {
-        name: "mm",
-        base: BaseUnit {
-            m: 1,
-            factor: 1e-3,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
-    UnitDefinition {
-        name: "rad",
-        base: BaseUnit {
-            rad: 1,
-            ..BaseUnit::NONE
-        },
-        display_units: &[DisplayUnit {
-            name: "deg",
-            factor: DEG_PER_RAD,
-            offset: 0.0,
-        }],
-    },
-    UnitDefinition {
-        name: "Hz",
-        base: BaseUnit {
-            s: -1,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
-    UnitDefinition {
-        name: "s",
-        base: BaseUnit {
-            s: 1,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
+    units::VOLT,
+    units::MICROMETRE,
+    units::MILLIMETRE,
+    units::RADIAN,
+    units::HERTZ,
+    units::SECOND,
     // µm per volt: m / (kg m² s⁻³ A⁻¹)
     UnitDefinition {
         name: "um/V",

@@ -16,6 +16,7 @@ pub mod fingerprint;
 pub mod flexure_stage;
 pub mod inverse_pi;
 pub mod oscillator;
+pub mod piezo_controller;
 pub mod sensor_noise;
 
 pub use amplifier::{Amplifier, AmplifierParams};
@@ -28,4 +29,7 @@ pub use flexure_stage::{
 };
 pub use inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 pub use oscillator::{ModeParams, ModeSet, Oscillator};
+pub use piezo_controller::{
+    ControllerOutput, ControllerParams, PiController, PiGains, PiezoController,
+};
 pub use sensor_noise::{SensorNoise, SensorNoiseParams};

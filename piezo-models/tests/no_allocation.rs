@@ -1,10 +1,11 @@
-//! `FlexureStage::step` allocates nothing (it runs inside an FMU's doStep).
+//! `FlexureStage::step` and `PiezoController::step` allocate nothing (they run
+//! inside an FMU's doStep).
 //!
 //! A counting global allocator counts the allocations of the test thread only
 //! while counting is switched on, so the harness's own threads do not disturb
 //! the count.
 
-use piezo_models::{FlexureStage, FlexureStageParams};
+use piezo_models::{ControllerParams, FlexureStage, FlexureStageParams, PiezoController};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::f64::consts::TAU;
@@ -76,4 +77,39 @@ fn step_allocates_nothing() {
     let allocations = ALLOCATIONS.with(Cell::get);
     assert!(finite);
     assert_eq!(allocations, 0, "step allocated {allocations} times");
+}
+
+/// 10 000 controller samples with every part on (feedforward, decoupling,
+/// three PI loops), limited commands and varying sample periods: zero
+/// allocations.
+#[test]
+fn controller_step_allocates_nothing() {
+    let params = ControllerParams {
+        decoupling: true,
+        ..ControllerParams::default()
+    };
+    let mut controller = PiezoController::new(params).unwrap();
+    let mut total = 0.0;
+
+    COUNTING.with(|c| c.set(true));
+    for k in 1..=10_000 {
+        let t = k as f64 * 1e-4;
+        let dt = if k % 1000 == 0 { 2.5e-4 } else { 1e-4 };
+        let y_ref = 6.0 + 5.0 * (TAU * t).sin();
+        let sensors = if k % 777 == 0 {
+            [30.0, -5.0, 40.0]
+        } else {
+            [y_ref - 0.1, 6.0, 6.1]
+        };
+        let out = controller.step(6.0, y_ref, 1e-5 * (TAU * t).cos(), sensors, dt);
+        total += out.u[0] + out.u[1] + out.u[2];
+    }
+    COUNTING.with(|c| c.set(false));
+
+    let allocations = ALLOCATIONS.with(Cell::get);
+    assert!(total.is_finite());
+    assert_eq!(
+        allocations, 0,
+        "the controller allocated {allocations} times"
+    );
 }

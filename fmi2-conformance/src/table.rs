@@ -1,0 +1,152 @@
+//! Checks that tie a model's variable table (the one source of truth) to the
+//! modelDescription.xml generated from it and committed beside the code. They
+//! are generic over the model; an FMU crate runs them all with
+//! [`table_tests!`](crate::table_tests).
+//!
+//! Unlike the ABI checks in [`checks`](crate::checks), these know the layer
+//! (`fmi2-cosim`): their point is to compare its table with what an importer
+//! parses (fmi-schema).
+
+use fmi_schema::fmi2::{Causality, Fmi2ModelDescription, ScalarVariableElement};
+use fmi_schema::traits::FmiModelDescription;
+use fmi2_cosim::CoSimModel;
+use fmi2_cosim::model_description::{guid, model_description};
+use fmi2_cosim::variables::{Causality as TableCausality, Value};
+
+fn generated<M: CoSimModel>() -> String {
+    model_description::<M>().expect("the description renders")
+}
+
+/// The committed `modelDescription/<id>.xml` equals a fresh generation.
+pub fn committed_description_is_current<M: CoSimModel>(committed_path: &str) {
+    let committed = std::fs::read_to_string(committed_path)
+        .unwrap_or_else(|e| panic!("{committed_path}: {e}; run `make model-descriptions`"));
+    assert!(
+        committed == generated::<M>(),
+        "{committed_path} differs from the variable table of {}; run `make model-descriptions` \
+         and commit the result",
+        M::INFO.model_identifier
+    );
+}
+
+/// The GUID is a pure function of the interface and appears in the XML.
+pub fn guid_is_deterministic<M: CoSimModel>() {
+    let first = guid::<M>().unwrap();
+    assert_eq!(first, guid::<M>().unwrap());
+    assert_eq!(first.len(), 38, "{{8-4-4-4-12}} with braces");
+    assert!(generated::<M>().contains(&format!("guid=\"{first}\"")));
+}
+
+/// fmi-schema parses the XML, and every variable agrees with the table: name,
+/// value reference, causality, type and start value (read from the model the
+/// binary starts with).
+pub fn parsed_description_matches_the_table<M: CoSimModel>() {
+    let md = Fmi2ModelDescription::deserialize(&generated::<M>()).expect("fmi-schema parses it");
+    let table = M::variables();
+    assert_eq!(md.model_variables.variables.len(), table.len());
+    let model = M::new();
+    for (vr, (parsed, var)) in md.model_variables.variables.iter().zip(table).enumerate() {
+        assert_eq!(parsed.name, var.name);
+        assert_eq!(parsed.value_reference as usize, vr, "{}", var.name);
+        let causality = match var.causality {
+            TableCausality::Parameter => Causality::Parameter,
+            TableCausality::CalculatedParameter => Causality::CalculatedParameter,
+            TableCausality::Input => Causality::Input,
+            TableCausality::Output => Causality::Output,
+            TableCausality::Local => Causality::Local,
+        };
+        assert_eq!(parsed.causality, causality, "{}", var.name);
+        match (&parsed.elem, &var.value) {
+            (ScalarVariableElement::Real(r), Value::Real(v)) => {
+                if var.has_start() {
+                    assert_eq!(r.start, Some((v.get)(&model)), "start of {}", var.name);
+                } else {
+                    assert_eq!(r.start, None, "{} has no start", var.name);
+                }
+            }
+            (ScalarVariableElement::Integer(i), Value::Integer(v)) => {
+                assert_eq!(i.start, Some((v.get)(&model)), "start of {}", var.name);
+            }
+            (ScalarVariableElement::Boolean(b), Value::Boolean(v)) => {
+                assert_eq!(b.start, Some((v.get)(&model)), "start of {}", var.name);
+            }
+            (parsed, _) => panic!("{}: type {parsed:?} differs from the table", var.name),
+        }
+    }
+}
+
+/// Inputs and outputs have flat names: a '.' in a port name becomes a bus in
+/// Simulink, and '[' an array in some importers.
+pub fn ports_have_flat_names<M: CoSimModel>() {
+    for var in M::variables() {
+        if matches!(
+            var.causality,
+            TableCausality::Input | TableCausality::Output
+        ) {
+            assert!(
+                !var.name.contains('.') && !var.name.contains('['),
+                "port {} is not flat",
+                var.name
+            );
+        }
+    }
+}
+
+/// Every parameter records where the model keeps it, so that the model's own
+/// validation messages (which name serde paths) map to FMI names.
+pub fn every_parameter_has_a_model_path<M: CoSimModel>() {
+    for var in M::variables() {
+        if var.causality == TableCausality::Parameter {
+            let path = var
+                .model_path
+                .unwrap_or_else(|| panic!("{} has no model path", var.name));
+            assert!(
+                !path.contains(' '),
+                "{}: model path {path:?} has spaces",
+                var.name
+            );
+        }
+    }
+}
+
+/// Asserts that each named port exists, is Real and has the unit given.
+pub fn ports_have_units<M: CoSimModel>(ports: &[(&str, &str)]) {
+    for (name, unit) in ports {
+        let var = M::variables()
+            .iter()
+            .find(|v| v.name == *name)
+            .unwrap_or_else(|| panic!("port {name} missing"));
+        let Value::Real(r) = &var.value else {
+            panic!("{name} is not Real")
+        };
+        assert_eq!(r.unit, Some(*unit), "unit of {name}");
+    }
+}
+
+/// Defines one `#[test]` per table check for model type `$model`, whose
+/// committed description is at `$committed` (a path literal).
+#[macro_export]
+macro_rules! table_tests {
+    ($model:ty, $committed:expr) => {
+        #[test]
+        fn committed_model_description_is_current() {
+            $crate::table::committed_description_is_current::<$model>($committed);
+        }
+        #[test]
+        fn guid_is_deterministic_and_tracks_the_interface() {
+            $crate::table::guid_is_deterministic::<$model>();
+        }
+        #[test]
+        fn parsed_description_matches_the_table() {
+            $crate::table::parsed_description_matches_the_table::<$model>();
+        }
+        #[test]
+        fn ports_have_flat_names() {
+            $crate::table::ports_have_flat_names::<$model>();
+        }
+        #[test]
+        fn every_parameter_maps_to_its_preset_path() {
+            $crate::table::every_parameter_has_a_model_path::<$model>();
+        }
+    };
+}

@@ -1,0 +1,540 @@
+//! PiezoController FMU: seed 000's controller for the 3-DOF flexure stage
+//! (modified inverse Prandtl-Ishlinskii feedforward, PI feedback and the
+//! decoupling law, eq. 3-5, 10-12) as an FMI 2.0 co-simulation slave.
+//!
+//! This crate is the thin join of `fmi2-cosim` (which knows nothing of piezos)
+//! and `piezo-models` (which knows nothing of FMI): a variable table, units, and
+//! a `CoSimModel` implementation that forwards to [`PiezoController`].
+//!
+//! Timing: the controller samples its inputs (references and sensors) at the
+//! communication point t_k where `fmi2DoStep(t_k, h)` starts and its outputs,
+//! computed from them, hold from the end of the step: one sample of compute
+//! delay, as on a DSP that writes its outputs at the next sample. The outputs
+//! are 0 V until the first step, so the stage starts de-energized.
+
+use fmi2_cosim::{
+    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    UnitDefinition, Variability, Variable, units,
+};
+use piezo_models::{ControllerOutput, ControllerParams, PiezoController};
+use serde::{Deserialize, Serialize};
+
+/// The FMU's model: the parameters the importer sets, the inputs it writes,
+/// and the controller built from the parameters at initialization.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct PiezoControllerFmu {
+    params: ControllerParams,
+    /// x_ref [µm], y_ref [µm], theta_ref [rad].
+    references: [f64; 3],
+    /// s1, s2, s3 [µm].
+    sensors: [f64; 3],
+    controller: PiezoController,
+    /// Whether limiting of each command was already logged (once per channel,
+    /// not at every step).
+    saturation_reported: [bool; 3],
+}
+
+impl PiezoControllerFmu {
+    pub fn params(&self) -> &ControllerParams {
+        &self.params
+    }
+
+    pub fn controller(&self) -> &PiezoController {
+        &self.controller
+    }
+
+    fn output(&self) -> &ControllerOutput {
+        self.controller.output()
+    }
+
+    /// Writes a tunable parameter both where the importer reads it back and
+    /// into the running controller.
+    fn tune(&mut self, tuning: impl Fn(&mut ControllerParams)) {
+        tuning(&mut self.params);
+        self.controller.set_tuning(tuning);
+    }
+}
+
+/// Unit of the y³ coefficient of G and similar: V per µm^k (and V·s/µm² for
+/// the rate slopes of eq. 4). Volt = kg·m²·s⁻³·A⁻¹.
+const fn volt_per(m: i8, s: i8, factor: f64) -> BaseUnit {
+    BaseUnit {
+        kg: 1,
+        m: 2 - m,
+        s: -3 - s,
+        a: -1,
+        factor,
+        ..BaseUnit::NONE
+    }
+}
+
+const UNITS: &[UnitDefinition] = &[
+    units::VOLT,
+    units::MICROMETRE,
+    units::MILLIMETRE,
+    units::RADIAN,
+    units::SECOND,
+    UnitDefinition {
+        name: "V/um",
+        base: volt_per(1, 0, 1e6),
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "V/(um.s)",
+        base: volt_per(1, 1, 1e6),
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "V.s/um2",
+        base: volt_per(2, -1, 1e12),
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "V/um2",
+        base: volt_per(2, 0, 1e12),
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "V/um3",
+        base: volt_per(3, 0, 1e18),
+        display_units: &[],
+    },
+    // Δk4 turns a rotation demand in millidegrees into micrometres (the unit
+    // seed 000 writes its rotation demands in, eq. 16).
+    UnitDefinition {
+        name: "um/mdeg",
+        base: BaseUnit {
+            m: 1,
+            rad: -1,
+            factor: 1e-6 / (1e-3 * std::f64::consts::PI / 180.0),
+            ..BaseUnit::NONE
+        },
+        display_units: &[],
+    },
+];
+
+/// An output read from the controller's last sample.
+macro_rules! output {
+    ($name:literal, $description:literal, $unit:literal, $($path:tt)+) => {
+        Variable::real_output($name, $description, $unit, |m: &PiezoControllerFmu| {
+            m.output().$($path)+
+        })
+    };
+}
+
+/// A Real parameter whose value lives at `params.<path>`; tunable ones also
+/// reach the running controller.
+macro_rules! parameter {
+    (fixed $name:expr, $description:expr, $unit:expr, [$min:expr, $max:expr], $($path:tt)+) => {
+        Variable::real_parameter(
+            $name,
+            $description,
+            $unit,
+            Variability::Fixed,
+            |m: &PiezoControllerFmu| m.params.$($path)+,
+            |m: &mut PiezoControllerFmu, v: f64| m.params.$($path)+ = v,
+        )
+        .range($min, $max)
+        .model_path(stringify!($($path)+))
+    };
+    (tunable $name:expr, $description:expr, $unit:expr, [$min:expr, $max:expr], $($path:tt)+) => {
+        Variable::real_parameter(
+            $name,
+            $description,
+            $unit,
+            Variability::Tunable,
+            |m: &PiezoControllerFmu| m.params.$($path)+,
+            |m: &mut PiezoControllerFmu, v: f64| m.tune(|p| p.$($path)+ = v),
+        )
+        .range($min, $max)
+        .model_path(stringify!($($path)+))
+    };
+}
+
+/// A tunable Boolean switch at `params.<field>`.
+macro_rules! switch {
+    ($name:literal, $description:literal, $field:ident) => {
+        Variable::<PiezoControllerFmu>::boolean_parameter(
+            $name,
+            $description,
+            Variability::Tunable,
+            |m| m.params.$field,
+            |m, v| m.tune(|p| p.$field = v),
+        )
+        .model_path(stringify!($field))
+    };
+}
+
+/// Fixed parameters `<prefix>.<field>[i]` for the listed 1-based indices `i`
+/// of the array `params.<path>.<field>` (0-based index `j`).
+macro_rules! indexed {
+    ($prefix:literal, $field:ident, $description:expr, $unit:expr, $path:ident;
+     $($i:literal => $j:literal),+) => {
+        [$(
+            Variable::real_parameter(
+                concat!($prefix, ".", stringify!($field), "[", $i, "]"),
+                $description,
+                $unit,
+                Variability::Fixed,
+                |m: &PiezoControllerFmu| m.params.$path.$field[$j],
+                |m: &mut PiezoControllerFmu, v: f64| m.params.$path.$field[$j] = v,
+            )
+            // Spelled out: stringify! spaces tokens unpredictably.
+            .model_path(concat!(stringify!($path), ".", stringify!($field), "[", $j, "]"))
+        ),+]
+    };
+}
+
+/// The 32 parameters of one modified inverse P-I model (seed 000 eq. 3-5).
+macro_rules! inverse_pi_parameters {
+    ($prefix:literal, $who:literal, $model:ident) => {{
+        const K: [Variable<PiezoControllerFmu>; 10] = indexed!($prefix, k,
+            concat!($who, ": slope k_i of backlash weight i with the demanded rate, w_h = k·dy/dt + b (seed 000 eq. 4)"),
+            "V.s/um2", $model;
+            1 => 0, 2 => 1, 3 => 2, 4 => 3, 5 => 4, 6 => 5, 7 => 6, 8 => 7, 9 => 8, 10 => 9);
+        const B: [Variable<PiezoControllerFmu>; 10] = indexed!($prefix, b,
+            concat!($who, ": intercept b_i of backlash weight i (seed 000 eq. 4)"),
+            "V/um", $model;
+            1 => 0, 2 => 1, 3 => 2, 4 => 3, 5 => 4, 6 => 5, 7 => 6, 8 => 7, 9 => 8, 10 => 9);
+        const WS: [Variable<PiezoControllerFmu>; 6] = indexed!($prefix, ws,
+            concat!($who, ": weight w_s,j of dead-zone operator j (seed 000 eq. 3)"),
+            "", $model;
+            1 => 0, 2 => 1, 3 => 2, 4 => 3, 5 => 4, 6 => 5);
+        const A1: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
+            concat!($who, ": a1 of the cubic G(y) = a1·y³ + a2·y² + a3·y + a4 (seed 000 eq. 3, 8-9)"),
+            "V/um3", $model; 1 => 0);
+        const A2: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
+            concat!($who, ": a2 of the cubic G(y)"), "V/um2", $model; 2 => 1);
+        const A3: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
+            concat!($who, ": a3 of the cubic G(y)"), "V/um", $model; 3 => 2);
+        const A4: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
+            concat!($who, ": a4 of the cubic G(y)"), "V", $model; 4 => 3);
+        const THRESHOLDS: [Variable<PiezoControllerFmu>; 2] = [
+            parameter!(fixed concat!($prefix, ".c"),
+                concat!($who, ": scale c of the dead-zone thresholds d = c·[0,1,3,5,7,9] (seed 000 eq. 5)"),
+                "um", [Some(0.0), None], $model.c),
+            parameter!(fixed concat!($prefix, ".u1max"),
+                concat!($who, ": u1max, scale of the backlash thresholds r = [0,…,6.5]·u1max/10 (seed 000 eq. 5)"),
+                "um", [Some(0.0), None], $model.u1max),
+        ];
+        fmi2_cosim::variables::concat::<PiezoControllerFmu, 32>(
+            &[&K, &B, &WS, &THRESHOLDS, &A1, &A2, &A3, &A4],
+        )
+    }};
+}
+
+/// Inputs and outputs: the names users wire.
+const PORTS: [Variable<PiezoControllerFmu>; 22] = [
+    Variable::real_input(
+        "x_ref",
+        "Demanded x of the platform",
+        "um",
+        |m| m.references[0],
+        |m, v| m.references[0] = v,
+    ),
+    Variable::real_input(
+        "y_ref",
+        "Demanded y of the platform",
+        "um",
+        |m| m.references[1],
+        |m, v| m.references[1] = v,
+    ),
+    Variable::<PiezoControllerFmu>::real_input(
+        "theta_ref",
+        "Demanded rotation of the platform about z (anticlockwise positive)",
+        "rad",
+        |m| m.references[2],
+        |m, v| m.references[2] = v,
+    )
+    .display_unit("deg"),
+    Variable::real_input(
+        "s1",
+        "Measured y: laser sensor s1 (wire from FlexureStage.s1)",
+        "um",
+        |m| m.sensors[0],
+        |m, v| m.sensors[0] = v,
+    ),
+    Variable::real_input(
+        "s2",
+        "Measured x + theta_z·L/2: laser sensor s2 (wire from FlexureStage.s2)",
+        "um",
+        |m| m.sensors[1],
+        |m, v| m.sensors[1] = v,
+    ),
+    Variable::real_input(
+        "s3",
+        "Measured x − theta_z·L/2: laser sensor s3 (wire from FlexureStage.s3)",
+        "um",
+        |m| m.sensors[2],
+        |m, v| m.sensors[2] = v,
+    ),
+    output!(
+        "u1",
+        "Command of the PZT1 amplifier channel (y), 0..10 V (wire to FlexureStage.u1)",
+        "V",
+        u[0]
+    ),
+    output!(
+        "u2",
+        "Command of the PZT2 amplifier channel (x pair), 0..10 V (wire to FlexureStage.u2)",
+        "V",
+        u[1]
+    ),
+    output!(
+        "u3",
+        "Command of the PZT3 amplifier channel (x pair), 0..10 V (wire to FlexureStage.u3)",
+        "V",
+        u[2]
+    ),
+    output!(
+        "u1_ff",
+        "Feedforward part of u1: the inverse P-I model of y (seed 000 eq. 3)",
+        "V",
+        feedforward[0]
+    ),
+    output!(
+        "u2_ff",
+        "Feedforward part of u2: the inverse P-I model of x at x_r2",
+        "V",
+        feedforward[1]
+    ),
+    output!(
+        "u3_ff",
+        "Feedforward part of u3: the inverse P-I model of x at x_r3",
+        "V",
+        feedforward[2]
+    ),
+    output!(
+        "u1_fb",
+        "Feedback part of u1: the y PI law (seed 000 eq. 10)",
+        "V",
+        feedback[0]
+    ),
+    output!(
+        "u2_fb",
+        "Feedback part of u2: x PI + theta PI",
+        "V",
+        feedback[1]
+    ),
+    output!(
+        "u3_fb",
+        "Feedback part of u3: x PI − theta PI",
+        "V",
+        feedback[2]
+    ),
+    output!("e_x", "Tracking error x_ref − (s2+s3)/2", "um", e_x),
+    output!("e_y", "Tracking error y_ref − s1", "um", e_y),
+    Variable::<PiezoControllerFmu>::real_output(
+        "e_theta",
+        "Tracking error theta_ref − (s2−s3)/L",
+        "rad",
+        |m| m.output().e_theta,
+    )
+    .display_unit("deg"),
+    output!(
+        "x_r2",
+        "Input of PZT2's inverse model after decoupling, x_d2 + D1 (seed 000 eq. 11)",
+        "um",
+        decoupled.x_r2
+    ),
+    output!(
+        "x_r3",
+        "Input of PZT3's inverse model after decoupling, x_d3 + D2 (seed 000 eq. 11)",
+        "um",
+        decoupled.x_r3
+    ),
+    output!(
+        "y_rx",
+        "y reference compensated for x, y_d + D3 (seed 000 eq. 11)",
+        "um",
+        decoupled.y_rx
+    ),
+    output!(
+        "y_rtheta",
+        "y reference compensated for rotation, y_d + D4 (seed 000 eq. 11)",
+        "um",
+        decoupled.y_rtheta
+    ),
+];
+
+/// Switches, gains, geometry and command range.
+const SETTINGS: [Variable<PiezoControllerFmu>; 12] = [
+    switch!(
+        "feedforward",
+        "Apply the inverse P-I feedforward (seed 000 eq. 3)",
+        feedforward
+    ),
+    switch!(
+        "decoupling",
+        "Apply the decoupling law to the inverse models' inputs (seed 000 eq. 11-12)",
+        decoupling
+    ),
+    switch!(
+        "feedback_x",
+        "Close the x PI loop (seed 000 eq. 10)",
+        feedback_x
+    ),
+    switch!(
+        "feedback_y",
+        "Close the y PI loop (seed 000 eq. 10)",
+        feedback_y
+    ),
+    switch!(
+        "feedback_theta",
+        "Close the theta_z PI loop (seed 000 eq. 10)",
+        feedback_theta
+    ),
+    parameter!(tunable "translation.kp",
+        "Proportional gain of the x and y PI laws (seed 000 §3.2: 0.05)",
+        "V/um", [Some(0.0), None], translation_gains.kp),
+    parameter!(tunable "translation.ki",
+        "Integral gain of the x and y PI laws (seed 000 §3.2: 50)",
+        "V/(um.s)", [Some(0.0), None], translation_gains.ki),
+    parameter!(tunable "rotation.kp",
+        "Proportional gain of the theta_z PI law, on the differential error e_theta·L/2 (seed 000 §3.2: 0.06)",
+        "V/um", [Some(0.0), None], rotation_gains.kp),
+    parameter!(tunable "rotation.ki",
+        "Integral gain of the theta_z PI law, on e_theta·L/2 (seed 000 §3.2: 70)",
+        "V/(um.s)", [Some(0.0), None], rotation_gains.ki),
+    parameter!(fixed "L",
+        "Distance between the x sensors s2 and s3 (and PZT2, PZT3): theta_z = (s2 − s3)/L",
+        "mm", [Some(0.0), None], sensor_spacing_mm),
+    parameter!(fixed "command_min",
+        "Lowest command of every channel (0 V: the actuators cannot retract)",
+        "V", [None, None], command_min),
+    parameter!(fixed "command_max",
+        "Highest command of every channel (10 V: 100 V after the amplifier)",
+        "V", [None, None], command_max),
+];
+
+const X_MODEL: [Variable<PiezoControllerFmu>; 32] =
+    inverse_pi_parameters!("x", "Inverse P-I model of the x pair (PZT2, PZT3)", x_model);
+
+const Y_MODEL: [Variable<PiezoControllerFmu>; 32] =
+    inverse_pi_parameters!("y", "Inverse P-I model of y (PZT1)", y_model);
+
+/// Δk, Δb, p, q of the four compensations D_i (seed 000 eq. 11, Table 2).
+const DECOUPLING: [Variable<PiezoControllerFmu>; 16] = fmi2_cosim::variables::concat(&[
+    &indexed!("decoupling", dk,
+        "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um], D4 on theta_zd [um/mdeg] (seed 000 eq. 11)",
+        "", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
+    &indexed!("decoupling", db,
+        "Offset Δb_i of compensation D_i (seed 000 eq. 11)",
+        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
+    &indexed!("decoupling", p,
+        "Upper cutoff p_i of compensation D_i (seed 000 eq. 11)",
+        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
+    &indexed!("decoupling", q,
+        "Lower cutoff q_i of compensation D_i (seed 000 eq. 11)",
+        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
+]);
+
+/// Every variable, in value-reference order.
+static VARIABLES: [Variable<PiezoControllerFmu>; 114] =
+    fmi2_cosim::variables::concat(&[&PORTS, &SETTINGS, &X_MODEL, &Y_MODEL, &DECOUPLING]);
+
+/// The FMI name of the parameter the model calls `path` (its serde path).
+fn fmi_name(path: &str) -> Option<&'static str> {
+    VARIABLES
+        .iter()
+        .find(|v| v.model_path.is_some_and(|p| p.replace(' ', "") == path))
+        .map(|v| v.name)
+}
+
+impl CoSimModel for PiezoControllerFmu {
+    const INFO: ModelInfo = ModelInfo {
+        model_identifier: "PiezoController",
+        model_name: "PiezoController",
+        description: "Controller of the 3-DOF piezo flexure stage: modified inverse \
+                      Prandtl-Ishlinskii feedforward, PI feedback and decoupling (seed 000)",
+        author: "piezo-fmu project",
+        version: env!("CARGO_PKG_VERSION"),
+        license: "MIT OR Apache-2.0",
+        default_experiment: DefaultExperiment {
+            start_time: 0.0,
+            stop_time: 1.0,
+            step_size: 1e-4,
+        },
+    };
+    const UNITS: &'static [UnitDefinition] = UNITS;
+
+    fn variables() -> &'static [Variable<Self>] {
+        &VARIABLES
+    }
+
+    fn new() -> Self {
+        let params = ControllerParams::default();
+        let controller = PiezoController::new(params.clone())
+            .expect("the shipped preset validates (tested in piezo-models)");
+        PiezoControllerFmu {
+            params,
+            references: [0.0; 3],
+            sensors: [0.0; 3],
+            controller,
+            saturation_reported: [false; 3],
+        }
+    }
+
+    fn exit_initialization_mode(
+        &mut self,
+        ctx: &mut Context<'_>,
+        _start_time: f64,
+    ) -> Result<(), ModelError> {
+        // The controller starts with empty integrators and de-energized
+        // backlash memories (seed 000 eq. 1: zero initial state).
+        self.controller = PiezoController::new(self.params.clone()).map_err(|e| {
+            let name = fmi_name(&e.parameter).unwrap_or("a parameter");
+            ModelError(format!(
+                "parameter {name} ({}) = {} is not allowed: {}",
+                e.parameter, e.value, e.allowed
+            ))
+        })?;
+        self.saturation_reported = [false; 3];
+        ctx.event(format_args!(
+            "controller built from the parameters: feedforward {}, decoupling {}, feedback x/y/theta {}/{}/{}",
+            self.params.feedforward,
+            self.params.decoupling,
+            self.params.feedback_x,
+            self.params.feedback_y,
+            self.params.feedback_theta
+        ));
+        Ok(())
+    }
+
+    fn do_step(
+        &mut self,
+        ctx: &mut Context<'_>,
+        current_time: f64,
+        step_size: f64,
+    ) -> Result<Status, ModelError> {
+        let [x_ref, y_ref, theta_ref] = self.references;
+        if !(self.references.iter().chain(&self.sensors)).all(|v| v.is_finite()) {
+            return Err(ModelError(format!(
+                "t = {current_time}: non-finite input (references {:?}, sensors {:?})",
+                self.references, self.sensors
+            )));
+        }
+        let out = self
+            .controller
+            .step(x_ref, y_ref, theta_ref, self.sensors, step_size);
+        // Limiting is part of normal operation (a demand of 0 µm asks for a
+        // slightly negative voltage; anti-windup handles it), so it is an
+        // event, logged once per channel, not a warning.
+        for channel in 0..3 {
+            let demanded = out.feedforward[channel] + out.feedback[channel];
+            if demanded != out.u[channel] && !self.saturation_reported[channel] {
+                self.saturation_reported[channel] = true;
+                ctx.event(format_args!(
+                    "t = {current_time}: u{} demanded {demanded} V, outside {}..{} V; the \
+                     command is limited and the integrators hold (reported once per channel)",
+                    channel + 1,
+                    self.params.command_min,
+                    self.params.command_max
+                ));
+            }
+        }
+        Ok(Status::Ok)
+    }
+}
+
+fmi2_cosim::export_fmi2!(PiezoControllerFmu);

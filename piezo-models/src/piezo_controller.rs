@@ -1,0 +1,350 @@
+//! Seed 000's controller for the 3-DOF stage: modified inverse P-I feedforward
+//! per actuator channel, PI feedback per axis (eq. 10, §3.2) and the decoupling
+//! law (eq. 11-12), sampled at a fixed period.
+//!
+//! Channels: PZT1 (y), PZT2 and PZT3 (the x pair). x and θz are commanded
+//! through the pair: equal commands translate, opposite commands rotate (§3.2),
+//! so the demanded extensions of the pair are x_d2,3 = x_ref ± θ_ref·L/2.
+//!
+//! Feedback (eq. 10): e_x = x_ref − (s2+s3)/2, e_y = y_ref − s1,
+//! e_θ = θ_ref − (s2−s3)/L. The rotational PI acts on the rotation error
+//! expressed as the differential displacement at the actuators, e_θ·L/2 in µm,
+//! so that its gains (§3.2: kp 0.06, ki 70) are in V/µm like the translational
+//! ones (kp 0.05, ki 50); §3.2 gives no unit, and in radians these gains would
+//! be ineffective (θ is of order 10⁻⁴ rad). Channel feedback: fb1 = v_y,
+//! fb2 = v_x + v_θ, fb3 = v_x − v_θ.
+//!
+//! Integrators: forward Euler, I ← I + e·T, the current sample included.
+//! Anti-windup by conditional integration: an axis's integrator holds while a
+//! channel it drives was limited (command_min or command_max) at the previous
+//! sample and the axis's error pushes that channel further into the limit. The
+//! command thus reaches its limit, the integrator passes it by at most one
+//! sample's increment (ki·e·T), and it leaves the limit as soon as the error
+//! turns.
+
+use serde::{Deserialize, Serialize};
+
+use crate::decoupling::{DecoupledReferences, DecouplingParams, decouple};
+use crate::flexure_stage::{FlexureStageParams, ParamError};
+use crate::inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
+
+/// Proportional and integral gains of one axis [V/µm, V/(µm·s)].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PiGains {
+    pub kp: f64,
+    pub ki: f64,
+}
+
+/// A PI law's running integral of the error (eq. 10).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PiController {
+    integral: f64,
+}
+
+impl PiController {
+    pub fn reset(&mut self) {
+        self.integral = 0.0;
+    }
+
+    pub fn integral(&self) -> f64 {
+        self.integral
+    }
+
+    /// kp·e + ki·I after integrating this sample's error when `integrate`.
+    fn update(&mut self, gains: PiGains, error: f64, dt: f64, integrate: bool) -> f64 {
+        if integrate {
+            self.integral += error * dt;
+        }
+        gains.kp * error + gains.ki * self.integral
+    }
+}
+
+/// Everything that defines the controller.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerParams {
+    pub feedforward: bool,
+    pub decoupling: bool,
+    pub feedback_x: bool,
+    pub feedback_y: bool,
+    pub feedback_theta: bool,
+    /// x and y axes (seed 000 §3.2: kp 0.05, ki 50).
+    pub translation_gains: PiGains,
+    /// θz axis, on the differential displacement e_θ·L/2 (kp 0.06, ki 70).
+    pub rotation_gains: PiGains,
+    /// L, distance between the x sensors s2 and s3 [mm].
+    pub sensor_spacing_mm: f64,
+    /// Shared by PZT2 and PZT3 (two instances with their own memories).
+    pub x_model: InversePiParams,
+    /// PZT1.
+    pub y_model: InversePiParams,
+    pub decoupling_params: DecouplingParams,
+    /// Command range of every channel [V] (0..10 V: the actuators cannot retract).
+    pub command_min: f64,
+    pub command_max: f64,
+}
+
+impl ControllerParams {
+    /// Seed 000's controller as printed: Table 1 and eq. (8)-(9) (see
+    /// `InversePiModels::paper`), Table 2, the §3.2 gains; L of the plant preset.
+    pub fn paper() -> Self {
+        let models = InversePiModels::paper();
+        ControllerParams {
+            feedforward: true,
+            decoupling: false,
+            feedback_x: true,
+            feedback_y: true,
+            feedback_theta: true,
+            translation_gains: PiGains { kp: 0.05, ki: 50.0 },
+            rotation_gains: PiGains { kp: 0.06, ki: 70.0 },
+            sensor_spacing_mm: FlexureStageParams::default().sensor_spacing_mm,
+            x_model: models.x,
+            y_model: models.y,
+            decoupling_params: DecouplingParams::paper(),
+            command_min: 0.0,
+            command_max: 10.0,
+        }
+    }
+
+    /// Checks every value; the error names the parameter by its serde path.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let error = |parameter: &str, value: f64, allowed: &str| ParamError {
+            parameter: parameter.to_owned(),
+            value,
+            allowed: allowed.to_owned(),
+        };
+        for (name, gains) in [
+            ("translation_gains", self.translation_gains),
+            ("rotation_gains", self.rotation_gains),
+        ] {
+            for (field, value) in [("kp", gains.kp), ("ki", gains.ki)] {
+                if !(value.is_finite() && value >= 0.0) {
+                    return Err(error(&format!("{name}.{field}"), value, ">= 0 (finite)"));
+                }
+            }
+        }
+        if !(self.sensor_spacing_mm.is_finite() && self.sensor_spacing_mm > 0.0) {
+            return Err(error(
+                "sensor_spacing_mm",
+                self.sensor_spacing_mm,
+                "> 0 (finite)",
+            ));
+        }
+        if !(self.command_min.is_finite() && self.command_max.is_finite())
+            || self.command_max <= self.command_min
+        {
+            return Err(error(
+                "command_max",
+                self.command_max,
+                "> command_min (finite)",
+            ));
+        }
+        self.x_model.validate("x_model")?;
+        self.y_model.validate("y_model")?;
+        let d = &self.decoupling_params;
+        for (field, values) in [("dk", d.dk), ("db", d.db), ("p", d.p), ("q", d.q)] {
+            for (i, v) in values.iter().enumerate() {
+                if !v.is_finite() {
+                    return Err(error(
+                        &format!("decoupling_params.{field}[{i}]"),
+                        *v,
+                        "finite",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Default for ControllerParams {
+    fn default() -> Self {
+        ControllerParams::paper()
+    }
+}
+
+/// One sample's commands and the diagnostics users plot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ControllerOutput {
+    /// Commands of PZT1, PZT2, PZT3 [V], within the command range.
+    pub u: [f64; 3],
+    /// Feedforward part of each command [V].
+    pub feedforward: [f64; 3],
+    /// Feedback part of each command [V].
+    pub feedback: [f64; 3],
+    pub e_x: f64,
+    pub e_y: f64,
+    /// [rad]
+    pub e_theta: f64,
+    /// The inverse models' inputs (eq. 11); without decoupling, the demands.
+    pub decoupled: DecoupledReferences,
+}
+
+/// The sampled controller.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PiezoController {
+    params: ControllerParams,
+    /// Inverse models of PZT1, PZT2, PZT3.
+    models: [ModifiedInversePi; 3],
+    /// Previous inputs of the three models, for the rates of eq. (4).
+    previous_references: Option<[f64; 3]>,
+    pi_x: PiController,
+    pi_y: PiController,
+    pi_theta: PiController,
+    /// Which limit each channel hit at the previous sample: +1 upper, −1
+    /// lower, 0 none (for the anti-windup).
+    limited: [i8; 3],
+    output: ControllerOutput,
+}
+
+/// Channel directions of each axis's feedback: y → PZT1; x → PZT2, PZT3;
+/// θ → +PZT2, −PZT3.
+const Y_DIRECTIONS: [f64; 3] = [1.0, 0.0, 0.0];
+const X_DIRECTIONS: [f64; 3] = [0.0, 1.0, 1.0];
+const THETA_DIRECTIONS: [f64; 3] = [0.0, 1.0, -1.0];
+
+impl PiezoController {
+    pub fn new(params: ControllerParams) -> Result<Self, ParamError> {
+        params.validate()?;
+        Ok(PiezoController {
+            models: [
+                ModifiedInversePi::new(params.y_model),
+                ModifiedInversePi::new(params.x_model),
+                ModifiedInversePi::new(params.x_model),
+            ],
+            params,
+            previous_references: None,
+            pi_x: PiController::default(),
+            pi_y: PiController::default(),
+            pi_theta: PiController::default(),
+            limited: [0; 3],
+            output: ControllerOutput::default(),
+        })
+    }
+
+    pub fn params(&self) -> &ControllerParams {
+        &self.params
+    }
+
+    /// The parameters that may change while running: switches and gains.
+    /// Turning an axis's feedback off empties its integrator.
+    pub fn set_tuning(&mut self, tuning: impl FnOnce(&mut ControllerParams)) {
+        tuning(&mut self.params);
+        for (on, pi) in [
+            (self.params.feedback_x, &mut self.pi_x),
+            (self.params.feedback_y, &mut self.pi_y),
+            (self.params.feedback_theta, &mut self.pi_theta),
+        ] {
+            if !on {
+                pi.reset();
+            }
+        }
+    }
+
+    pub fn reset(&mut self) {
+        for model in &mut self.models {
+            model.reset();
+        }
+        self.previous_references = None;
+        self.pi_x.reset();
+        self.pi_y.reset();
+        self.pi_theta.reset();
+        self.limited = [0; 3];
+        self.output = ControllerOutput::default();
+    }
+
+    pub fn output(&self) -> &ControllerOutput {
+        &self.output
+    }
+
+    /// One sample of period `dt` (> 0): references x_ref, y_ref [µm],
+    /// theta_ref [rad]; sensors s1, s2, s3 [µm].
+    pub fn step(
+        &mut self,
+        x_ref: f64,
+        y_ref: f64,
+        theta_ref: f64,
+        sensors: [f64; 3],
+        dt: f64,
+    ) -> ControllerOutput {
+        let p = &self.params;
+        let half_spacing_um = 0.5 * p.sensor_spacing_mm * 1e3;
+        let x_d2 = x_ref + theta_ref * half_spacing_um;
+        let x_d3 = x_ref - theta_ref * half_spacing_um;
+        let (decoupled, references) = if p.decoupling {
+            let d = decouple(&p.decoupling_params, x_d2, x_d3, y_ref, p.sensor_spacing_mm);
+            (d, [d.y_r(y_ref), d.x_r2, d.x_r3])
+        } else {
+            let d = DecoupledReferences {
+                x_r2: x_d2,
+                x_r3: x_d3,
+                y_rx: y_ref,
+                y_rtheta: y_ref,
+            };
+            (d, [y_ref, x_d2, x_d3])
+        };
+        let previous = self.previous_references.unwrap_or(references);
+        self.previous_references = Some(references);
+        // The models always advance, so switching the feedforward on later
+        // starts from memories that followed the demand.
+        let mut feedforward = [0.0; 3];
+        for (channel, model) in self.models.iter_mut().enumerate() {
+            let rate = (references[channel] - previous[channel]) / dt;
+            let u = model.evaluate(references[channel], rate);
+            if p.feedforward {
+                feedforward[channel] = u;
+            }
+        }
+
+        let e_x = x_ref - 0.5 * (sensors[1] + sensors[2]);
+        let e_y = y_ref - sensors[0];
+        let e_theta = theta_ref - (sensors[1] - sensors[2]) / (2.0 * half_spacing_um);
+        let axes = [
+            (p.feedback_y, p.translation_gains, e_y, Y_DIRECTIONS),
+            (p.feedback_x, p.translation_gains, e_x, X_DIRECTIONS),
+            (
+                p.feedback_theta,
+                p.rotation_gains,
+                e_theta * half_spacing_um,
+                THETA_DIRECTIONS,
+            ),
+        ];
+        let (lo, hi) = (p.command_min, p.command_max);
+        let limited = self.limited;
+        let mut feedback = [0.0; 3];
+        for ((on, gains, error, directions), pi) in
+            axes.into_iter()
+                .zip([&mut self.pi_y, &mut self.pi_x, &mut self.pi_theta])
+        {
+            if !on {
+                continue;
+            }
+            let winds_up = (0..3).any(|c| f64::from(limited[c]) * directions[c] * error > 0.0);
+            let v = pi.update(gains, error, dt, !winds_up);
+            for c in 0..3 {
+                feedback[c] += directions[c] * v;
+            }
+        }
+        let raw = [0, 1, 2].map(|c| feedforward[c] + feedback[c]);
+        self.limited = raw.map(|u| {
+            if u >= hi {
+                1
+            } else if u <= lo {
+                -1
+            } else {
+                0
+            }
+        });
+        self.output = ControllerOutput {
+            u: raw.map(|u| u.clamp(lo, hi)),
+            feedforward,
+            feedback,
+            e_x,
+            e_y,
+            e_theta,
+            decoupled,
+        };
+        self.output
+    }
+}

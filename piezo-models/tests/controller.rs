@@ -1,0 +1,188 @@
+//! Seed 000's sampled controller (eq. 3-5, 10-12): each part checked against
+//! the law it implements, independently of the others.
+
+use piezo_models::decoupling::decouple;
+use piezo_models::{ControllerParams, ModifiedInversePi, PiGains, PiezoController};
+
+const DT: f64 = 1e-4;
+
+fn params() -> ControllerParams {
+    ControllerParams::paper()
+}
+
+fn feedback_only(mut p: ControllerParams) -> ControllerParams {
+    p.feedforward = false;
+    p.decoupling = false;
+    p
+}
+
+#[test]
+fn feedforward_alone_is_the_inverse_model_of_each_channel() {
+    let mut p = params();
+    p.feedback_x = false;
+    p.feedback_y = false;
+    p.feedback_theta = false;
+    let half_l_um = 0.5 * p.sensor_spacing_mm * 1e3;
+    let mut controller = PiezoController::new(p.clone()).unwrap();
+    let mut y_model = ModifiedInversePi::new(p.y_model);
+    let mut pzt2 = ModifiedInversePi::new(p.x_model);
+    let mut pzt3 = ModifiedInversePi::new(p.x_model);
+    let mut previous: Option<[f64; 3]> = None;
+    for n in 0..2000 {
+        let t = n as f64 * DT;
+        let (x_ref, y_ref) = (6.0 + 2.0 * (7.0 * t).sin(), 6.0 + 5.0 * (3.0 * t).sin());
+        let theta_ref = 4e-5 * (5.0 * t).cos();
+        let out = controller.step(x_ref, y_ref, theta_ref, [0.0; 3], DT);
+        let inputs = [
+            y_ref,
+            x_ref + theta_ref * half_l_um,
+            x_ref - theta_ref * half_l_um,
+        ];
+        let prev = previous.unwrap_or(inputs);
+        previous = Some(inputs);
+        let expected = [
+            y_model.evaluate(inputs[0], (inputs[0] - prev[0]) / DT),
+            pzt2.evaluate(inputs[1], (inputs[1] - prev[1]) / DT),
+            pzt3.evaluate(inputs[2], (inputs[2] - prev[2]) / DT),
+        ];
+        for (c, expected) in expected.into_iter().enumerate() {
+            assert_eq!(out.feedforward[c], expected, "channel {c}, sample {n}");
+            assert_eq!(out.feedback[c], 0.0);
+            assert_eq!(out.u[c], expected.clamp(0.0, 10.0));
+        }
+        assert_eq!(out.decoupled.x_r2, inputs[1]);
+        assert_eq!(out.decoupled.y_rx, y_ref);
+    }
+}
+
+#[test]
+fn pi_law_follows_eq_10_with_the_channel_mapping_of_section_3_2() {
+    let p = feedback_only(params());
+    let (kt, kr) = (p.translation_gains, p.rotation_gains);
+    let half_l_um = 0.5 * p.sensor_spacing_mm * 1e3;
+    let mut controller = PiezoController::new(p).unwrap();
+    // Constant errors: y 0.4 µm, x 0.3 µm, theta 2e-6 rad about x = 5 µm.
+    let (e_y, e_x, e_theta) = (0.4, 0.3, 2e-6);
+    let x_ref = 5.0;
+    // s2 − s3 = −e_theta·L so that theta_ref − (s2 − s3)/L = e_theta with theta_ref = 0.
+    let s2 = x_ref - e_x - e_theta * half_l_um;
+    let s3 = x_ref - e_x + e_theta * half_l_um;
+    let sensors = [3.0 - e_y, s2, s3];
+    for n in 1..=50 {
+        let out = controller.step(x_ref, 3.0, 0.0, sensors, DT);
+        let integral_time = n as f64 * DT;
+        let v = |g: PiGains, e: f64| g.kp * e + g.ki * e * integral_time;
+        let v_y = v(kt, e_y);
+        let v_x = v(kt, e_x);
+        let v_theta = v(kr, e_theta * half_l_um);
+        let tol = 1e-12;
+        assert!((out.e_y - e_y).abs() < tol && (out.e_x - e_x).abs() < tol);
+        assert!((out.e_theta - e_theta).abs() < 1e-15);
+        assert!(
+            (out.feedback[0] - v_y).abs() < tol,
+            "{n}: {:?}",
+            out.feedback
+        );
+        assert!((out.feedback[1] - (v_x + v_theta)).abs() < tol);
+        assert!((out.feedback[2] - (v_x - v_theta)).abs() < tol);
+        assert_eq!(out.u, out.feedback, "inside the command range");
+    }
+}
+
+#[test]
+fn integrators_hold_while_their_channel_is_limited() {
+    let mut p = feedback_only(params());
+    p.feedback_x = false;
+    p.feedback_theta = false;
+    let ki = p.translation_gains.ki;
+    let mut controller = PiezoController::new(p).unwrap();
+    // A 20 µm error asks for more than 10 V within 10 ms (ki·e·t = 10 V at t = 10 ms).
+    let mut limited_at = None;
+    for n in 0..400 {
+        let out = controller.step(0.0, 20.0, 0.0, [0.0; 3], DT);
+        if out.u[0] == 10.0 && limited_at.is_none() {
+            limited_at = Some(n);
+        }
+    }
+    let limited_at = limited_at.expect("the command reaches its limit");
+    assert!(limited_at < 120, "limited after {limited_at} samples");
+    let held = controller.output().feedback[0];
+    assert!(
+        (10.0..=10.0 + ki * 20.0 * DT + 1e-9).contains(&held),
+        "the integrator stops within one increment past the limit: fb = {held}"
+    );
+    // When the error reverses, the command leaves the limit at once: no
+    // stored windup to unwind.
+    let out = controller.step(0.0, 20.0, 0.0, [21.0, 0.0, 0.0], DT);
+    assert!(out.u[0] < 10.0, "u1 = {}", out.u[0]);
+}
+
+#[test]
+fn switching_feedback_off_empties_the_integrator() {
+    let p = feedback_only(params());
+    let mut controller = PiezoController::new(p).unwrap();
+    for _ in 0..100 {
+        controller.step(0.0, 1.0, 0.0, [0.0; 3], DT);
+    }
+    assert!(controller.output().feedback[0] > 0.0);
+    controller.set_tuning(|p| p.feedback_y = false);
+    controller.set_tuning(|p| p.feedback_y = true);
+    let out = controller.step(0.0, 1.0, 0.0, [1.0, 0.0, 0.0], DT);
+    assert_eq!(out.feedback[0], 0.0, "no error, no stored integral");
+}
+
+#[test]
+fn decoupling_feeds_the_compensated_references_to_the_models() {
+    let mut p = params();
+    p.decoupling = true;
+    p.feedback_x = false;
+    p.feedback_y = false;
+    p.feedback_theta = false;
+    let half_l_um = 0.5 * p.sensor_spacing_mm * 1e3;
+    let mut controller = PiezoController::new(p.clone()).unwrap();
+    let mut y_model = ModifiedInversePi::new(p.y_model);
+    let mut pzt2 = ModifiedInversePi::new(p.x_model);
+    let (x_ref, y_ref, theta_ref) = (6.0, 8.0, 3e-5);
+    let (x_d2, x_d3) = (x_ref + theta_ref * half_l_um, x_ref - theta_ref * half_l_um);
+    let expected = decouple(&p.decoupling_params, x_d2, x_d3, y_ref, p.sensor_spacing_mm);
+    let out = controller.step(x_ref, y_ref, theta_ref, [0.0; 3], DT);
+    assert_eq!(out.decoupled, expected);
+    assert!(expected.x_r2 != x_d2, "the paper's D1 acts at y = 8 µm");
+    assert_eq!(
+        out.feedforward[0],
+        y_model.evaluate(expected.y_r(y_ref), 0.0)
+    );
+    assert_eq!(out.feedforward[1], pzt2.evaluate(expected.x_r2, 0.0));
+}
+
+#[test]
+fn the_state_round_trips_through_serde() {
+    let mut controller = PiezoController::new(params()).unwrap();
+    for n in 0..300 {
+        let y = 6.0 + 3.0 * (n as f64 * 0.01).sin();
+        controller.step(6.0, y, 0.0, [0.1, 6.0, 6.0], DT);
+    }
+    let json = serde_json::to_string(&controller).unwrap();
+    let mut restored: PiezoController = serde_json::from_str(&json).unwrap();
+    assert_eq!(restored, controller);
+    let a = controller.step(6.0, 7.0, 0.0, [7.2, 6.1, 5.9], DT);
+    let b = restored.step(6.0, 7.0, 0.0, [7.2, 6.1, 5.9], DT);
+    assert_eq!(a, b);
+}
+
+#[test]
+fn invalid_parameters_are_named() {
+    let mut p = params();
+    p.rotation_gains.ki = -1.0;
+    let e = PiezoController::new(p).unwrap_err();
+    assert_eq!(e.parameter, "rotation_gains.ki");
+    let mut p = params();
+    p.sensor_spacing_mm = 0.0;
+    assert_eq!(
+        PiezoController::new(p).unwrap_err().parameter,
+        "sensor_spacing_mm"
+    );
+    let mut p = params();
+    p.y_model.c = -0.5;
+    assert_eq!(PiezoController::new(p).unwrap_err().parameter, "y_model.c");
+}
