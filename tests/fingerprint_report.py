@@ -41,7 +41,7 @@ def main() -> int:
     started = time.perf_counter()
     plant = Plant(str(args.fmu))
     steps = ["strokes", "x home command", "rotation range", "theta_z resonance", "major loops",
-             "coupling sweeps"]
+             "coupling sweeps", "ultimate gains"]
 
     def progress(message: str) -> None:
         done = steps.index(message) if message in steps else 0

@@ -56,6 +56,24 @@ TARGETS = {
     "y_from_rotation": Target(
         "coupling span y from rotation", 1.6784, 0.15, "um", "seed 000 Table 3"
     ),
+    # Seed 000 §3.2 tuned its PI gains by Ziegler-Nichols: kp = 0.45 Ku and
+    # ki = 1.2 kp / Tu, so translation (0.05, 50) and rotation kp 0.06 give:
+    "ultimate_gain_x": Target(
+        "Ziegler-Nichols ultimate gain x", 0.05 / 0.45, 0.10, "V/um", "seed 000 §3.2 kp / 0.45"
+    ),
+    "ultimate_gain_y": Target(
+        "Ziegler-Nichols ultimate gain y", 0.05 / 0.45, 0.10, "V/um", "seed 000 §3.2 kp / 0.45"
+    ),
+    "ultimate_gain_theta": Target(
+        "Ziegler-Nichols ultimate gain theta_z", 0.06 / 0.45, 0.10, "V/um",
+        "seed 000 §3.2 kp / 0.45"
+    ),
+    "ultimate_period_x": Target(
+        "Ziegler-Nichols ultimate period x", 1.2e-3, 0.10, "s", "seed 000 §3.2 1.2 kp / ki"
+    ),
+    "ultimate_period_y": Target(
+        "Ziegler-Nichols ultimate period y", 1.2e-3, 0.10, "s", "seed 000 §3.2 1.2 kp / ki"
+    ),
 }
 #: Major-loop width as a fraction of the stroke (issue: 8-15 %).
 LOOP_WIDTH_RANGE = (0.08, 0.15)
@@ -410,6 +428,94 @@ def _solve_x_amplitude(plant: Plant, tolerance: float) -> float:
     return solve_increasing(lambda a: x_span(a) - SWEEP_SPAN_UM, 0.0, FULL_COMMAND, tolerance)
 
 
+#: u1 at the operating point of the loop tests (y at mid stroke) [V].
+LOOP_Y_COMMAND = 5.0
+#: Reference step that starts a loop's oscillation [um].
+LOOP_STEP_UM = 0.05
+#: Length of one proportional-loop probe [s] and its two envelope windows.
+LOOP_PROBE_TIME = 0.12
+LOOP_WINDOWS = ((0.02, 0.06), (0.08, 0.12))
+#: How each loop axis drives the channels (seed 000 §3.2).
+LOOP_DIRECTIONS = {"x": (0.0, 1.0, 1.0), "y": (1.0, 0.0, 0.0), "theta": (0.0, 1.0, -1.0)}
+
+
+def _loop_reading(sensors, axis: str) -> float:
+    """x = (s2+s3)/2, y = s1, theta as the half-differential (s2-s3)/2 [um]."""
+    if axis == "x":
+        return 0.5 * (sensors[1] + sensors[2])
+    if axis == "y":
+        return float(sensors[0])
+    return 0.5 * (sensors[1] - sensors[2])
+
+
+def proportional_loop_growth(rig: Rig, axis: str, kp: float) -> tuple[float, float]:
+    """From the rig's current state, a proportional loop follows a 0.05 um
+    reference step; the command over [t_k, t_k+1] is the operating command plus
+    directions * kp * (r - reading(t_k-1)): one sample of compute delay, as the
+    co-simulation gives. Returns the growth rate of the oscillation [1/s]
+    (RMS about the mean in the two windows) and its period [s]; a probe whose
+    command leaves 0..10 V is unstable (growth +inf). The rig's state and time
+    are restored afterwards (FMU state), so probes can repeat from one point."""
+    state = rig.fmu.getFMUstate()
+    time0 = rig.time
+    operating = rig.commands.copy()
+    directions = np.array(LOOP_DIRECTIONS[axis])
+    previous = current = _loop_reading(rig.sensors(), axis)
+    reference = current + LOOP_STEP_UM
+    steps = round(LOOP_PROBE_TIME / SAMPLE_PERIOD)
+    errors = np.empty(steps)
+    try:
+        for k in range(steps):
+            u = operating + directions * (kp * (reference - previous))
+            if np.any(u < 0.0) or np.any(u > FULL_COMMAND):
+                return math.inf, math.nan
+            rig.fmu.setReal(rig.u_vrs, list(u))
+            rig.fmu.doStep(rig.time, SAMPLE_PERIOD)
+            rig.time += SAMPLE_PERIOD
+            previous, current = current, _loop_reading(rig.fmu.getReal(rig.s_vrs), axis)
+            errors[k] = reference - current
+    finally:
+        rig.fmu.setFMUstate(state)
+        rig.fmu.freeFMUstate(state)
+        rig.time = time0
+
+    def window(bounds):
+        a, b = (round(v / SAMPLE_PERIOD) for v in bounds)
+        segment = errors[a:b] - errors[a:b].mean()
+        return math.sqrt(float(np.mean(segment**2))), segment
+
+    first, _ = window(LOOP_WINDOWS[0])
+    last, centred = window(LOOP_WINDOWS[1])
+    growth = math.log(max(last, 1e-300) / max(first, 1e-300)) / (LOOP_WINDOWS[1][0] - LOOP_WINDOWS[0][0])
+    k = np.nonzero(np.signbit(centred[:-1]) != np.signbit(centred[1:]))[0]
+    crossings = k + centred[k] / (centred[k] - centred[k + 1])
+    period = (
+        2.0 * (crossings[-1] - crossings[0]) * SAMPLE_PERIOD / (len(crossings) - 1)
+        if len(crossings) >= 3
+        else math.nan
+    )
+    return growth, period
+
+
+def ultimate_gain(plant: Plant, u_home: float, axis: str) -> tuple[float, float]:
+    """Ziegler-Nichols ultimate gain Ku [V/um] and period Tu [s] of `axis`: at
+    the operating point (ramp to (5 V, u_home, u_home) over 1 s, hold 0.5 s),
+    the gain at which the proportional loop's growth changes sign, by
+    bisection in log gain between 0.001 and 10 V/um to a relative width 1e-3."""
+    with plant.rig() as rig:
+        rig.ramp_to([LOOP_Y_COMMAND, u_home, u_home])
+        rig.hold(0.5)
+        stable, unstable = 1e-3, 10.0
+        while unstable / stable > 1.0 + 1e-3:
+            kp = math.sqrt(stable * unstable)
+            if proportional_loop_growth(rig, axis, kp)[0] > 0.0:
+                unstable = kp
+            else:
+                stable = kp
+        _, period = proportional_loop_growth(rig, axis, stable)
+        return math.sqrt(stable * unstable), period
+
+
 @dataclass
 class Fingerprints:
     stroke_x: float
@@ -421,6 +527,12 @@ class Fingerprints:
     loop_x: LoopShape
     loop_y: LoopShape
     couplings: Couplings
+    ultimate_gain_x: float
+    ultimate_gain_y: float
+    ultimate_gain_theta: float
+    ultimate_period_x: float
+    ultimate_period_y: float
+    ultimate_period_theta: float
 
     def value(self, key: str) -> float:
         if key in self.couplings.shapes:
@@ -444,6 +556,11 @@ def measure(plant: Plant, progress=lambda message: None) -> Fingerprints:
     loop_y = major_loop(plant, "y")
     progress("coupling sweeps")
     couplings = coupling_sweeps(plant, u_home)
+    progress("ultimate gains")
+    (ku_x, tu_x), (ku_y, tu_y), (ku_t, tu_t) = (
+        ultimate_gain(plant, u_home, axis) for axis in ("x", "y", "theta")
+    )
     return Fingerprints(
-        stroke_x, stroke_y, u_home, anticlockwise, clockwise, resonance, loop_x, loop_y, couplings
+        stroke_x, stroke_y, u_home, anticlockwise, clockwise, resonance, loop_x, loop_y, couplings,
+        ku_x, ku_y, ku_t, tu_x, tu_y, tu_t,
     )

@@ -80,3 +80,14 @@ def test_coupling_span_and_hysteresis(fingerprints, key):
     assert shape.width_ratio >= COUPLING_LOOP_WIDTH_MIN, (
         f"{key}: the coupling is not hysteretic (width {shape.width_ratio:.1%} of its span)"
     )
+
+
+@pytest.mark.parametrize(
+    "key",
+    ["ultimate_gain_x", "ultimate_gain_y", "ultimate_gain_theta", "ultimate_period_x",
+     "ultimate_period_y"],
+)
+def test_ziegler_nichols_ultimate_gain_matches_the_papers_pi_gains(fingerprints, key):
+    """Seed 000 tuned its PI gains by Ziegler-Nichols, so the plant must put
+    its ultimate gain where the paper's gains say (gain margin 1/0.45 = 2.2)."""
+    check_target(fingerprints, key)

@@ -10,7 +10,14 @@
 //! 2. PZT2 scale, PZT3 scale and L ← x stroke 12.74 µm and rotation range
 //!    0.0103° anticlockwise / 0.0088° clockwise (seed 000 §2);
 //! 3. scales of x_from_pzt1, rot_from_pzt1, y_from_pzt2, y_from_pzt3 ← the
-//!    coupling spans of seed 000 Table 3 (2.2065, 2.7435, 1.2482, 1.6784 µm).
+//!    coupling spans of seed 000 Table 3 (2.2065, 2.7435, 1.2482, 1.6784 µm);
+//! 4. the modes ← seed 000 §3.2's PI gains, which were tuned by
+//!    Ziegler-Nichols (kp = 0.45·K_u, ki = 0.54·K_u/T_u): translation kp 0.05,
+//!    ki 50 give K_u = 0.111 V/µm and T_u = 1.2 ms, rotation kp 0.06 gives
+//!    K_u = 0.133 V/µm. The x and y frequencies and damping ratios are solved
+//!    for (K_u, T_u), the θ damping ratio for K_u (its frequency is the 790 Hz
+//!    of §2; the rotation's ki 70 would need T_u = 1.03 ms, which a 790 Hz
+//!    mode cannot give, so it is reported, not fitted).
 //!
 //! A scale multiplies p and q of a Bouc-Wen model together, which scales its
 //! output exactly (for any n) and keeps its shape. The steps are independent
@@ -21,7 +28,7 @@
 //! Usage: `cargo run --release -p piezo-models --example calibrate [-- --write]`
 //! (`--write` replaces the preset file; otherwise the JSON is printed).
 
-use piezo_models::fingerprint::{self, Axis, Fingerprints};
+use piezo_models::fingerprint::{self, Axis, Fingerprints, LoopAxis};
 use piezo_models::{BoucWenParams, FlexureStageParams};
 
 const STROKE_X_UM: f64 = 12.74;
@@ -32,6 +39,11 @@ const S2_FROM_Y_UM: f64 = 2.2065;
 const S3_FROM_Y_UM: f64 = 2.7435;
 const Y_FROM_X_UM: f64 = 1.2482;
 const Y_FROM_ROTATION_UM: f64 = 1.6784;
+/// Seed 000 §3.2: translation kp 0.05, ki 50; rotation kp 0.06, ki 70, tuned
+/// by Ziegler-Nichols (kp = 0.45·K_u, ki = kp·1.2/T_u).
+const TRANSLATION_KP: f64 = 0.05;
+const TRANSLATION_KI: f64 = 50.0;
+const ROTATION_KP: f64 = 0.06;
 
 fn scaled(bw: BoucWenParams, factor: f64) -> BoucWenParams {
     BoucWenParams {
@@ -190,7 +202,55 @@ fn calibrate(base: &FlexureStageParams) -> FlexureStageParams {
     ] {
         round_model(bw);
     }
+
+    // 4. Modes from the Ziegler-Nichols figures of the §3.2 gains.
+    calibrate_modes(&mut params);
     params
+}
+
+/// Fixed-point iteration on the two near-proportionalities of the sampled
+/// loop: K_u ∝ ζ (the resonant peak's height is ∝ 1/ζ) and T_u ∝ 1/f. The
+/// targets are the K_u and T_u that Ziegler-Nichols maps to seed 000's gains.
+fn calibrate_modes(params: &mut FlexureStageParams) {
+    let u_home = fingerprint::x_home_command(params);
+    let ku_translation = TRANSLATION_KP / 0.45;
+    let tu_translation = 1.2 * TRANSLATION_KP / TRANSLATION_KI;
+    let ku_rotation = ROTATION_KP / 0.45;
+    for iteration in 0..30 {
+        let mut worst = 0.0f64;
+        for axis in LoopAxis::ALL {
+            let ku = fingerprint::ultimate_gain(params, u_home, axis);
+            let mode = match axis {
+                LoopAxis::X => &mut params.modes.x,
+                LoopAxis::Y => &mut params.modes.y,
+                LoopAxis::Theta => &mut params.modes.theta,
+            };
+            let (ku_target, tu_target) = match axis {
+                LoopAxis::Theta => (ku_rotation, None),
+                _ => (ku_translation, Some(tu_translation)),
+            };
+            worst = worst.max((ku.gain / ku_target - 1.0).abs());
+            mode.damping_ratio *= ku_target / ku.gain;
+            if let Some(tu_target) = tu_target {
+                worst = worst.max((ku.period / tu_target - 1.0).abs());
+                mode.frequency_hz *= ku.period / tu_target;
+            }
+            eprintln!(
+                "modes: iteration {iteration}, {axis:?}: K_u {:.5} V/µm, T_u {:.4} ms -> f {:.2} Hz, ζ {:.5}",
+                ku.gain,
+                ku.period * 1e3,
+                mode.frequency_hz,
+                mode.damping_ratio
+            );
+        }
+        if worst < 2e-3 {
+            break;
+        }
+    }
+    for mode in [&mut params.modes.x, &mut params.modes.y, &mut params.modes.theta] {
+        mode.frequency_hz = round6(mode.frequency_hz);
+        mode.damping_ratio = round6(mode.damping_ratio);
+    }
 }
 
 fn report(f: &Fingerprints, params: &FlexureStageParams) {
@@ -236,6 +296,23 @@ fn report(f: &Fingerprints, params: &FlexureStageParams) {
         println!(
             "| {name} | {target} | {measured:.6} | {:+.3} % |",
             pct(measured, target)
+        );
+    }
+    for (axis, ku) in LoopAxis::ALL.iter().zip(f.ultimate_gains) {
+        let (ku_target, tu_target) = match axis {
+            LoopAxis::Theta => (ROTATION_KP / 0.45, f64::NAN),
+            _ => (TRANSLATION_KP / 0.45, 1.2 * TRANSLATION_KP / TRANSLATION_KI),
+        };
+        println!(
+            "| ultimate gain {axis:?} [V/µm] | {ku_target:.6} | {:.6} | {:+.3} % |",
+            ku.gain,
+            pct(ku.gain, ku_target)
+        );
+        println!(
+            "| ultimate period {axis:?} [ms] | {:.4} | {:.4} | {:+.3} % |",
+            tu_target * 1e3,
+            ku.period * 1e3,
+            pct(ku.period, tu_target)
         );
     }
     println!();

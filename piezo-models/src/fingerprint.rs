@@ -44,6 +44,7 @@ pub struct Sample {
 }
 
 /// A stage with its current commands, stepped at a fixed period.
+#[derive(Clone)]
 pub struct Rig {
     stage: FlexureStage,
     commands: [f64; 3],
@@ -470,6 +471,160 @@ pub fn coupling_sweeps(params: &FlexureStageParams, u_home: f64) -> CouplingSwee
     }
 }
 
+/// Axis of a feedback-loop test, read and driven as seed 000's controller
+/// reads and drives it (§3.2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LoopAxis {
+    /// Reads x = (s2 + s3)/2, drives u2 and u3 equally.
+    X,
+    /// Reads y = s1, drives u1.
+    Y,
+    /// Reads θ·L/2 = (s2 − s3)/2 [µm], drives u2 up and u3 down.
+    Theta,
+}
+
+impl LoopAxis {
+    pub const ALL: [LoopAxis; 3] = [LoopAxis::X, LoopAxis::Y, LoopAxis::Theta];
+
+    fn directions(self) -> [f64; 3] {
+        match self {
+            LoopAxis::X => [0.0, 1.0, 1.0],
+            LoopAxis::Y => [1.0, 0.0, 0.0],
+            LoopAxis::Theta => [0.0, 1.0, -1.0],
+        }
+    }
+
+    fn reading(self, rig: &Rig) -> f64 {
+        let s = rig.stage.sensors();
+        match self {
+            LoopAxis::X => 0.5 * (s[1] + s[2]),
+            LoopAxis::Y => s[0],
+            LoopAxis::Theta => 0.5 * (s[1] - s[2]),
+        }
+    }
+}
+
+/// u1 at the operating point of the loop tests (y at mid stroke) [V].
+pub const LOOP_Y_COMMAND: f64 = 5.0;
+/// Reference step that starts the loop's oscillation [µm].
+pub const LOOP_STEP_UM: f64 = 0.05;
+/// Length of one proportional-loop probe [s].
+pub const LOOP_PROBE_TIME: f64 = 0.12;
+/// The two windows whose oscillation amplitudes give the growth rate [s].
+const LOOP_WINDOWS: [(f64, f64); 2] = [(0.02, 0.06), (0.08, 0.12)];
+
+/// The Ziegler-Nichols ultimate gain of one axis: the proportional gain at
+/// which the sampled loop oscillates without growing or decaying, and the
+/// period of that oscillation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UltimateGain {
+    /// K_u [V/µm].
+    pub gain: f64,
+    /// T_u [s].
+    pub period: f64,
+}
+
+impl UltimateGain {
+    /// Ziegler-Nichols PI tuning: kp = 0.45·K_u, ki = kp/(T_u/1.2).
+    pub fn ziegler_nichols_pi(&self) -> (f64, f64) {
+        let kp = 0.45 * self.gain;
+        (kp, kp * 1.2 / self.period)
+    }
+}
+
+/// A proportional loop on `axis` from the settled rig `start`: the reference
+/// steps by [`LOOP_STEP_UM`] and the command of channel c over [t_k, t_k+1] is
+/// the operating command + directions_c·kp·(r − reading(t_k−1)): one sample
+/// of compute delay, as a controller FMU in the
+/// project's co-simulation has. Returns the growth rate of the oscillation
+/// [1/s] (ln of the ratio of the RMS of the error about its mean in the two
+/// [`LOOP_WINDOWS`], over their distance) and its period [s] from the zero
+/// crossings in the last window. A probe whose command leaves 0..10 V is
+/// unstable: growth +∞.
+pub fn proportional_loop_growth(start: &Rig, axis: LoopAxis, kp: f64) -> (f64, f64) {
+    let mut rig = start.clone();
+    let operating = rig.commands;
+    let directions = axis.directions();
+    let reference = axis.reading(&rig) + LOOP_STEP_UM;
+    let mut previous = axis.reading(&rig);
+    let mut current = previous;
+    let steps = (LOOP_PROBE_TIME / SAMPLE_PERIOD).round() as usize;
+    let mut errors = Vec::with_capacity(steps);
+    for _ in 0..steps {
+        let v = kp * (reference - previous);
+        let raw = [0, 1, 2].map(|c| operating[c] + directions[c] * v);
+        if raw.iter().any(|u| !(0.0..=FULL_COMMAND).contains(u)) {
+            // A loop that is stable never leaves the command range after a
+            // 0.05 µm step from mid-stroke; once limited, an unstable loop's
+            // amplitude stops growing and would look marginal.
+            return (f64::INFINITY, f64::NAN);
+        }
+        rig.stage.step(raw, SAMPLE_PERIOD);
+        previous = current;
+        current = axis.reading(&rig);
+        errors.push(reference - current);
+    }
+    let window = |(from, to): (f64, f64)| {
+        let a = (from / SAMPLE_PERIOD).round() as usize;
+        let b = ((to / SAMPLE_PERIOD).round() as usize).min(errors.len());
+        let segment = &errors[a..b];
+        let mean = segment.iter().sum::<f64>() / segment.len() as f64;
+        let centred: Vec<f64> = segment.iter().map(|e| e - mean).collect();
+        let rms = (centred.iter().map(|e| e * e).sum::<f64>() / centred.len() as f64).sqrt();
+        (rms, centred)
+    };
+    let (first, _) = window(LOOP_WINDOWS[0]);
+    let (last, centred) = window(LOOP_WINDOWS[1]);
+    let distance = LOOP_WINDOWS[1].0 - LOOP_WINDOWS[0].0;
+    let growth = (last.max(1e-300) / first.max(1e-300)).ln() / distance;
+    // Zero crossings, interpolated between samples [in samples].
+    let crossings: Vec<f64> = (1..centred.len())
+        .filter(|&k| (centred[k - 1] < 0.0) != (centred[k] < 0.0))
+        .map(|k| (k - 1) as f64 + centred[k - 1] / (centred[k - 1] - centred[k]))
+        .collect();
+    let period = if crossings.len() >= 3 {
+        2.0 * (crossings[crossings.len() - 1] - crossings[0]) * SAMPLE_PERIOD
+            / (crossings.len() - 1) as f64
+    } else {
+        f64::NAN
+    };
+    (growth, period)
+}
+
+/// A rig at the operating point of the loop tests: from rest, ramp to
+/// ([`LOOP_Y_COMMAND`], u_home, u_home) over 1 s and hold 0.5 s so that the
+/// modes settle.
+pub fn rig_at_loop_operating_point(params: &FlexureStageParams, u_home: f64) -> Rig {
+    let mut rig = Rig::new(params);
+    rig.ramp_to([LOOP_Y_COMMAND, u_home, u_home]);
+    rig.hold(0.5);
+    rig
+}
+
+/// The ultimate gain of `axis` (Ziegler-Nichols, the method seed 000 §3.2
+/// tuned its PI gains with): the gain at which
+/// [`proportional_loop_growth`] changes sign, by bisection in log gain
+/// between 0.001 and 10 V/µm to a relative width of 1e-4, at the operating
+/// point of [`rig_at_loop_operating_point`]. (Bisection, because an unstable
+/// probe reports an infinite growth that regula falsi cannot interpolate.)
+pub fn ultimate_gain(params: &FlexureStageParams, u_home: f64, axis: LoopAxis) -> UltimateGain {
+    let rig = rig_at_loop_operating_point(params, u_home);
+    let (mut stable, mut unstable): (f64, f64) = (1e-3, 10.0);
+    while unstable / stable > 1.0 + 1e-4 {
+        let kp = (stable * unstable).sqrt();
+        if proportional_loop_growth(&rig, axis, kp).0 > 0.0 {
+            unstable = kp;
+        } else {
+            stable = kp;
+        }
+    }
+    let gain = (stable * unstable).sqrt();
+    // The period of the oscillation just inside the stable side, where the
+    // probe does not leave the command range.
+    let (_, period) = proportional_loop_growth(&rig, axis, stable);
+    UltimateGain { gain, period }
+}
+
 /// Every fingerprint of the calibrated stage.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fingerprints {
@@ -482,6 +637,8 @@ pub struct Fingerprints {
     pub loop_x: LoopShape,
     pub loop_y: LoopShape,
     pub couplings: CouplingSweeps,
+    /// Ziegler-Nichols ultimate gains of x, y and θ (in [`LoopAxis::ALL`] order).
+    pub ultimate_gains: [UltimateGain; 3],
 }
 
 /// Runs every procedure of this module.
@@ -496,6 +653,7 @@ pub fn measure(params: &FlexureStageParams) -> Fingerprints {
         loop_x: major_loop(params, Axis::X),
         loop_y: major_loop(params, Axis::Y),
         couplings: coupling_sweeps(params, u_home),
+        ultimate_gains: LoopAxis::ALL.map(|axis| ultimate_gain(params, u_home, axis)),
     }
 }
 

@@ -130,3 +130,36 @@ fn coupling_spans_match_table_3_and_are_hysteretic() {
         assert!(coupling.width_ratio >= 0.05, "{name}");
     }
 }
+
+/// Ziegler-Nichols ultimate gains, the loop-dynamics fingerprint: seed 000
+/// §3.2 tuned its PI gains by Ziegler-Nichols (kp = 0.45·K_u, ki = 1.2·kp/T_u),
+/// so translation kp 0.05, ki 50 mean K_u = 0.111 V/µm and T_u = 1.2 ms, and
+/// rotation kp 0.06 means K_u = 0.133 V/µm; ± 10 %. Procedure: at the loop
+/// operating point (ramp to (5 V, u_home, u_home) over 1 s, hold 0.5 s), a
+/// proportional loop with one sample of compute delay follows a 0.05 µm
+/// reference step; K_u is the gain at which the oscillation neither grows nor
+/// decays (see `fingerprint::ultimate_gain`). The paper's gains then have a
+/// gain margin of 1/0.45 ≈ 2.2 on this plant, as on the paper's stage.
+#[test]
+fn ziegler_nichols_ultimate_gains_match_the_papers_pi_gains() {
+    use piezo_models::fingerprint::LoopAxis;
+    let params = FlexureStageParams::default();
+    let u_home = fingerprint::x_home_command(&params);
+    for (axis, ku_target, tu_target) in [
+        (LoopAxis::X, 0.05 / 0.45, Some(1.2e-3)),
+        (LoopAxis::Y, 0.05 / 0.45, Some(1.2e-3)),
+        (LoopAxis::Theta, 0.06 / 0.45, None),
+    ] {
+        let ku = fingerprint::ultimate_gain(&params, u_home, axis);
+        let (kp, ki) = ku.ziegler_nichols_pi();
+        println!(
+            "{axis:?}: K_u {:.5} V/µm (target {ku_target:.5}), T_u {:.4} ms -> Ziegler-Nichols kp {kp:.4}, ki {ki:.1}",
+            ku.gain,
+            ku.period * 1e3
+        );
+        assert!(relative_error(ku.gain, ku_target) < 0.10, "{axis:?}");
+        if let Some(tu) = tu_target {
+            assert!(relative_error(ku.period, tu) < 0.10, "{axis:?}");
+        }
+    }
+}
