@@ -247,7 +247,11 @@ fn calibrate_modes(params: &mut FlexureStageParams) {
             break;
         }
     }
-    for mode in [&mut params.modes.x, &mut params.modes.y, &mut params.modes.theta] {
+    for mode in [
+        &mut params.modes.x,
+        &mut params.modes.y,
+        &mut params.modes.theta,
+    ] {
         mode.frequency_hz = round6(mode.frequency_hz);
         mode.damping_ratio = round6(mode.damping_ratio);
     }
