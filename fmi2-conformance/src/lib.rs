@@ -114,12 +114,18 @@ pub struct Fmu {
 }
 
 impl Fmu {
-    /// Loads `library` (dlopen) and parses `model_description` with fmi-schema.
+    /// Loads `library` (dlopen) and parses `model_description` with fmi-schema;
+    /// panics with the reason (for tests).
     pub fn load(library: &Path, model_description: &str) -> Fmu {
+        Fmu::try_load(library, model_description).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// Like [`Fmu::load`], with the reason as an error (for tools).
+    pub fn try_load(library: &Path, model_description: &str) -> Result<Fmu, String> {
         let binding = unsafe { Fmi2Binding::new(library) }
-            .unwrap_or_else(|e| panic!("cannot load {}: {e}", library.display()));
+            .map_err(|e| format!("cannot load {}: {e}", library.display()))?;
         let description = Fmi2ModelDescription::deserialize(model_description)
-            .unwrap_or_else(|e| panic!("modelDescription does not parse with fmi-schema: {e}"));
+            .map_err(|e| format!("modelDescription does not parse with fmi-schema: {e}"))?;
         let variables = description
             .model_variables
             .variables
@@ -144,13 +150,18 @@ impl Fmu {
                 }
             })
             .collect();
-        Fmu {
+        Ok(Fmu {
             binding,
             library_path: library.to_owned(),
             guid: description.guid.clone(),
             description,
             variables,
-        }
+        })
+    }
+
+    /// The variable called `name`, if there is one.
+    pub fn find(&self, name: &str) -> Option<&VariableInfo> {
+        self.variables.iter().find(|v| v.name == name)
     }
 
     pub fn variable(&self, name: &str) -> &VariableInfo {

@@ -1,0 +1,560 @@
+//! Reading a numeric voltage/displacement record from a text file.
+//!
+//! The format is the common one of measurement exports: one sample per line,
+//! columns separated by whitespace or by commas, an optional header row of
+//! column names, `#` starting a comment (whole line or trailing) and blank
+//! lines ignored. Options pick the input (voltage) and output (displacement)
+//! columns by 0-based index or by header name, and give the sampling either
+//! as a time column or as a sample rate.
+//!
+//! Every field of a data row must be a finite number, not only the selected
+//! ones: a numeric export with a stray word or a NaN in any column is more
+//! likely corrupt than intended, and refusing it early is cheaper than a fit
+//! on garbage. Errors name the file, the 1-based line and the problem
+//! (`file:line: problem`).
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Fewest data rows a record may have: more than the 31 parameters of the
+/// largest model identified here (seed 000's proposed model and its 10 + 10
+/// rival), so that even an unsampled fit is over-determined.
+pub const MINIMUM_ROWS: usize = 32;
+
+/// Largest relative deviation of one time step from the mean step before the
+/// sampling counts as non-uniform (1 %): the hysteresis operators are
+/// discrete-time (seed 000 eq. 1, sampling period T) and the rates are
+/// backward differences, both of which assume one fixed period.
+pub const UNIFORM_SAMPLING_TOLERANCE: f64 = 0.01;
+
+/// A column chosen by 0-based index or by its name in the header row.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Column {
+    Index(usize),
+    Name(String),
+}
+
+impl Column {
+    /// Reads a command-line value: an unsigned integer is an index, anything
+    /// else a header name.
+    pub fn parse(text: &str) -> Column {
+        match text.trim().parse::<usize>() {
+            Ok(index) => Column::Index(index),
+            Err(_) => Column::Name(text.trim().to_owned()),
+        }
+    }
+}
+
+impl fmt::Display for Column {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Column::Index(i) => write!(f, "{i}"),
+            Column::Name(name) => write!(f, "\"{name}\""),
+        }
+    }
+}
+
+/// How the samples are spaced in time.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Sampling {
+    /// A column of times [s]; must increase strictly and uniformly (within
+    /// [`UNIFORM_SAMPLING_TOLERANCE`]).
+    TimeColumn(Column),
+    /// A fixed sample rate [Hz].
+    Rate(f64),
+}
+
+/// Which columns to read and how the samples are spaced.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReadOptions {
+    /// The actuator command [V].
+    pub input: Column,
+    /// The measured displacement [µm].
+    pub output: Column,
+    pub sampling: Sampling,
+}
+
+/// A voltage/displacement record sampled at a fixed period.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Record {
+    /// Input (command) samples [V].
+    pub input: Vec<f64>,
+    /// Output (displacement) samples [µm].
+    pub output: Vec<f64>,
+    /// Sampling period [s].
+    pub sample_period: f64,
+}
+
+/// What is wrong with a line (or, for [`Problem::TooFewRows`], the file).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Problem {
+    #[error("field {field} (\"{text}\") is not a number")]
+    NotANumber { field: usize, text: String },
+    #[error("field {field} is {value}, not a finite number")]
+    NotFinite { field: usize, value: f64 },
+    #[error("row has {found} columns, column {needed} (0-based) is needed")]
+    TooFewColumns { found: usize, needed: usize },
+    #[error("column \"{name}\" is not in the header (columns: {header})")]
+    UnknownColumn { name: String, header: String },
+    #[error("column \"{name}\" is named but the file has no header row")]
+    NoHeader { name: String },
+    #[error("header has fields that are numbers and fields that are not")]
+    MixedHeader,
+    #[error("time {time} s does not increase (previous row: {previous} s)")]
+    TimeNotIncreasing { previous: f64, time: f64 },
+    #[error(
+        "time step {step} s differs from the mean step {mean} s by more than 1 % (non-uniform sampling)"
+    )]
+    NonUniformSampling { step: f64, mean: f64 },
+    #[error("only {found} data rows, at least {minimum} are needed")]
+    TooFewRows { found: usize, minimum: usize },
+}
+
+/// A record that could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// `line` is 1-based; for a file-wide problem (too few rows) it is the
+    /// last line of the file.
+    #[error("{}:{line}: {problem}", path.display())]
+    Malformed {
+        path: PathBuf,
+        line: usize,
+        problem: Problem,
+    },
+    /// The sample rate given in the options (not the file) is unusable.
+    #[error("sample rate {rate} Hz is not a positive finite number")]
+    InvalidRate { rate: f64 },
+}
+
+impl DataError {
+    /// The problem, when the file was readable.
+    pub fn problem(&self) -> Option<&Problem> {
+        match self {
+            DataError::Io { .. } | DataError::InvalidRate { .. } => None,
+            DataError::Malformed { problem, .. } => Some(problem),
+        }
+    }
+}
+
+/// Reads a record from a file.
+pub fn read_record(path: &Path, options: &ReadOptions) -> Result<Record, DataError> {
+    let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse_record(&text, path, options)
+}
+
+/// Parses a record from text; `path` only names the source in errors.
+pub fn parse_record(text: &str, path: &Path, options: &ReadOptions) -> Result<Record, DataError> {
+    let malformed = |line: usize, problem: Problem| DataError::Malformed {
+        path: path.to_owned(),
+        line,
+        problem,
+    };
+    if let Sampling::Rate(rate) = options.sampling
+        && !(rate.is_finite() && rate > 0.0)
+    {
+        return Err(DataError::InvalidRate { rate });
+    }
+
+    let mut header: Option<(usize, Vec<String>)> = None;
+    let mut resolved: Option<ResolvedColumns> = None;
+    let mut input = Vec::new();
+    let mut output = Vec::new();
+    let mut times: Vec<(usize, f64)> = Vec::new();
+    let mut last_line = 0;
+    let mut seen_content = false;
+
+    for (index, raw) in text.lines().enumerate() {
+        let line = index + 1;
+        last_line = line;
+        let content = raw.split('#').next().unwrap_or("").trim();
+        if content.is_empty() {
+            continue;
+        }
+        let fields = split_fields(content);
+        let first_content_row = !seen_content;
+        seen_content = true;
+        if first_content_row {
+            let numeric = fields.iter().filter(|f| f.parse::<f64>().is_ok()).count();
+            if numeric == 0 {
+                header = Some((line, fields.iter().map(|f| (*f).to_owned()).collect()));
+                continue;
+            }
+            // Mostly names with a number among them: a header with a typo, not
+            // something to guess about. Mostly numbers: a data row, whose bad
+            // field is reported below.
+            if 2 * numeric < fields.len() {
+                return Err(malformed(line, Problem::MixedHeader));
+            }
+        }
+        let columns = match &resolved {
+            Some(columns) => *columns,
+            None => {
+                let columns = resolve_columns(options, header.as_ref())
+                    .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
+                resolved = Some(columns);
+                columns
+            }
+        };
+        let mut values = Vec::with_capacity(fields.len());
+        for (field, text) in fields.iter().enumerate() {
+            let value: f64 = text.parse().map_err(|_| {
+                malformed(
+                    line,
+                    Problem::NotANumber {
+                        field,
+                        text: (*text).to_owned(),
+                    },
+                )
+            })?;
+            if !value.is_finite() {
+                return Err(malformed(line, Problem::NotFinite { field, value }));
+            }
+            values.push(value);
+        }
+        let needed = columns.largest();
+        if values.len() <= needed {
+            return Err(malformed(
+                line,
+                Problem::TooFewColumns {
+                    found: values.len(),
+                    needed,
+                },
+            ));
+        }
+        input.push(values[columns.input]);
+        output.push(values[columns.output]);
+        if let Some(time) = columns.time {
+            let t = values[time];
+            if let Some(&(_, previous)) = times.last()
+                && t <= previous
+            {
+                return Err(malformed(
+                    line,
+                    Problem::TimeNotIncreasing { previous, time: t },
+                ));
+            }
+            times.push((line, t));
+        }
+    }
+
+    // Columns named in the options must exist even in a file without data.
+    if resolved.is_none() {
+        resolve_columns(options, header.as_ref())
+            .map_err(|(line, problem)| malformed(line.unwrap_or(last_line), problem))?;
+    }
+    if input.len() < MINIMUM_ROWS {
+        return Err(malformed(
+            last_line,
+            Problem::TooFewRows {
+                found: input.len(),
+                minimum: MINIMUM_ROWS,
+            },
+        ));
+    }
+    let sample_period = match options.sampling {
+        Sampling::Rate(rate) => 1.0 / rate,
+        Sampling::TimeColumn(_) => uniform_period(&times).map_err(|(l, p)| malformed(l, p))?,
+    };
+    Ok(Record {
+        input,
+        output,
+        sample_period,
+    })
+}
+
+/// Splits a line into fields: by commas when it has any (fields trimmed, an
+/// empty field kept so that it is reported), otherwise by whitespace.
+fn split_fields(content: &str) -> Vec<&str> {
+    if content.contains(',') {
+        content.split(',').map(str::trim).collect()
+    } else {
+        content.split_whitespace().collect()
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct ResolvedColumns {
+    input: usize,
+    output: usize,
+    time: Option<usize>,
+}
+
+impl ResolvedColumns {
+    fn largest(&self) -> usize {
+        self.input.max(self.output).max(self.time.unwrap_or(0))
+    }
+}
+
+/// Turns the selected columns into indices; an error carries the header's
+/// line when a name is not found there.
+fn resolve_columns(
+    options: &ReadOptions,
+    header: Option<&(usize, Vec<String>)>,
+) -> Result<ResolvedColumns, (Option<usize>, Problem)> {
+    let resolve = |column: &Column| -> Result<usize, (Option<usize>, Problem)> {
+        match column {
+            Column::Index(i) => Ok(*i),
+            Column::Name(name) => match header {
+                None => Err((None, Problem::NoHeader { name: name.clone() })),
+                Some((line, names)) => names.iter().position(|n| n == name).ok_or_else(|| {
+                    (
+                        Some(*line),
+                        Problem::UnknownColumn {
+                            name: name.clone(),
+                            header: names.join(", "),
+                        },
+                    )
+                }),
+            },
+        }
+    };
+    Ok(ResolvedColumns {
+        input: resolve(&options.input)?,
+        output: resolve(&options.output)?,
+        time: match &options.sampling {
+            Sampling::TimeColumn(column) => Some(resolve(column)?),
+            Sampling::Rate(_) => None,
+        },
+    })
+}
+
+/// The mean period of a strictly increasing time column, refusing a step that
+/// deviates from it by more than [`UNIFORM_SAMPLING_TOLERANCE`].
+fn uniform_period(times: &[(usize, f64)]) -> Result<f64, (usize, Problem)> {
+    let (first, last) = (times[0].1, times[times.len() - 1].1);
+    let mean = (last - first) / (times.len() - 1) as f64;
+    for pair in times.windows(2) {
+        let step = pair[1].1 - pair[0].1;
+        if (step - mean).abs() > UNIFORM_SAMPLING_TOLERANCE * mean {
+            return Err((pair[1].0, Problem::NonUniformSampling { step, mean }));
+        }
+    }
+    Ok(mean)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(input: Column, output: Column, sampling: Sampling) -> ReadOptions {
+        ReadOptions {
+            input,
+            output,
+            sampling,
+        }
+    }
+
+    fn by_index() -> ReadOptions {
+        options(Column::Index(0), Column::Index(1), Sampling::Rate(100.0))
+    }
+
+    /// `rows` data rows "u y" (whitespace separated) after `prefix`.
+    fn rows(prefix: &str, count: usize) -> String {
+        let mut text = prefix.to_owned();
+        for n in 0..count {
+            text.push_str(&format!("{} {}\n", n as f64 * 0.1, n as f64 * 0.2));
+        }
+        text
+    }
+
+    fn message(text: &str, options: &ReadOptions) -> String {
+        parse_record(text, Path::new("data.txt"), options)
+            .expect_err("the record must be refused")
+            .to_string()
+    }
+
+    #[test]
+    fn reads_whitespace_columns_with_comments_and_blank_lines() {
+        let text = rows("# a comment\n\n", MINIMUM_ROWS) + "  # trailing comment line\n";
+        let record = parse_record(&text, Path::new("data.txt"), &by_index()).unwrap();
+        assert_eq!(record.input.len(), MINIMUM_ROWS);
+        assert_eq!(record.input[3], 0.30000000000000004);
+        assert_eq!(record.output[3], 0.6000000000000001);
+        assert_eq!(record.sample_period, 0.01);
+    }
+
+    #[test]
+    fn reads_comma_columns_by_header_name_with_a_time_column() {
+        let mut text = String::from("time, volts, um # units: s, V, um\n");
+        for n in 0..40 {
+            text.push_str(&format!("{}, {}, {} # row\n", n as f64 * 0.005, n, 2 * n));
+        }
+        let options = options(
+            Column::Name("volts".into()),
+            Column::Name("um".into()),
+            Sampling::TimeColumn(Column::Name("time".into())),
+        );
+        let record = parse_record(&text, Path::new("data.csv"), &options).unwrap();
+        assert_eq!(record.input[39], 39.0);
+        assert_eq!(record.output[39], 78.0);
+        assert!((record.sample_period - 0.005).abs() < 1e-15);
+    }
+
+    #[test]
+    fn column_parse_reads_indices_and_names() {
+        assert_eq!(Column::parse("4"), Column::Index(4));
+        assert_eq!(Column::parse("volts"), Column::Name("volts".into()));
+    }
+
+    #[test]
+    fn refuses_a_field_that_is_not_a_number() {
+        let text = rows("", 5) + "0.5 1.o\n" + &rows("", 40);
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:6: field 1 (\"1.o\") is not a number"
+        );
+    }
+
+    #[test]
+    fn refuses_an_empty_comma_field() {
+        let text = "1,2\n3,,4\n";
+        assert_eq!(
+            message(text, &by_index()),
+            "data.txt:2: field 1 (\"\") is not a number"
+        );
+    }
+
+    #[test]
+    fn refuses_nan_and_infinity() {
+        let text = rows("", 3) + "NaN 1\n";
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:4: field 0 is NaN, not a finite number"
+        );
+        let text = rows("", 2) + "1 -inf\n";
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:3: field 1 is -inf, not a finite number"
+        );
+    }
+
+    #[test]
+    fn refuses_a_row_with_too_few_columns() {
+        let text = rows("", 7) + "0.5\n";
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:8: row has 1 columns, column 1 (0-based) is needed"
+        );
+        let options = options(Column::Index(0), Column::Index(4), Sampling::Rate(200.0));
+        assert_eq!(
+            message(&rows("", 40), &options),
+            "data.txt:1: row has 2 columns, column 4 (0-based) is needed"
+        );
+    }
+
+    #[test]
+    fn refuses_a_column_name_not_in_the_header() {
+        let text = rows("# header follows\nvolts um\n", 40);
+        let options = options(
+            Column::Name("volts".into()),
+            Column::Name("displacement".into()),
+            Sampling::Rate(100.0),
+        );
+        assert_eq!(
+            message(&text, &options),
+            "data.txt:2: column \"displacement\" is not in the header (columns: volts, um)"
+        );
+    }
+
+    #[test]
+    fn refuses_a_column_name_without_a_header() {
+        let options = options(
+            Column::Name("volts".into()),
+            Column::Index(1),
+            Sampling::Rate(100.0),
+        );
+        assert_eq!(
+            message(&rows("", 40), &options),
+            "data.txt:1: column \"volts\" is named but the file has no header row"
+        );
+    }
+
+    #[test]
+    fn refuses_a_header_mixing_names_and_numbers() {
+        let text = rows("volts um x 3\n", 40);
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:1: header has fields that are numbers and fields that are not"
+        );
+    }
+
+    #[test]
+    fn refuses_time_that_does_not_increase() {
+        let mut text = String::new();
+        for n in 0..40 {
+            let t = if n == 12 { 0.10 } else { n as f64 * 0.01 };
+            text.push_str(&format!("{t} {n} {n}\n"));
+        }
+        let options = options(
+            Column::Index(1),
+            Column::Index(2),
+            Sampling::TimeColumn(Column::Index(0)),
+        );
+        assert_eq!(
+            message(&text, &options),
+            "data.txt:13: time 0.1 s does not increase (previous row: 0.11 s)"
+        );
+    }
+
+    #[test]
+    fn refuses_non_uniform_sampling() {
+        let mut text = String::new();
+        for n in 0..40 {
+            // Row 21 (line 21) comes 2 % late, the next one back on the grid.
+            let t = n as f64 * 0.01 + if n == 20 { 0.0002 } else { 0.0 };
+            text.push_str(&format!("{t} {n} {n}\n"));
+        }
+        let options = options(
+            Column::Index(1),
+            Column::Index(2),
+            Sampling::TimeColumn(Column::Index(0)),
+        );
+        let message = message(&text, &options);
+        assert!(
+            message.starts_with("data.txt:21: time step 0.0102"),
+            "{message}"
+        );
+        assert!(
+            message.ends_with(
+                "differs from the mean step 0.01 s by more than 1 % (non-uniform sampling)"
+            ),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn refuses_too_few_rows() {
+        let text = rows("u y\n", 5) + "\n# end\n";
+        assert_eq!(
+            message(&text, &by_index()),
+            format!("data.txt:8: only 5 data rows, at least {MINIMUM_ROWS} are needed")
+        );
+    }
+
+    #[test]
+    fn refuses_an_invalid_rate() {
+        let options = options(Column::Index(0), Column::Index(1), Sampling::Rate(0.0));
+        assert_eq!(
+            message(&rows("", 40), &options),
+            "sample rate 0 Hz is not a positive finite number"
+        );
+    }
+
+    #[test]
+    fn names_a_missing_file() {
+        let error = read_record(Path::new("/nonexistent/record.dat"), &by_index()).unwrap_err();
+        assert!(error.problem().is_none());
+        assert!(
+            error.to_string().starts_with("/nonexistent/record.dat: "),
+            "{error}"
+        );
+    }
+}

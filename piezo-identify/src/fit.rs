@@ -1,0 +1,722 @@
+//! Separable least-squares identification (seed 000 §3.1, objective eq. 7:
+//! F = ‖u_model − u‖²).
+//!
+//! For the proposed model and its traditional rivals the parameters split in
+//! two: given c and the dead-zone weights w_s (and u1max, which follows from
+//! them and the data's range, eq. 5), the model is linear in (a, k, b), solved
+//! exactly by [`crate::least_squares`]. Only (c, w_s) is searched, by
+//! Nelder-Mead (argmin) from random initial values, best of N starts (30 by
+//! default, as the paper), the starts run in parallel with rayon.
+//!
+//! Structure of the search space:
+//! - Scale of w_s. Backlash is positively homogeneous (H_{λr}[λz] = λ·H_r[z]
+//!   for λ > 0) and odd (H_r[−z] = −H_r[z] from the zero memory of eq. 1), and
+//!   u1max = max |z| scales with |w_s|, so the backlash thresholds scale with
+//!   it: multiplying w_s by any λ ≠ 0 multiplies every H_i by λ, which (k, b)
+//!   absorb exactly. Only the direction of w_s matters; it is fixed by
+//!   ‖w_s‖₂ = 1 and searched in hyperspherical angles φ_1…φ_{m−1}
+//!   (w_s,1 = cos φ_1, w_s,2 = sin φ_1 cos φ_2, …), m − 1 free values for m
+//!   dead zones. A first attempt fixed w_s,1 = 1 instead; on the simulated
+//!   stage the best proposed model wants w_s,1 → 0 (z ≈ 0 below c), which that
+//!   normalisation can only reach with the other weights running off to 10⁷;
+//!   the sphere has no such edge.
+//! - c > 0 is searched as ln c.
+//! - Nelder-Mead minimises F/F_0 with F_0 = Σ(u − ū)² over the fitted samples
+//!   (the same minimiser as F; a scale-free cost makes the termination
+//!   tolerance mean the same on every data set).
+//!
+//! Random initial values: c is a scale, drawn log-uniformly over
+//! [0.001, 0.11]·y_max (the last dead-zone threshold 9c starts between 0.9 %
+//! and 99 % of the range), stratified: start k of N draws from the k-th of N
+//! equal slices of that log range. F is strongly multimodal in c (each
+//! placement of the dead-zone kinks across the data is a basin; on a test
+//! model with mild dead zones a start 10 % below the true c already ended in
+//! another one), so plain random draws leave gaps that a best-of-30 can miss;
+//! one draw per slice covers the range at a spacing of a factor 1.17 for
+//! N = 30. A first version drew c uniformly from [0.02, 0.11]·y_max and
+//! missed the lowest-F region of the P-885 record, which lies at small c
+//! (README). w_s starts as the direction of (1, U(−1, 1), …,
+//! U(−1, 1)): a dominant d = 0 (linear) operator with random corrections.
+//! Start k draws from its own Xoshiro256++ stream: the seed's generator
+//! advanced by k jumps (2¹²⁸ steps each), so the starts are independent of
+//! each other and of the thread that runs them, and the best start (lowest F,
+//! ties to the lowest index) is bit-identical for any number of rayon
+//! threads.
+//!
+//! Decimation: the search may use every m-th sample (m = `decimation`) with the
+//! rates by backward difference at m·T, which is far cheaper at 10 kHz; the
+//! final linear part (a, k, b) is then solved once on all samples for the
+//! chosen (c, w_s), and F is reported on all samples.
+
+use argmin::core::{CostFunction, Executor, State};
+use argmin::solver::neldermead::NelderMead;
+use nalgebra::DMatrix;
+use piezo_models::InversePiParams;
+use piezo_models::inverse_pi::{BACKLASH_OPERATORS, DEAD_ZONE_OPERATORS};
+use rand::{RngExt, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::least_squares::{LinearSolution, solve_least_squares};
+use crate::models::{
+    ClassicalPi, ClassicalPiParams, InverseHysteresis, TraditionalInversePi,
+    TraditionalInversePiParams, predict, u1max_for,
+};
+use crate::regressors::{
+    PROPOSED, RateDependentLayout, TRADITIONAL_SIX, TRADITIONAL_TEN, classical_regressors,
+    rate_dependent_regressors,
+};
+
+/// Nelder-Mead stops when the standard deviation of the simplex's normalised
+/// costs falls below this (cost F/F_0, module comment).
+const SIMPLEX_COST_TOLERANCE: f64 = 1e-14;
+/// Initial simplex edge in ln c and in each hyperspherical angle of w_s.
+const SIMPLEX_STEP: f64 = 0.2;
+/// Range of the random initial c, in units of y_max, drawn log-uniformly and
+/// stratified over the starts.
+const INITIAL_C_RANGE: (f64, f64) = (1e-3, 0.11);
+/// Range of the random initial w_s,j/w_s,1, j ≥ 2 (before normalising).
+const INITIAL_WEIGHT_RANGE: (f64, f64) = (-1.0, 1.0);
+/// Cost returned for parameters the model cannot use (c not finite, z not
+/// finite): far above any real cost (≤ about 1), finite so that Nelder-Mead's
+/// sort stays well defined.
+const UNUSABLE_COST: f64 = 1e30;
+
+/// Settings of a fit.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FitOptions {
+    /// Random starts of the Nelder-Mead search; the best is kept (seed 000: 30).
+    pub starts: usize,
+    /// Seed of the random initial values.
+    pub seed: u64,
+    /// Nelder-Mead iterations per start at most.
+    pub max_iterations: u64,
+    /// The search uses every `decimation`-th sample (1: all).
+    pub decimation: usize,
+    /// The first samples run the operators but are not fitted nor scored (a
+    /// start-up transient that no hysteresis model describes).
+    pub warm_up_samples: usize,
+    /// Rate-dependent backlash weights w_h = k·ẏ + b (seed 000 eq. 4); false
+    /// fits constant weights (k = 0) for the proposed and traditional models.
+    pub rate_dependent: bool,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            starts: 30,
+            seed: 0,
+            max_iterations: 2000,
+            decimation: 1,
+            warm_up_samples: 0,
+            rate_dependent: true,
+        }
+    }
+}
+
+/// Why a fit could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    #[error("displacement has {displacement} samples but voltage has {voltage}")]
+    LengthMismatch { displacement: usize, voltage: usize },
+    #[error("{found} samples to fit (after warm-up and decimation), at least {minimum} are needed")]
+    TooFewSamples { found: usize, minimum: usize },
+    #[error("{signal} sample {index} is {value}, not finite")]
+    NotFinite {
+        signal: &'static str,
+        index: usize,
+        value: f64,
+    },
+    #[error("sample period {0} s is not positive and finite")]
+    InvalidSamplePeriod(f64),
+    #[error(
+        "displacement never exceeds 0 (largest {0} um); shift it so that the de-energized position is 0"
+    )]
+    NoPositiveDisplacement(f64),
+    #[error("invalid option: {0}")]
+    InvalidOption(&'static str),
+    #[error("Nelder-Mead failed: {0}")]
+    Optimizer(String),
+}
+
+/// Error figures of a model's voltage against the measured one.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct FitQuality {
+    /// F of eq. (7): Σ (u_model − u)² over the scored samples [V²].
+    pub objective: f64,
+    /// √(F / samples) [V].
+    pub rms: f64,
+    /// Largest |u_model − u| [V].
+    pub max_abs: f64,
+    /// Index of the sample where it occurs (in the record given).
+    pub max_abs_sample: usize,
+    /// Number of scored samples.
+    pub samples: usize,
+}
+
+impl FitQuality {
+    /// Scores a prediction against measured voltages from sample `scored_from`.
+    pub fn of(prediction: &[f64], measured: &[f64], scored_from: usize) -> FitQuality {
+        let mut objective = 0.0;
+        let mut max_abs: f64 = 0.0;
+        let mut max_abs_sample = scored_from;
+        let mut samples = 0;
+        for (n, (p, m)) in prediction
+            .iter()
+            .zip(measured)
+            .enumerate()
+            .skip(scored_from)
+        {
+            let e = p - m;
+            objective += e * e;
+            if e.abs() > max_abs {
+                max_abs = e.abs();
+                max_abs_sample = n;
+            }
+            samples += 1;
+        }
+        FitQuality {
+            objective,
+            rms: (objective / samples.max(1) as f64).sqrt(),
+            max_abs,
+            max_abs_sample,
+            samples,
+        }
+    }
+}
+
+/// The outcome of one random start.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StartResult {
+    /// Index of the start (its random stream).
+    pub start: usize,
+    pub initial_c: f64,
+    pub initial_ws: Vec<f64>,
+    /// c and w_s at the end of the search.
+    pub c: f64,
+    pub ws: Vec<f64>,
+    /// F on the samples the search used (decimated, after warm-up) [V²].
+    pub objective: f64,
+    pub iterations: u64,
+    pub cost_evaluations: u64,
+}
+
+/// A fitted model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fit<P> {
+    pub params: P,
+    /// Quality on all samples given (after warm-up), at the full rate.
+    pub quality: FitQuality,
+    /// Every start, in start order (empty for the purely linear classical fit).
+    pub starts: Vec<StartResult>,
+    /// Index of the start that was kept.
+    pub best_start: Option<usize>,
+}
+
+/// Called once per finished start (from the rayon worker that ran it).
+pub type Progress<'a> = &'a (dyn Fn(&StartResult) + Sync);
+
+/// Fits seed 000's proposed modified inverse P-I model (eq. 3-5): displacement
+/// `y` [µm] (de-energized position at 0) and command `u` [V] sampled every
+/// `sample_period` seconds.
+pub fn fit_modified_inverse_pi(
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+) -> Result<Fit<InversePiParams>, FitError> {
+    fit_modified_inverse_pi_with_progress(y, u, sample_period, options, &|_| {})
+}
+
+/// [`fit_modified_inverse_pi`] reporting each finished start.
+pub fn fit_modified_inverse_pi_with_progress(
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+    progress: Progress,
+) -> Result<Fit<InversePiParams>, FitError> {
+    let layout = PROPOSED.with_rate_dependence(options.rate_dependent);
+    let fit = fit_rate_dependent(layout, y, u, sample_period, options, progress)?;
+    let (a, k, b) = split_coefficients(layout, &fit.coefficients);
+    let params = InversePiParams {
+        a: std::array::from_fn(|i| a[i]),
+        k,
+        b,
+        ws: std::array::from_fn::<f64, DEAD_ZONE_OPERATORS, _>(|j| fit.ws[j]),
+        c: fit.c,
+        u1max: fit.u1max,
+    };
+    let quality = score(
+        &mut piezo_models::ModifiedInversePi::new(params),
+        y,
+        u,
+        sample_period,
+        options.warm_up_samples,
+    );
+    Ok(Fit {
+        params,
+        quality,
+        starts: fit.starts,
+        best_start: Some(fit.best_start),
+    })
+}
+
+/// Fits a traditional inverse P-I model with `D` dead-zone operators (6 or 10,
+/// see [`crate::models`]).
+pub fn fit_traditional_inverse_pi<const D: usize>(
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+    progress: Progress,
+) -> Result<Fit<TraditionalInversePiParams<D>>, FitError> {
+    let layout = match D {
+        6 => TRADITIONAL_SIX,
+        10 => TRADITIONAL_TEN,
+        _ => {
+            return Err(FitError::InvalidOption(
+                "traditional models have 6 or 10 dead zones",
+            ));
+        }
+    }
+    .with_rate_dependence(options.rate_dependent);
+    let fit = fit_rate_dependent(layout, y, u, sample_period, options, progress)?;
+    let (_, k, b) = split_coefficients(layout, &fit.coefficients);
+    let params = TraditionalInversePiParams::<D> {
+        k,
+        b,
+        ws: std::array::from_fn(|j| fit.ws[j]),
+        c: fit.c,
+        u1max: fit.u1max,
+    };
+    let quality = score(
+        &mut TraditionalInversePi::new(params),
+        y,
+        u,
+        sample_period,
+        options.warm_up_samples,
+    );
+    Ok(Fit {
+        params,
+        quality,
+        starts: fit.starts,
+        best_start: Some(fit.best_start),
+    })
+}
+
+/// Fits the classical P-I model (see [`crate::models`]): thresholds evenly
+/// spaced over the range of `y`, weights and offset by linear least squares.
+/// Only `options.warm_up_samples` is used.
+pub fn fit_classical_pi(
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+) -> Result<Fit<ClassicalPiParams>, FitError> {
+    let linear_only = FitOptions {
+        decimation: 1,
+        ..options.clone()
+    };
+    check_signals(
+        y,
+        u,
+        sample_period,
+        &linear_only,
+        ClassicalPiParams::PARAMETER_COUNT,
+    )?;
+    // The range of the fitted samples: a start-up transient in the warm-up is
+    // not part of the working range.
+    let (low, high) = range(&y[options.warm_up_samples..]);
+    let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
+    let scored = &u[options.warm_up_samples..];
+    let solution = solve_least_squares(
+        classical_regressors(&thresholds, y, options.warm_up_samples),
+        scored,
+    );
+    let params = ClassicalPiParams {
+        weights: std::array::from_fn(|i| solution.coefficients[i]),
+        thresholds,
+        offset: solution.coefficients[crate::models::CLASSICAL_OPERATORS],
+    };
+    let quality = score(
+        &mut ClassicalPi::new(params),
+        y,
+        u,
+        sample_period,
+        options.warm_up_samples,
+    );
+    Ok(Fit {
+        params,
+        quality,
+        starts: Vec::new(),
+        best_start: None,
+    })
+}
+
+/// The coefficient vector of a layout as (a, k, b); absent parts are zero.
+fn split_coefficients(
+    layout: RateDependentLayout,
+    theta: &[f64],
+) -> (
+    [f64; 4],
+    [f64; BACKLASH_OPERATORS],
+    [f64; BACKLASH_OPERATORS],
+) {
+    let mut a = [0.0; 4];
+    let mut k = [0.0; BACKLASH_OPERATORS];
+    let (cubic, rest) = theta.split_at(layout.cubic_columns());
+    a[..cubic.len()].copy_from_slice(cubic);
+    let (rates, constants) = rest.split_at(layout.rate_columns());
+    k[..rates.len()].copy_from_slice(rates);
+    let b = std::array::from_fn(|i| constants[i]);
+    (a, k, b)
+}
+
+/// A model's quality on a record, run from the de-energized start.
+pub fn score<M: InverseHysteresis>(
+    model: &mut M,
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    scored_from: usize,
+) -> FitQuality {
+    FitQuality::of(&predict(model, y, sample_period), u, scored_from)
+}
+
+/// The nonlinear and linear parameters of a fitted eq. (3)-(5) model.
+struct RateDependentFit {
+    c: f64,
+    ws: Vec<f64>,
+    u1max: f64,
+    coefficients: Vec<f64>,
+    starts: Vec<StartResult>,
+    best_start: usize,
+}
+
+fn fit_rate_dependent(
+    layout: RateDependentLayout,
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+    progress: Progress,
+) -> Result<RateDependentFit, FitError> {
+    check_signals(y, u, sample_period, options, layout.parameter_count())?;
+    if options.starts == 0 {
+        return Err(FitError::InvalidOption("starts must be at least 1"));
+    }
+    let (_, y_max) = range(y);
+    if y_max <= 0.0 {
+        return Err(FitError::NoPositiveDisplacement(y_max));
+    }
+
+    let m = options.decimation;
+    let y_search: Vec<f64> = y.iter().step_by(m).copied().collect();
+    let u_search: Vec<f64> = u.iter().step_by(m).copied().collect();
+    let search_warm_up = options.warm_up_samples.div_ceil(m);
+    let search = SeparableProblem::new(
+        layout,
+        &y_search,
+        &u_search[search_warm_up..],
+        sample_period * m as f64,
+        search_warm_up,
+        y_max,
+    );
+
+    let starts: Vec<StartResult> = (0..options.starts)
+        .into_par_iter()
+        .map(|start| {
+            let result = search.run_start(start, options);
+            if let Ok(result) = &result {
+                progress(result);
+            }
+            result
+        })
+        .collect::<Result<_, _>>()?;
+    // Lowest F, ties to the lowest start index (`min_by` keeps the first).
+    let best = starts
+        .iter()
+        .min_by(|a, b| a.objective.total_cmp(&b.objective))
+        .expect("at least one start")
+        .start;
+
+    // The linear part on all samples for the chosen (c, w_s).
+    let c = starts[best].c;
+    let ws = starts[best].ws.clone();
+    let full = SeparableProblem::new(
+        layout,
+        y,
+        &u[options.warm_up_samples..],
+        sample_period,
+        options.warm_up_samples,
+        y_max,
+    );
+    let (u1max, solution) = full.solve(c, &ws).ok_or(FitError::Optimizer(format!(
+        "the best start (c = {c}) is unusable"
+    )))?;
+    Ok(RateDependentFit {
+        c,
+        ws,
+        u1max,
+        coefficients: solution.coefficients,
+        starts,
+        best_start: best,
+    })
+}
+
+fn check_signals(
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+    parameters: usize,
+) -> Result<(), FitError> {
+    if y.len() != u.len() {
+        return Err(FitError::LengthMismatch {
+            displacement: y.len(),
+            voltage: u.len(),
+        });
+    }
+    if !(sample_period.is_finite() && sample_period > 0.0) {
+        return Err(FitError::InvalidSamplePeriod(sample_period));
+    }
+    if options.decimation == 0 {
+        return Err(FitError::InvalidOption("decimation must be at least 1"));
+    }
+    for (signal, values) in [("displacement", y), ("voltage", u)] {
+        if let Some((index, &value)) = values.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(FitError::NotFinite {
+                signal,
+                index,
+                value,
+            });
+        }
+    }
+    // At least twice as many fitted samples as parameters, so that F measures
+    // more than the freedom of the model.
+    let minimum = 2 * parameters;
+    let m = options.decimation;
+    let fitted = y
+        .len()
+        .div_ceil(m)
+        .saturating_sub(options.warm_up_samples.div_ceil(m));
+    if fitted < minimum {
+        return Err(FitError::TooFewSamples {
+            found: fitted,
+            minimum,
+        });
+    }
+    Ok(())
+}
+
+fn range(values: &[f64]) -> (f64, f64) {
+    values
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        })
+}
+
+/// The search problem over (ln c, φ_1…φ_{m−1}) on one record.
+#[derive(Clone, Copy)]
+struct SeparableProblem<'a> {
+    layout: RateDependentLayout,
+    /// Displacement, from the first (warm-up) sample on.
+    y: &'a [f64],
+    /// Voltage of the scored samples only.
+    u_scored: &'a [f64],
+    sample_period: f64,
+    scored_from: usize,
+    /// Upper end of the working range for u1max (eq. 5).
+    y_max: f64,
+    /// F_0 = Σ (u − ū)² over the scored samples (the cost's unit).
+    reference: f64,
+}
+
+impl<'a> SeparableProblem<'a> {
+    fn new(
+        layout: RateDependentLayout,
+        y: &'a [f64],
+        u_scored: &'a [f64],
+        sample_period: f64,
+        scored_from: usize,
+        y_max: f64,
+    ) -> Self {
+        let mean = u_scored.iter().sum::<f64>() / u_scored.len() as f64;
+        let spread: f64 = u_scored.iter().map(|u| (u - mean) * (u - mean)).sum();
+        SeparableProblem {
+            layout,
+            y,
+            u_scored,
+            sample_period,
+            scored_from,
+            y_max,
+            // A constant voltage would make every cost 0/0; any positive unit
+            // keeps the minimiser.
+            reference: if spread > 0.0 { spread } else { 1.0 },
+        }
+    }
+
+    /// (c, w_s) from the search vector [ln c, φ_1 … φ_{m−1}].
+    fn decode(&self, theta: &[f64]) -> (f64, Vec<f64>) {
+        (theta[0].exp(), from_hyperspherical(&theta[1..]))
+    }
+
+    /// u1max (eq. 5) and the linear least-squares solution for (c, w_s); None
+    /// when they are unusable.
+    fn solve(&self, c: f64, ws: &[f64]) -> Option<(f64, LinearSolution)> {
+        if !(c.is_finite() && c > 0.0) || ws.iter().any(|w| !w.is_finite()) {
+            return None;
+        }
+        let thresholds: Vec<f64> = self
+            .layout
+            .dead_zone_pattern
+            .iter()
+            .map(|p| p * c)
+            .collect();
+        let u1max = u1max_for(ws, &thresholds, self.y_max);
+        if !u1max.is_finite() {
+            return None;
+        }
+        let x: DMatrix<f64> = rate_dependent_regressors(
+            self.layout,
+            c,
+            ws,
+            u1max,
+            self.y,
+            self.sample_period,
+            self.scored_from,
+        );
+        let solution = solve_least_squares(x, self.u_scored);
+        solution
+            .residual_sum_of_squares
+            .is_finite()
+            .then_some((u1max, solution))
+    }
+
+    fn normalised_cost(&self, theta: &[f64]) -> f64 {
+        let (c, ws) = self.decode(theta);
+        match self.solve(c, &ws) {
+            Some((_, solution)) => solution.residual_sum_of_squares / self.reference,
+            None => UNUSABLE_COST,
+        }
+    }
+
+    /// The initial point of start `start` of `starts` (module comment).
+    fn initial_point(&self, start: usize, starts: usize, seed: u64) -> Vec<f64> {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        for _ in 0..start {
+            rng.jump();
+        }
+        let (low, high) = (INITIAL_C_RANGE.0.ln(), INITIAL_C_RANGE.1.ln());
+        let slice = (start as f64 + rng.random_range(0.0..1.0)) / starts as f64;
+        let c = self.y_max * (low + slice * (high - low)).exp();
+        let mut direction = vec![1.0];
+        for _ in 1..self.layout.dead_zone_count() {
+            direction.push(rng.random_range(INITIAL_WEIGHT_RANGE.0..INITIAL_WEIGHT_RANGE.1));
+        }
+        let mut theta = vec![c.ln()];
+        theta.extend(to_hyperspherical(&direction));
+        theta
+    }
+
+    fn run_start(&self, start: usize, options: &FitOptions) -> Result<StartResult, FitError> {
+        let initial = self.initial_point(start, options.starts, options.seed);
+        let mut simplex = vec![initial.clone()];
+        for i in 0..initial.len() {
+            let mut vertex = initial.clone();
+            vertex[i] += SIMPLEX_STEP;
+            simplex.push(vertex);
+        }
+        let solver = NelderMead::new(simplex)
+            .with_sd_tolerance(SIMPLEX_COST_TOLERANCE)
+            .map_err(|e| FitError::Optimizer(e.to_string()))?;
+        let result = Executor::new(*self, solver)
+            .configure(|state| state.max_iters(options.max_iterations))
+            .run()
+            .map_err(|e| FitError::Optimizer(e.to_string()))?;
+        let state = result.state();
+        let best = state
+            .get_best_param()
+            .cloned()
+            .unwrap_or_else(|| initial.clone());
+        let (c, ws) = self.decode(&best);
+        let (initial_c, initial_ws) = self.decode(&initial);
+        Ok(StartResult {
+            start,
+            initial_c,
+            initial_ws,
+            c,
+            ws,
+            objective: state.get_best_cost() * self.reference,
+            iterations: state.get_iter(),
+            cost_evaluations: result
+                .problem()
+                .counts
+                .get("cost_count")
+                .copied()
+                .unwrap_or(0),
+        })
+    }
+}
+
+/// The unit vector with hyperspherical angles φ_1…φ_{m−1}:
+/// x_1 = cos φ_1, x_j = sin φ_1 ⋯ sin φ_{j−1} cos φ_j, x_m = sin φ_1 ⋯ sin φ_{m−1}.
+pub fn from_hyperspherical(angles: &[f64]) -> Vec<f64> {
+    let mut x = Vec::with_capacity(angles.len() + 1);
+    let mut sines = 1.0;
+    for phi in angles {
+        x.push(sines * phi.cos());
+        sines *= phi.sin();
+    }
+    x.push(sines);
+    x
+}
+
+/// Angles of the direction of a nonzero vector (inverse of
+/// [`from_hyperspherical`] for its normalised input).
+pub fn to_hyperspherical(x: &[f64]) -> Vec<f64> {
+    (0..x.len() - 1)
+        .map(|j| {
+            let rest: f64 = x[j + 1..].iter().map(|v| v * v).sum::<f64>().sqrt();
+            if j + 2 == x.len() {
+                // The last angle carries the sign of the last component.
+                x[j + 1].atan2(x[j])
+            } else {
+                rest.atan2(x[j])
+            }
+        })
+        .collect()
+}
+
+impl CostFunction for SeparableProblem<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, theta: &Self::Param) -> Result<f64, argmin::core::Error> {
+        Ok(self.normalised_cost(theta))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hyperspherical_angles_round_trip() {
+        for x in [
+            vec![1.0, 0.5, -0.3, 0.2, -0.9, 0.1],
+            vec![-0.2, 0.0, 0.0, 0.7, -0.1, -0.4, 0.3, 0.0, 0.2, -0.5],
+            vec![0.0, 1.0],
+            vec![0.3, -0.4],
+        ] {
+            let norm: f64 = x.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let back = from_hyperspherical(&to_hyperspherical(&x));
+            for (b, v) in back.iter().zip(&x) {
+                assert!((b - v / norm).abs() < 1e-15, "{back:?} vs {x:?}");
+            }
+        }
+    }
+}

@@ -1,0 +1,54 @@
+//! Identification of seed 000's modified inverse Prandtl-Ishlinskii model (and
+//! its traditional and classical rivals) from voltage/displacement data.
+//!
+//! - [`data`]: reads a numeric record (columns by index or header name, time
+//!   column or sample rate) and refuses malformed files with `file:line:
+//!   problem`.
+//! - [`fit`]: separable least squares for seed 000 §3.1, F = ‖u_model − u‖²
+//!   (eq. 7). For fixed (c, w_s) the models are linear in their weights,
+//!   solved exactly ([`least_squares`]: column-scaled Householder QR + SVD of
+//!   R); Nelder-Mead (argmin) searches (c, w_s) from random starts in parallel
+//!   (rayon), deterministic for a seed. [`fit::fit_modified_inverse_pi`]
+//!   returns a [`piezo_models::InversePiParams`].
+//! - [`models`]: the traditional inverse P-I rivals (10 backlash + 6 or 10
+//!   dead-zone operators, rate-dependent weights, no cubic) and the classical
+//!   P-I model, streaming and allocation-free like
+//!   [`piezo_models::ModifiedInversePi`].
+//! - [`regressors`]: the linear regressors of each model for given nonlinear
+//!   parameters.
+//! - [`compare`]: seed 000's model comparison (F of the three inverse models,
+//!   evaluation time per sample, Fig. 4) on data from eq. (6) driving the
+//!   simulated stage.
+//! - [`validation`]: sensor offset, and voltage errors as % of the input span
+//!   and as equivalent displacement.
+//! - [`plant`]: drives a plant FMU through its FMI 2.0 C ABI (open-loop
+//!   eq. (6) records, closed loop with the controller law).
+//! - [`decoupling`]: fits seed 000's compensations D_i (eq. 11, Table 2) to
+//!   single-axis coupling errors.
+//! - [`stage`]: the whole procedure on a plant FMU, giving the `stage`
+//!   controller preset.
+//!
+//! The models know nothing of files; the `piezo-identify` binary does the I/O.
+//! `README.md` beside this crate gives the method, every reading of the paper
+//! and the measured figures.
+
+pub mod compare;
+pub mod data;
+pub mod decoupling;
+pub mod fit;
+pub mod least_squares;
+pub mod models;
+pub mod plant;
+pub mod regressors;
+pub mod stage;
+pub mod validation;
+
+pub use data::{Column, DataError, ReadOptions, Record, Sampling, read_record};
+pub use fit::{
+    Fit, FitError, FitOptions, FitQuality, StartResult, fit_classical_pi, fit_modified_inverse_pi,
+    fit_modified_inverse_pi_with_progress, fit_traditional_inverse_pi,
+};
+pub use models::{
+    ClassicalPi, ClassicalPiParams, InverseHysteresis, TraditionalInversePi,
+    TraditionalInversePiParams,
+};

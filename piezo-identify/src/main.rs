@@ -1,0 +1,595 @@
+//! `piezo-identify`: fits seed 000's modified inverse P-I model to a
+//! voltage/displacement record, validates it on a second record, and runs the
+//! paper's model comparison. All I/O lives here; the library does the math.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Mutex;
+
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use piezo_identify::compare::{
+    IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE, compare_inverse_models, synthetic_plant_record,
+};
+use piezo_identify::decoupling::fit_compensation;
+use piezo_identify::fit::{FitQuality, score};
+use piezo_identify::plant::PlantFmu;
+use piezo_identify::stage::identify_stage;
+use piezo_identify::validation::{
+    ErrorReport, ScaleReference, centred_moving_average, displacement_offset, shifted,
+};
+use piezo_identify::{
+    ClassicalPi, Column, FitOptions, ReadOptions, Record, Sampling, StartResult, fit_classical_pi,
+    fit_modified_inverse_pi_with_progress, read_record,
+};
+use piezo_models::ModifiedInversePi;
+
+#[derive(Parser)]
+#[command(
+    name = "piezo-identify",
+    version,
+    about = "Identify seed 000's modified inverse Prandtl-Ishlinskii model from voltage/displacement data"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Fit the proposed modified inverse P-I model (seed 000 eq. 3-5), with the
+    /// classical P-I model as a baseline; optionally validate on a second file.
+    InversePi(InversePiArgs),
+    /// Seed 000's model comparison: F (eq. 7) and evaluation time of the
+    /// proposed model and the traditional 10+6 and 10+10 models.
+    Compare(CompareArgs),
+    /// Seed 000's whole identification on a plant FMU: eq. (6) records and
+    /// inverse-model fits of x and y, then single-axis closed-loop runs and
+    /// the decoupling compensations (Table 2). Writes a controller preset
+    /// (piezo_models::ControllerParams) that PiezoController's start values
+    /// come from.
+    Stage(StageArgs),
+    /// Fit one decoupling compensation D(f) = clamp(dk*f + db, q, p) (seed 000
+    /// eq. 11, Table 2) to a record of (driving demand, coupling error).
+    Decoupling(DecouplingArgs),
+}
+
+#[derive(Args)]
+struct StageArgs {
+    /// The plant FMU to identify (FMI 2.0 co-simulation, inputs u1..u3 [V],
+    /// outputs s1..s3 [um], parameter L [mm]).
+    #[arg(long, default_value = "dist/FlexureStage.fmu")]
+    plant: PathBuf,
+    #[command(flatten)]
+    search: SearchArgs,
+    /// Rounds of decoupling runs: the second refits what the first leaves.
+    #[arg(long, default_value_t = 2)]
+    rounds: usize,
+    /// Write the controller preset (JSON) here.
+    #[arg(long)]
+    out: PathBuf,
+    /// Write everything measured (fits, compensations per round) here as JSON.
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct DecouplingArgs {
+    /// Record with a driving-demand column and a coupling-error column.
+    file: PathBuf,
+    /// Driving demand column (y_d or x_d [um], theta_zd [mdeg]): index or header.
+    #[arg(long, default_value = "0")]
+    demand: String,
+    /// Coupling error column (demand - measurement of the coupled channel) [um].
+    #[arg(long, default_value = "1")]
+    error: String,
+}
+
+#[derive(Args)]
+struct ColumnArgs {
+    /// Input (command voltage) column: 0-based index or header name.
+    #[arg(long, default_value = "0")]
+    input: String,
+    /// Output (displacement) column: 0-based index or header name.
+    #[arg(long, default_value = "1")]
+    output: String,
+    /// Sample rate [Hz] (or give --time).
+    #[arg(long, conflicts_with = "time")]
+    rate: Option<f64>,
+    /// Time column [s]: 0-based index or header name (or give --rate).
+    #[arg(long)]
+    time: Option<String>,
+}
+
+impl ColumnArgs {
+    fn read_options(&self) -> Result<ReadOptions, String> {
+        let sampling = match (&self.time, self.rate) {
+            (Some(time), None) => Sampling::TimeColumn(Column::parse(time)),
+            (None, Some(rate)) => Sampling::Rate(rate),
+            _ => return Err("give the sampling: --rate HZ or --time COLUMN".to_owned()),
+        };
+        Ok(ReadOptions {
+            input: Column::parse(&self.input),
+            output: Column::parse(&self.output),
+            sampling,
+        })
+    }
+}
+
+#[derive(Args)]
+struct SearchArgs {
+    /// Random starts of the Nelder-Mead search (seed 000: 30).
+    #[arg(long, default_value_t = 30)]
+    starts: usize,
+    /// Seed of the random initial values.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Nelder-Mead iterations per start at most.
+    #[arg(long, default_value_t = 2000)]
+    max_iterations: u64,
+    /// The search uses every N-th sample (the final linear solve and F use all).
+    #[arg(long)]
+    decimation: Option<usize>,
+    /// Seconds at the start of each record that run the models but are not
+    /// fitted nor scored (a start-up transient).
+    #[arg(long, default_value_t = 0.0)]
+    warm_up: f64,
+    /// Constant backlash weights (k = 0) instead of seed 000 eq. (4)'s
+    /// w_h = k·ẏ + b: for a record whose single frequency and amplitude make
+    /// the rate a function of position and direction (k not identifiable).
+    #[arg(long)]
+    rate_independent: bool,
+    /// Half width [samples] of a centred moving average applied to the
+    /// displacement of every record before fitting and evaluation (0: none).
+    #[arg(long, default_value_t = 0)]
+    smooth: usize,
+}
+
+impl SearchArgs {
+    fn options(&self, sample_period: f64, default_decimation: usize) -> FitOptions {
+        FitOptions {
+            starts: self.starts,
+            seed: self.seed,
+            max_iterations: self.max_iterations,
+            decimation: self.decimation.unwrap_or(default_decimation),
+            warm_up_samples: (self.warm_up / sample_period).round() as usize,
+            rate_dependent: !self.rate_independent,
+        }
+    }
+}
+
+#[derive(Args)]
+struct InversePiArgs {
+    /// Identification record.
+    file: PathBuf,
+    #[command(flatten)]
+    columns: ColumnArgs,
+    #[command(flatten)]
+    search: SearchArgs,
+    /// Displacement offset [µm] subtracted from every record, or "auto": the
+    /// smallest displacement of the identification record after the warm-up.
+    #[arg(long, default_value = "auto")]
+    offset: String,
+    /// Validation record (same columns and sampling), not used by the fit.
+    #[arg(long)]
+    validate: Option<PathBuf>,
+    /// Write the fitted parameters (piezo_models::InversePiParams) as JSON.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// Record to compare on (or --synthetic).
+    #[arg(required_unless_present = "synthetic")]
+    file: Option<PathBuf>,
+    /// Generate the record: seed 000 eq. (6) driving the simulated stage's y
+    /// actuator for 10 s at 10 kHz.
+    #[arg(long, conflicts_with = "file")]
+    synthetic: bool,
+    #[command(flatten)]
+    columns: ColumnArgs,
+    #[command(flatten)]
+    search: SearchArgs,
+    /// Displacement offset [µm] for a file, or "auto" (as for inverse-pi).
+    /// The synthetic record starts de-energized at 0 and is not shifted.
+    #[arg(long, default_value = "auto")]
+    offset: String,
+    /// Timed passes over the record per model (the median is reported).
+    #[arg(long, default_value_t = 31)]
+    repetitions: usize,
+}
+
+/// Decimation of the synthetic 10 kHz record for the search: 500 Hz, 250
+/// samples per period of eq. (6)'s fastest (1 Hz) component.
+const SYNTHETIC_DECIMATION: usize = 20;
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::InversePi(args) => inverse_pi(args),
+        Command::Compare(args) => compare(args),
+        Command::Stage(args) => stage(args),
+        Command::Decoupling(args) => decoupling(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(message) => {
+            eprintln!("{message}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn read(path: &Path, options: &ReadOptions) -> Result<Record, String> {
+    read_record(path, options).map_err(|e| e.to_string())
+}
+
+fn resolve_offset(text: &str, y: &[f64], warm_up_samples: usize) -> Result<f64, String> {
+    if text == "auto" {
+        Ok(displacement_offset(y, warm_up_samples))
+    } else {
+        text.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("--offset {text}: give a number [µm] or \"auto\""))
+    }
+}
+
+/// A progress bar on stderr for `total` starts, hidden when stderr is not a
+/// terminal; ticked from the rayon workers.
+fn progress_bar(total: usize, message: &str) -> ProgressBar {
+    let target = if std::io::stderr().is_terminal() {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    };
+    let bar = ProgressBar::with_draw_target(Some(total as u64), target);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} starts, {elapsed}")
+            .expect("the template is valid")
+            .progress_chars("=> "),
+    );
+    bar.set_message(message.to_owned());
+    bar
+}
+
+fn describe(record: &Record, path: &str) -> String {
+    format!(
+        "{path}: {} samples, {:.2} s at {:.6} Hz",
+        record.input.len(),
+        record.input.len() as f64 * record.sample_period,
+        1.0 / record.sample_period
+    )
+}
+
+fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
+    let read_options = args.columns.read_options()?;
+    let record = read(&args.file, &read_options)?;
+    let options = args.search.options(record.sample_period, 1);
+    let smoothed = centred_moving_average(&record.output, args.search.smooth);
+    let offset = resolve_offset(&args.offset, &smoothed, options.warm_up_samples)?;
+    let y = shifted(&smoothed, offset);
+    let u = &record.input;
+    let dt = record.sample_period;
+
+    println!("{}", describe(&record, &args.file.display().to_string()));
+    println!(
+        "displacement: centred moving average over {} samples, then offset {offset:.6} um subtracted; \
+         first {} samples ({} s) run the models but are not fitted nor scored",
+        2 * args.search.smooth + 1,
+        options.warm_up_samples,
+        args.search.warm_up
+    );
+    let bar = progress_bar(options.starts, "proposed model");
+    let best_so_far = Mutex::new(f64::INFINITY);
+    let tick = |start: &StartResult| {
+        let mut best = best_so_far.lock().expect("no panics while held");
+        *best = best.min(start.objective);
+        bar.set_message(format!("proposed model, best F {:.6e}", *best));
+        bar.inc(1);
+    };
+    let proposed = fit_modified_inverse_pi_with_progress(&y, u, dt, &options, &tick)
+        .map_err(|e| format!("{}: {e}", args.file.display()))?;
+    bar.finish_and_clear();
+    let classical = fit_classical_pi(&y, u, dt, &options)
+        .map_err(|e| format!("{}: {e}", args.file.display()))?;
+
+    let reference = ScaleReference::of(u, &y, options.warm_up_samples);
+    println!(
+        "yardstick (identification record): input span {:.6} V, stroke {:.6} um, mean gain {:.6} um/V",
+        reference.input_span,
+        reference.stroke,
+        reference.mean_gain()
+    );
+    let p = &proposed.params;
+    println!(
+        "\nproposed modified inverse P-I (seed 000 eq. 3-5, {} backlash weights), best of {} starts (seed {}, best start {}):",
+        if options.rate_dependent {
+            "rate-dependent (eq. 4)"
+        } else {
+            "constant"
+        },
+        options.starts,
+        options.seed,
+        proposed.best_start.unwrap_or(0)
+    );
+    print_starts(&proposed.starts, options.max_iterations);
+    println!("  c = {:.9} um, u1max = {:.9} um", p.c, p.u1max);
+    println!("  ws = {:?}", p.ws);
+    println!("  a  = {:?}", p.a);
+    println!("  k  = {:?}", p.k);
+    println!("  b  = {:?}", p.b);
+    println!(
+        "classical P-I (10 backlash on y, constant weights, offset): offset {:.6} V, weights {:?}",
+        classical.params.offset, classical.params.weights
+    );
+
+    println!(
+        "\nidentification record ({} scored samples):",
+        proposed.quality.samples
+    );
+    print_errors("proposed", &proposed.quality, &reference);
+    print_errors("classical", &classical.quality, &reference);
+
+    if let Some(path) = &args.validate {
+        let validation = read(path, &read_options)?;
+        let y_validation = shifted(
+            &centred_moving_average(&validation.output, args.search.smooth),
+            offset,
+        );
+        let warm_up = (args.search.warm_up / validation.sample_period).round() as usize;
+        println!("\n{}", describe(&validation, &path.display().to_string()));
+        println!(
+            "validation record (not seen by the fit; same offset; models from the de-energized state; {} scored samples):",
+            validation.input.len().saturating_sub(warm_up)
+        );
+        let proposed_quality = score(
+            &mut ModifiedInversePi::new(proposed.params),
+            &y_validation,
+            &validation.input,
+            validation.sample_period,
+            warm_up,
+        );
+        let classical_quality = score(
+            &mut ClassicalPi::new(classical.params),
+            &y_validation,
+            &validation.input,
+            validation.sample_period,
+            warm_up,
+        );
+        print_errors("proposed", &proposed_quality, &reference);
+        print_errors("classical", &classical_quality, &reference);
+        for (name, quality) in [
+            ("proposed", &proposed_quality),
+            ("classical", &classical_quality),
+        ] {
+            println!(
+                "  {name} max error at t = {:.3} s",
+                quality.max_abs_sample as f64 * validation.sample_period
+            );
+        }
+    }
+
+    if let Some(out) = &args.out {
+        let json = serde_json::to_string_pretty(&proposed.params)
+            .map_err(|e| format!("cannot serialise the parameters: {e}"))?;
+        std::fs::write(out, json + "\n").map_err(|e| format!("{}: {e}", out.display()))?;
+        println!("\nparameters written to {}", out.display());
+    }
+    Ok(())
+}
+
+/// One line on the spread of the random starts.
+fn print_starts(starts: &[StartResult], max_iterations: u64) {
+    let mut objectives: Vec<f64> = starts.iter().map(|s| s.objective).collect();
+    objectives.sort_by(f64::total_cmp);
+    let mut iterations: Vec<u64> = starts.iter().map(|s| s.iterations).collect();
+    iterations.sort_unstable();
+    let best = objectives[0];
+    println!(
+        "  starts: F on the searched samples best {:.6e}, median {:.6e}, worst {:.6e}; {} of {} within 0.1 % of the best; \
+         iterations median {} ({} stopped at the cap of {max_iterations})",
+        best,
+        objectives[objectives.len() / 2],
+        objectives[objectives.len() - 1],
+        objectives.iter().filter(|f| **f <= best * 1.001).count(),
+        starts.len(),
+        iterations[iterations.len() / 2],
+        iterations.iter().filter(|i| **i >= max_iterations).count()
+    );
+}
+
+fn print_errors(name: &str, quality: &FitQuality, reference: &ScaleReference) {
+    let e = ErrorReport::new(quality, reference);
+    println!(
+        "  {name:<9} F = {:.6e} V^2; voltage error RMS {:.6} V ({:.3} % of input span), max {:.6} V ({:.3} %); \
+         equivalent displacement RMS {:.4} um, max {:.4} um (same % of stroke)",
+        quality.objective,
+        e.rms_volts,
+        e.rms_percent,
+        e.max_volts,
+        e.max_percent,
+        e.rms_displacement_um,
+        e.max_displacement_um
+    );
+}
+
+fn compare(args: &CompareArgs) -> Result<(), String> {
+    let (record, name, offset, default_decimation) = if args.synthetic {
+        let record = synthetic_plant_record(IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE)
+            .map_err(|e| format!("stage preset: {e}"))?;
+        (
+            record,
+            "synthetic: seed 000 eq. (6) on FlexureStage y, 10 s at 10 kHz".to_owned(),
+            0.0,
+            SYNTHETIC_DECIMATION,
+        )
+    } else {
+        let path = args
+            .file
+            .as_ref()
+            .expect("clap requires a file without --synthetic");
+        let record = read(path, &args.columns.read_options()?)?;
+        let warm_up = (args.search.warm_up / record.sample_period).round() as usize;
+        let smoothed = centred_moving_average(&record.output, args.search.smooth);
+        let offset = resolve_offset(&args.offset, &smoothed, warm_up)?;
+        (record, path.display().to_string(), offset, 1)
+    };
+    let options = args
+        .search
+        .options(record.sample_period, default_decimation);
+    let y = shifted(
+        &centred_moving_average(&record.output, args.search.smooth),
+        offset,
+    );
+    let u = &record.input;
+    println!("{}", describe(&record, &name));
+    println!(
+        "displacement offset {offset:.6} um; search on every {} sample(s) ({:.1} Hz); F on all {} scored samples",
+        options.decimation,
+        1.0 / (record.sample_period * options.decimation as f64),
+        y.len() - options.warm_up_samples
+    );
+    let bar = progress_bar(3 * options.starts, "fitting three models");
+    let tick = |_: &StartResult| bar.inc(1);
+    let comparison = compare_inverse_models(
+        &y,
+        u,
+        record.sample_period,
+        &options,
+        args.repetitions,
+        &tick,
+    )
+    .map_err(|e| format!("{name}: {e}"))?;
+    bar.finish_and_clear();
+
+    println!(
+        "\nbest of {} random starts each (seed {}); F = sum of squared voltage errors (eq. 7)",
+        options.starts, options.seed
+    );
+    println!(
+        "{:<44} {:>6} {:>14} {:>12} {:>12} {:>16}",
+        "model", "params", "F [V^2]", "RMS [V]", "max [V]", "eval [ns/sample]"
+    );
+    for s in &comparison.summaries {
+        println!(
+            "{:<44} {:>6} {:>14.6e} {:>12.6} {:>12.6} {:>16.2}",
+            s.name,
+            s.parameter_count,
+            s.objective,
+            s.rms_volts,
+            s.max_abs_volts,
+            s.evaluation.median_ns_per_sample
+        );
+    }
+    println!(
+        "\nevaluation time: median of {} streaming passes over the record (fastest..slowest):",
+        args.repetitions
+    );
+    for s in &comparison.summaries {
+        println!(
+            "  {:<44} {:.2}..{:.2} ns/sample",
+            s.name, s.evaluation.fastest_ns_per_sample, s.evaluation.slowest_ns_per_sample
+        );
+    }
+    println!("\nrandom starts of each model:");
+    let fits = [
+        &comparison.proposed.starts,
+        &comparison.traditional_six.starts,
+        &comparison.traditional_ten.starts,
+    ];
+    for (s, starts) in comparison.summaries.iter().zip(fits) {
+        println!("{}", s.name);
+        print_starts(starts, options.max_iterations);
+    }
+    let p = &comparison.proposed.params;
+    println!(
+        "\nproposed model: c = {:.6} um, u1max = {:.6} um, ws = {:?}, a = {:?}",
+        p.c, p.u1max, p.ws, p.a
+    );
+    Ok(())
+}
+
+/// Decimation of the plant's 10 kHz eq. (6) records for the search (500 Hz).
+const STAGE_DECIMATION: usize = 20;
+
+fn stage(args: &StageArgs) -> Result<(), String> {
+    let plant = PlantFmu::open(&args.plant).map_err(|e| e.to_string())?;
+    let options = args
+        .search
+        .options(piezo_identify::stage::SAMPLE_PERIOD, STAGE_DECIMATION);
+    let bar = progress_bar(options.starts, "");
+    let step = |message: &str| {
+        bar.reset();
+        bar.set_message(message.to_owned());
+        if bar.is_hidden() {
+            eprintln!("{message}");
+        }
+    };
+    let tick = |_: usize| bar.inc(1);
+    let identified = identify_stage(&plant, &options, args.rounds, &step, &tick)
+        .map_err(|e| format!("{}: {e}", args.plant.display()))?;
+    bar.finish_and_clear();
+    for (name, fit) in [("x", &identified.x_fit), ("y", &identified.y_fit)] {
+        println!(
+            "{name} inverse model on eq. (6): F = {:.6e} V^2, RMS {:.6} V, max {:.6} V",
+            fit.f, fit.rms_v, fit.max_v
+        );
+    }
+    for (round, compensations) in identified.rounds.iter().enumerate() {
+        println!("decoupling round {}:", round + 1);
+        for (i, c) in compensations.iter().enumerate() {
+            println!(
+                "  D{}: dk {:+.6}, db {:+.6} um, p {:+.4}, q {:+.4}; coupling span {:.4} um -> residual span {:.4} um (RMS {:.4})",
+                i + 1,
+                c.dk,
+                c.db,
+                c.p,
+                c.q,
+                c.error_span,
+                c.residual_span,
+                c.residual_rms
+            );
+        }
+    }
+    let json = serde_json::to_string_pretty(&identified.controller)
+        .map_err(|e| format!("cannot serialise the preset: {e}"))?;
+    std::fs::write(&args.out, json + "\n").map_err(|e| format!("{}: {e}", args.out.display()))?;
+    println!("controller preset written to {}", args.out.display());
+    if let Some(path) = &args.report {
+        let json = serde_json::to_string_pretty(&identified)
+            .map_err(|e| format!("cannot serialise the report: {e}"))?;
+        std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        println!("identification report written to {}", path.display());
+    }
+    Ok(())
+}
+
+fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
+    let options = ReadOptions {
+        input: Column::parse(&args.demand),
+        output: Column::parse(&args.error),
+        // The fit is static: the sampling does not matter.
+        sampling: Sampling::Rate(1.0),
+    };
+    let record = read(&args.file, &options)?;
+    let c = fit_compensation(&record.input, &record.output)
+        .map_err(|e| format!("{}: {e}", args.file.display()))?;
+    println!(
+        "{}: {} pairs; D(f) = clamp({:.6}*f {:+.6}, q = {:.6}, p = {:.6})",
+        args.file.display(),
+        record.input.len(),
+        c.dk,
+        c.db,
+        c.q,
+        c.p
+    );
+    println!(
+        "coupling error span {:.6} um; residual span {:.6} um, RMS {:.6} um",
+        c.error_span, c.residual_span, c.residual_rms
+    );
+    Ok(())
+}

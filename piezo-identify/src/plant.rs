@@ -1,0 +1,290 @@
+//! Drives a plant FMU, as the identification experiments of seed 000 drove
+//! the real stage: the FMU is unpacked, its binary loaded with dlopen and
+//! stepped through the FMI 2.0 C ABI (the importer of `fmi2-conformance`).
+//!
+//! The plant must have inputs `u1`, `u2`, `u3` [V] and outputs `s1`, `s2`,
+//! `s3` [µm] (FlexureStage's interface): s1 reads y, s2 and s3 the two x
+//! sensors, x = (s2 + s3)/2, θ = (s2 − s3)/L.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use fmi2_conformance::{Fmu, Instance, OK, WARNING};
+use piezo_models::{ControllerParams, PiezoController};
+
+use crate::compare::eq6_command;
+use crate::data::Record;
+
+/// Why a plant FMU could not be driven.
+#[derive(Debug, thiserror::Error)]
+pub enum PlantError {
+    #[error("{path}: {problem}")]
+    Archive { path: PathBuf, problem: String },
+    #[error("{path}: {problem}")]
+    Interface { path: PathBuf, problem: String },
+    #[error("{path}: {call} returned status {status} at t = {time} s: {log}")]
+    Call {
+        path: PathBuf,
+        call: &'static str,
+        status: u32,
+        time: f64,
+        log: String,
+    },
+}
+
+/// An unpacked plant FMU with its binary loaded.
+pub struct PlantFmu {
+    path: PathBuf,
+    fmu: Fmu,
+    /// Keeps the unpacked binary alive as long as it is loaded.
+    _unpacked: tempfile::TempDir,
+    u: [u32; 3],
+    s: [u32; 3],
+}
+
+fn platform_folder() -> &'static str {
+    match (std::env::consts::OS, std::env::consts::ARCH) {
+        ("linux", "x86_64") => "linux64",
+        ("linux", _) => "linux32",
+        ("windows", "x86_64") => "win64",
+        ("macos", _) => "darwin64",
+        _ => "unknown",
+    }
+}
+
+impl PlantFmu {
+    /// Unpacks `path` (modelDescription.xml and this platform's binary) and
+    /// loads it.
+    pub fn open(path: &Path) -> Result<PlantFmu, PlantError> {
+        let archive_error = |problem: String| PlantError::Archive {
+            path: path.to_owned(),
+            problem,
+        };
+        let file = std::fs::File::open(path).map_err(|e| archive_error(e.to_string()))?;
+        let mut zip = zip::ZipArchive::new(file)
+            .map_err(|e| archive_error(format!("not an FMU (zip) archive: {e}")))?;
+        let mut description = String::new();
+        zip.by_name("modelDescription.xml")
+            .map_err(|e| archive_error(format!("modelDescription.xml: {e}")))?
+            .read_to_string(&mut description)
+            .map_err(|e| archive_error(format!("modelDescription.xml: {e}")))?;
+        let identifier = description
+            .split("modelIdentifier=\"")
+            .nth(1)
+            .and_then(|rest| rest.split('"').next())
+            .ok_or_else(|| archive_error("no CoSimulation modelIdentifier".to_owned()))?
+            .to_owned();
+        let inside = format!(
+            "binaries/{}/{identifier}{}",
+            platform_folder(),
+            std::env::consts::DLL_SUFFIX
+        );
+        let unpacked = tempfile::tempdir().map_err(|e| archive_error(e.to_string()))?;
+        let library = unpacked
+            .path()
+            .join(format!("{identifier}{}", std::env::consts::DLL_SUFFIX));
+        let mut binary = zip
+            .by_name(&inside)
+            .map_err(|e| archive_error(format!("{inside}: {e}")))?;
+        let mut out = std::fs::File::create(&library).map_err(|e| archive_error(e.to_string()))?;
+        std::io::copy(&mut binary, &mut out).map_err(|e| archive_error(e.to_string()))?;
+        drop(out);
+        let fmu = Fmu::try_load(&library, &description).map_err(archive_error)?;
+        let vr = |name: &str| {
+            fmu.find(name).map(|v| v.vr).ok_or_else(|| PlantError::Interface {
+                path: path.to_owned(),
+                problem: format!(
+                    "no variable {name}: a plant needs inputs u1..u3 [V] and outputs s1..s3 [um]"
+                ),
+            })
+        };
+        let u = [vr("u1")?, vr("u2")?, vr("u3")?];
+        let s = [vr("s1")?, vr("s2")?, vr("s3")?];
+        Ok(PlantFmu {
+            path: path.to_owned(),
+            fmu,
+            _unpacked: unpacked,
+            u,
+            s,
+        })
+    }
+
+    /// The value of a parameter's start attribute, e.g. `L`.
+    pub fn start(&self, name: &str) -> Option<f64> {
+        self.fmu.find(name).and_then(|v| v.start)
+    }
+
+    /// A fresh instance at rest, initialized at t = 0 with its start values.
+    pub fn session(&self) -> Result<PlantSession<'_>, PlantError> {
+        let instance = self
+            .fmu
+            .try_instantiate("identification", &self.fmu.guid, None, false)
+            .map_err(|log| PlantError::Interface {
+                path: self.path.clone(),
+                problem: format!(
+                    "fmi2Instantiate returned NULL: {}",
+                    log.iter()
+                        .map(|r| r.message.as_str())
+                        .collect::<Vec<_>>()
+                        .join("; ")
+                ),
+            })?;
+        let mut session = PlantSession {
+            plant: self,
+            instance,
+        };
+        let status = session.instance.setup(0.0);
+        session.check("fmi2SetupExperiment", status)?;
+        let status = session.instance.enter_init();
+        session.check("fmi2EnterInitializationMode", status)?;
+        let status = session.instance.exit_init();
+        session.check("fmi2ExitInitializationMode", status)?;
+        Ok(session)
+    }
+
+    fn call_error(
+        &self,
+        call: &'static str,
+        status: u32,
+        time: f64,
+        log: &[fmi2_conformance::LogRecord],
+    ) -> PlantError {
+        PlantError::Call {
+            path: self.path.clone(),
+            call,
+            status,
+            time,
+            log: log
+                .iter()
+                .map(|r| r.message.as_str())
+                .collect::<Vec<_>>()
+                .join("; "),
+        }
+    }
+}
+
+/// One running instance.
+pub struct PlantSession<'a> {
+    plant: &'a PlantFmu,
+    instance: Instance<'a>,
+}
+
+impl PlantSession<'_> {
+    fn check(&self, call: &'static str, status: u32) -> Result<(), PlantError> {
+        if status == OK || status == WARNING {
+            Ok(())
+        } else {
+            Err(self
+                .plant
+                .call_error(call, status, self.instance.time, &self.instance.take_log()))
+        }
+    }
+
+    /// Holds `commands` over one step of `h` seconds; returns s1, s2, s3
+    /// at its end.
+    pub fn step(&mut self, commands: [f64; 3], h: f64) -> Result<[f64; 3], PlantError> {
+        let status = self.instance.set_real(&self.plant.u, &commands);
+        self.check("fmi2SetReal", status)?;
+        let status = self.instance.do_step(h);
+        self.check("fmi2DoStep", status)?;
+        let (status, s) = self.instance.get_real(&self.plant.s);
+        self.check("fmi2GetReal", status)?;
+        Ok([s[0], s[1], s[2]])
+    }
+}
+
+/// The axis an open-loop identification record drives and reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecordAxis {
+    /// u1 driven, y = s1 read (PZT1).
+    Y,
+    /// u2 = u3 driven, x = (s2 + s3)/2 read (the x pair, seed 000 §3.1).
+    X,
+}
+
+/// Seed 000 §3.1's identification record: eq. (6) on the axis's channel(s),
+/// the others at 0 V, from rest, `duration` s at `sample_rate`. Sample n
+/// pairs the command held over [t_n, t_n+1] (limited to `command_max`, the
+/// amplifier's input range: beyond it the stage does not respond) with the
+/// displacement at t_n+1, as [`crate::compare::synthetic_plant_record`] does.
+pub fn eq6_record(
+    plant: &PlantFmu,
+    axis: RecordAxis,
+    duration: f64,
+    sample_rate: f64,
+    command_max: f64,
+) -> Result<Record, PlantError> {
+    let mut session = plant.session()?;
+    let h = 1.0 / sample_rate;
+    let samples = (duration * sample_rate).round() as usize;
+    let mut input = Vec::with_capacity(samples);
+    let mut output = Vec::with_capacity(samples);
+    for n in 0..samples {
+        let u = eq6_command(n as f64 * h);
+        let commands = match axis {
+            RecordAxis::Y => [u, 0.0, 0.0],
+            RecordAxis::X => [0.0, u, u],
+        };
+        let s = session.step(commands, h)?;
+        input.push(u.min(command_max));
+        output.push(match axis {
+            RecordAxis::Y => s[0],
+            RecordAxis::X => 0.5 * (s[1] + s[2]),
+        });
+    }
+    Ok(Record {
+        input,
+        output,
+        sample_period: h,
+    })
+}
+
+/// A closed-loop run: the demands and the sensor readings at every
+/// communication point.
+#[derive(Clone, Debug, Default)]
+pub struct ClosedLoopRun {
+    pub t: Vec<f64>,
+    /// x_ref [µm], y_ref [µm], theta_ref [rad] at t.
+    pub references: Vec<[f64; 3]>,
+    /// s1, s2, s3 [µm] at t.
+    pub sensors: Vec<[f64; 3]>,
+}
+
+/// Runs `controller` in closed loop with a fresh plant instance for
+/// `duration` s at step `h`, with the master algorithm of the project's
+/// co-simulation harness (demo/cosim.py): Jacobi ordering, so the command the
+/// plant holds over [t_k, t_k+1] was computed from the sensors at t_k−1 (one
+/// sample of compute delay), and the references given `preview` samples
+/// ahead.
+pub fn closed_loop(
+    plant: &PlantFmu,
+    controller: &ControllerParams,
+    reference: impl Fn(f64) -> [f64; 3],
+    duration: f64,
+    h: f64,
+    preview: usize,
+) -> Result<ClosedLoopRun, PlantError> {
+    let mut session = plant.session()?;
+    let mut law = PiezoController::new(controller.clone()).map_err(|e| PlantError::Interface {
+        path: plant.path.clone(),
+        problem: format!("controller parameter {}: {}", e.parameter, e.allowed),
+    })?;
+    let steps = (duration / h).round() as usize;
+    let mut run = ClosedLoopRun::default();
+    let mut sensors = [0.0; 3];
+    let mut commands = [0.0; 3];
+    for k in 0..=steps {
+        let t = k as f64 * h;
+        run.t.push(t);
+        run.references.push(reference(t));
+        run.sensors.push(sensors);
+        if k == steps {
+            break;
+        }
+        let [x, y, theta] = reference(t + preview as f64 * h);
+        let next = law.step(x, y, theta, sensors, h).u;
+        sensors = session.step(commands, h)?;
+        commands = next;
+    }
+    Ok(run)
+}

@@ -1,0 +1,212 @@
+//! Regressor matrices of the linear part of each model.
+//!
+//! Seed 000's model (eq. 3-5) is linear in (a, k, b) once c, w_s and u1max
+//! are fixed; so are the traditional rivals in (k, b) and the classical P-I
+//! model in its weights and offset. These functions run the operators over a
+//! trajectory from the de-energized start and return one row per scored sample,
+//! so that u ≈ Xθ. They generalise
+//! `piezo_models::inverse_pi::linear_regressors` (which is fixed at the
+//! proposed layout and returns a row vector per sample) to the rivals and write
+//! straight into the column-major matrix the solver factorises.
+//!
+//! `scored_from` drops the first rows from the matrix while the operators still
+//! run through those samples: a warm-up that sets the memories without being
+//! fitted.
+
+use nalgebra::DMatrix;
+use piezo_models::inverse_pi::{BACKLASH_OPERATORS, backlash, backlash_thresholds};
+
+use crate::models::{CLASSICAL_OPERATORS, SIX_DEAD_ZONE_PATTERN, TEN_DEAD_ZONE_PATTERN};
+
+/// Layout of a model of the eq. (3)-(5) family: its dead-zone thresholds in
+/// units of c, whether the cubic G(y) is present, and whether the backlash
+/// weights depend on the rate (eq. 4, w_h = k·ẏ + b) or are constant (k = 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RateDependentLayout {
+    pub dead_zone_pattern: &'static [f64],
+    pub cubic: bool,
+    pub rate_dependent: bool,
+}
+
+/// Seed 000's proposed model: 10 backlash + 6 dead-zone operators + cubic.
+pub const PROPOSED: RateDependentLayout = RateDependentLayout {
+    dead_zone_pattern: &SIX_DEAD_ZONE_PATTERN,
+    cubic: true,
+    rate_dependent: true,
+};
+/// Traditional inverse P-I, 10 backlash + 6 dead-zone operators.
+pub const TRADITIONAL_SIX: RateDependentLayout = RateDependentLayout {
+    dead_zone_pattern: &SIX_DEAD_ZONE_PATTERN,
+    cubic: false,
+    rate_dependent: true,
+};
+/// Traditional inverse P-I, 10 backlash + 10 dead-zone operators.
+pub const TRADITIONAL_TEN: RateDependentLayout = RateDependentLayout {
+    dead_zone_pattern: &TEN_DEAD_ZONE_PATTERN,
+    cubic: false,
+    rate_dependent: true,
+};
+
+impl RateDependentLayout {
+    pub fn dead_zone_count(&self) -> usize {
+        self.dead_zone_pattern.len()
+    }
+
+    /// The same layout with constant (`false`) or eq. (4) rate-dependent
+    /// backlash weights.
+    pub fn with_rate_dependence(self, rate_dependent: bool) -> Self {
+        RateDependentLayout {
+            rate_dependent,
+            ..self
+        }
+    }
+
+    /// Columns of X: [y³, y², y, 1] if cubic, then ẏ·H_1…ẏ·H_10 if rate
+    /// dependent, then H_1…H_10.
+    pub fn linear_columns(&self) -> usize {
+        self.cubic_columns() + self.rate_columns() + BACKLASH_OPERATORS
+    }
+
+    /// 4 with the cubic, else 0.
+    pub fn cubic_columns(&self) -> usize {
+        if self.cubic { 4 } else { 0 }
+    }
+
+    /// 10 with rate-dependent weights, else 0.
+    pub fn rate_columns(&self) -> usize {
+        if self.rate_dependent {
+            BACKLASH_OPERATORS
+        } else {
+            0
+        }
+    }
+
+    /// All identified parameters: the linear ones, the dead-zone weights and c.
+    pub fn parameter_count(&self) -> usize {
+        self.linear_columns() + self.dead_zone_count() + 1
+    }
+}
+
+/// X of a model of the eq. (3)-(5) family for given c, w_s, u1max, with rates
+/// by backward difference (the first rate 0); rows for samples
+/// `scored_from..`. Column order matches
+/// `piezo_models::inverse_pi::linear_coefficients`: [a, k, b] (without a when
+/// there is no cubic, without k when the weights are constant).
+pub fn rate_dependent_regressors(
+    layout: RateDependentLayout,
+    c: f64,
+    ws: &[f64],
+    u1max: f64,
+    y: &[f64],
+    sample_period: f64,
+    scored_from: usize,
+) -> DMatrix<f64> {
+    assert_eq!(
+        ws.len(),
+        layout.dead_zone_count(),
+        "one weight per dead zone"
+    );
+    let rows = y.len().saturating_sub(scored_from);
+    let columns = layout.linear_columns();
+    let mut matrix = DMatrix::zeros(rows, columns);
+    let data = matrix.as_mut_slice();
+    let mut dead_zone_thresholds = [0.0; TEN_DEAD_ZONE_PATTERN.len()];
+    for (d, p) in dead_zone_thresholds
+        .iter_mut()
+        .zip(layout.dead_zone_pattern)
+    {
+        *d = c * p;
+    }
+    let dead_zone_thresholds = &dead_zone_thresholds[..ws.len()];
+    let thresholds = backlash_thresholds(u1max);
+    let mut memories = [0.0; BACKLASH_OPERATORS];
+    let rate_column = layout.cubic_columns();
+    let constant_column = rate_column + layout.rate_columns();
+    let mut previous = y.first().copied().unwrap_or(0.0);
+    for (n, &yn) in y.iter().enumerate() {
+        let rate = (yn - previous) / sample_period;
+        previous = yn;
+        let z = crate::models::dead_zone_sum(yn, ws, dead_zone_thresholds);
+        for (memory, r) in memories.iter_mut().zip(&thresholds) {
+            *memory = backlash(z, *r, *memory);
+        }
+        if n < scored_from {
+            continue;
+        }
+        let row = n - scored_from;
+        if layout.cubic {
+            data[row] = yn * yn * yn;
+            data[rows + row] = yn * yn;
+            data[2 * rows + row] = yn;
+            data[3 * rows + row] = 1.0;
+        }
+        for (i, h) in memories.iter().enumerate() {
+            // eq. (4): w_h,i·H_i = k_i·(ẏ·H_i) + b_i·H_i.
+            if layout.rate_dependent {
+                data[(rate_column + i) * rows + row] = rate * h;
+            }
+            data[(constant_column + i) * rows + row] = *h;
+        }
+    }
+    matrix
+}
+
+/// X of the classical P-I model: [H_{r_1}[y] … H_{r_10}[y], 1], rows for
+/// samples `scored_from..`.
+pub fn classical_regressors(
+    thresholds: &[f64; CLASSICAL_OPERATORS],
+    y: &[f64],
+    scored_from: usize,
+) -> DMatrix<f64> {
+    let rows = y.len().saturating_sub(scored_from);
+    let mut matrix = DMatrix::zeros(rows, CLASSICAL_OPERATORS + 1);
+    let data = matrix.as_mut_slice();
+    let mut memories = [0.0; CLASSICAL_OPERATORS];
+    for (n, &yn) in y.iter().enumerate() {
+        for (memory, r) in memories.iter_mut().zip(thresholds) {
+            *memory = backlash(yn, *r, *memory);
+        }
+        if n < scored_from {
+            continue;
+        }
+        let row = n - scored_from;
+        for (i, h) in memories.iter().enumerate() {
+            data[i * rows + row] = *h;
+        }
+        data[CLASSICAL_OPERATORS * rows + row] = 1.0;
+    }
+    matrix
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use piezo_models::inverse_pi::{linear_regressors, u1max_over_range};
+
+    #[test]
+    fn proposed_layout_matches_piezo_models_linear_regressors() {
+        let ws = [1.0, 0.3, -0.2, 0.1, 0.05, -0.02];
+        let c = 0.9;
+        let y: Vec<f64> = (0..300)
+            .map(|n| 6.0 - 5.5 * (n as f64 * 0.03).cos())
+            .collect();
+        let u1max = u1max_over_range(&ws, c, 11.5);
+        let reference = linear_regressors(c, &ws, u1max, &y, 2e-3);
+        let matrix = rate_dependent_regressors(PROPOSED, c, &ws, u1max, &y, 2e-3, 7);
+        assert_eq!(matrix.nrows(), 293);
+        for (row, expected) in reference.iter().skip(7).enumerate() {
+            for (column, value) in expected.iter().enumerate() {
+                assert_eq!(matrix[(row, column)], *value, "row {row} column {column}");
+            }
+        }
+    }
+
+    #[test]
+    fn parameter_counts_match_seed_000() {
+        // §3.1: the 10 + 10 traditional model has as many parameters as the
+        // proposed one.
+        assert_eq!(PROPOSED.parameter_count(), 31);
+        assert_eq!(TRADITIONAL_TEN.parameter_count(), 31);
+        assert_eq!(TRADITIONAL_SIX.parameter_count(), 27);
+    }
+}

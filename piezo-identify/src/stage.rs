@@ -1,0 +1,286 @@
+//! The `stage` controller preset: seed 000's identification procedure run on
+//! a plant FMU (FlexureStage by default).
+//!
+//! 1. Inverse models (§3.1): eq. (6) drives PZT1 (y) and, separately, the x
+//!    pair (u2 = u3) from rest for 10 s at 10 kHz; the modified inverse P-I
+//!    model of each axis is fitted to (displacement, command) by separable
+//!    least squares (best of N random starts, [`crate::fit`]).
+//! 2. Decoupling (§4): with those models, the §3.2 PI gains and no
+//!    decoupling, three single-axis runs as in Fig. 7 (feedback on the driven
+//!    axis only, feedforward of the constant demand on the others) record the
+//!    coupling errors; the four compensations D_i are fitted to them
+//!    ([`crate::decoupling`]).
+//! 3. Further rounds repeat the runs with the decoupling on and refit each
+//!    compensation, whole, to what it applied plus the coupling left (the
+//!    plant's coupling moves once the compensations move the actuators). The
+//!    static coupling of the x pair at home into y belongs to D3; D4 fits
+//!    what D3 leaves of the rotation run's y error, since y_r = y_d + D3 + D4
+//!    applies both.
+//!
+//! Single-axis runs: home x = 8 µm, y = 7 µm, θ = 0; the reference moves from
+//! the origin to the start by a raised cosine over 0.5 s, holds 0.5 s, then a
+//! 1 Hz sine of 10 µm peak to peak about home starting at the bottom (θ:
+//! ±9.2·10⁻³°, eq. 16's amplitude) runs for 3 s; the fit uses the last 2 s.
+//! These are the conditions of the demo's Fig. 7/10 runs (demo/experiments.py).
+
+use std::f64::consts::PI;
+
+use piezo_models::{ControllerParams, DecouplingParams, InversePiParams, PiGains};
+use serde::Serialize;
+
+use crate::decoupling::{
+    Compensation, DecouplingError, NO_CUTOFF, decoupling_params, fit_compensation,
+};
+use crate::fit::{Fit, FitError, FitOptions, StartResult, fit_modified_inverse_pi_with_progress};
+use crate::plant::{PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record};
+
+pub const HOME: [f64; 3] = [8.0, 7.0, 0.0];
+pub const APPROACH_TIME: f64 = 0.5;
+pub const SETTLE_TIME: f64 = 0.5;
+pub const SINE_HZ: f64 = 1.0;
+pub const SINE_AMPLITUDE_UM: f64 = 5.0;
+pub const ROTATION_AMPLITUDE_DEG: f64 = 9.2e-3;
+/// Length of a single-axis run after the approach [s], and the part fitted.
+pub const RUN_TIME: f64 = 3.0;
+pub const FITTED_TIME: f64 = 2.0;
+pub const SAMPLE_PERIOD: f64 = 1e-4;
+pub const PREVIEW: usize = 2;
+/// eq. (6) is applied for 10 s (one period of its 0.2 Hz component).
+pub const IDENTIFICATION_TIME: f64 = 10.0;
+
+/// The axis a single-axis run drives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum DrivenAxis {
+    Y,
+    X,
+    Theta,
+}
+
+/// The reference of a single-axis run at time `t` (x [µm], y [µm], θ [rad]).
+pub fn single_axis_reference(axis: DrivenAxis, t: f64) -> [f64; 3] {
+    let start = APPROACH_TIME + SETTLE_TIME;
+    let path = |tau: f64| {
+        let mut pose = HOME;
+        let phase = 2.0 * PI * SINE_HZ * tau;
+        match axis {
+            DrivenAxis::Y => pose[1] += SINE_AMPLITUDE_UM * (phase - PI / 2.0).sin(),
+            DrivenAxis::X => pose[0] += SINE_AMPLITUDE_UM * (phase - PI / 2.0).sin(),
+            DrivenAxis::Theta => pose[2] = ROTATION_AMPLITUDE_DEG.to_radians() * phase.sin(),
+        }
+        pose
+    };
+    if t >= start {
+        return path(t - start);
+    }
+    let s = (t / APPROACH_TIME).clamp(0.0, 1.0);
+    let blend = 0.5 * (1.0 - (PI * s).cos());
+    path(0.0).map(|v| blend * v)
+}
+
+/// The pairs (driving demand, coupling error) of the compensations one run
+/// feeds: y runs feed D1 (x2) and D2 (x3), x runs D3, θ runs D4.
+fn coupling_pairs(
+    axis: DrivenAxis,
+    run: &crate::plant::ClosedLoopRun,
+    spacing_um: f64,
+) -> Vec<(usize, Vec<f64>, Vec<f64>)> {
+    let from = APPROACH_TIME + SETTLE_TIME + RUN_TIME - FITTED_TIME - 1e-9;
+    let window: Vec<usize> = (0..run.t.len()).filter(|&k| run.t[k] >= from).collect();
+    let half = spacing_um / 2.0;
+    let collect = |demand: &dyn Fn(usize) -> f64, error: &dyn Fn(usize) -> f64| {
+        (
+            window.iter().map(|&k| demand(k)).collect::<Vec<_>>(),
+            window.iter().map(|&k| error(k)).collect::<Vec<_>>(),
+        )
+    };
+    let r = &run.references;
+    let s = &run.sensors;
+    match axis {
+        DrivenAxis::Y => {
+            let (f1, e1) = collect(&|k| r[k][1], &|k| r[k][0] + r[k][2] * half - s[k][1]);
+            let (f2, e2) = collect(&|k| r[k][1], &|k| r[k][0] - r[k][2] * half - s[k][2]);
+            vec![(0, f1, e1), (1, f2, e2)]
+        }
+        DrivenAxis::X => {
+            let (f, e) = collect(&|k| r[k][0], &|k| r[k][1] - s[k][0]);
+            vec![(2, f, e)]
+        }
+        DrivenAxis::Theta => {
+            // D4 takes θ_zd in millidegrees (seed 000 eq. 16's unit).
+            let (f, e) = collect(&|k| r[k][2].to_degrees() * 1e3, &|k| r[k][1] - s[k][0]);
+            vec![(3, f, e)]
+        }
+    }
+}
+
+/// Everything the `stage` identification measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageIdentification {
+    pub controller: ControllerParams,
+    pub x_fit: FitSummary,
+    pub y_fit: FitSummary,
+    /// Compensations of each round.
+    pub rounds: Vec<[Compensation; 4]>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct FitSummary {
+    /// F = ‖u_model − u‖² over the 10 s record at 10 kHz (eq. 7) [V²].
+    pub f: f64,
+    pub rms_v: f64,
+    pub max_v: f64,
+}
+
+impl FitSummary {
+    fn of(fit: &Fit<InversePiParams>) -> FitSummary {
+        FitSummary {
+            f: fit.quality.objective,
+            rms_v: fit.quality.rms,
+            max_v: fit.quality.max_abs,
+        }
+    }
+}
+
+/// Why the stage identification failed.
+#[derive(Debug, thiserror::Error)]
+pub enum StageError {
+    #[error(transparent)]
+    Plant(#[from] PlantError),
+    #[error("fitting the {axis} inverse model: {source}")]
+    Fit {
+        axis: &'static str,
+        #[source]
+        source: FitError,
+    },
+    #[error("fitting compensation D{index}: {source}")]
+    Decoupling {
+        index: usize,
+        #[source]
+        source: DecouplingError,
+    },
+    #[error("{0}: the plant has no parameter L (sensor spacing) to read")]
+    NoSpacing(String),
+}
+
+/// Runs steps 1-3 on `plant`; `progress(message)` is told what runs.
+pub fn identify_stage(
+    plant: &PlantFmu,
+    options: &FitOptions,
+    rounds: usize,
+    progress: &dyn Fn(&str),
+    fit_progress: &(dyn Fn(usize) + Sync),
+) -> Result<StageIdentification, StageError> {
+    let spacing_mm = plant
+        .start("L")
+        .ok_or_else(|| StageError::NoSpacing("plant".to_owned()))?;
+    let sample_rate = 1.0 / SAMPLE_PERIOD;
+    let command_max = 10.0;
+    let mut fits = Vec::new();
+    for (axis, name) in [(RecordAxis::X, "x"), (RecordAxis::Y, "y")] {
+        progress(&format!(
+            "eq. (6) record and fit of the {name} inverse model"
+        ));
+        let record = eq6_record(plant, axis, IDENTIFICATION_TIME, sample_rate, command_max)?;
+        let fit = fit_modified_inverse_pi_with_progress(
+            &record.output,
+            &record.input,
+            record.sample_period,
+            options,
+            &|s: &StartResult| fit_progress(s.start),
+        )
+        .map_err(|source| StageError::Fit { axis: name, source })?;
+        fits.push(fit);
+    }
+    let (x_fit, y_fit) = (fits.remove(0), fits.remove(0));
+    let mut controller = ControllerParams {
+        feedforward: true,
+        decoupling: false,
+        feedback_x: true,
+        feedback_y: true,
+        feedback_theta: true,
+        translation_gains: PiGains { kp: 0.05, ki: 50.0 },
+        rotation_gains: PiGains { kp: 0.06, ki: 70.0 },
+        sensor_spacing_mm: spacing_mm,
+        x_model: x_fit.params,
+        y_model: y_fit.params,
+        decoupling_params: DecouplingParams {
+            dk: [0.0; 4],
+            db: [0.0; 4],
+            p: [NO_CUTOFF; 4],
+            q: [-NO_CUTOFF; 4],
+        },
+        command_min: 0.0,
+        command_max,
+    };
+    let spacing_um = spacing_mm * 1e3;
+    let mut all_rounds = Vec::new();
+    for round in 0..rounds {
+        // Round 0 runs without decoupling, so its errors are the whole
+        // coupling; later rounds run with the compensations so far, and what
+        // is applied plus what is left is the coupling to fit again.
+        let applied = controller.decoupling_params;
+        let applied_eval = |i: usize, f: f64| {
+            if round == 0 {
+                0.0
+            } else {
+                Compensation::of(&applied, i).eval(f)
+            }
+        };
+        let mut pairs: [Option<(Vec<f64>, Vec<f64>)>; 4] = Default::default();
+        for axis in [DrivenAxis::Y, DrivenAxis::X, DrivenAxis::Theta] {
+            progress(&format!(
+                "decoupling round {}: single-axis {axis:?} run",
+                round + 1
+            ));
+            let mut run_params = controller.clone();
+            run_params.decoupling = round > 0;
+            run_params.feedback_x = axis == DrivenAxis::X;
+            run_params.feedback_y = axis == DrivenAxis::Y;
+            run_params.feedback_theta = axis == DrivenAxis::Theta;
+            let run = closed_loop(
+                plant,
+                &run_params,
+                |t| single_axis_reference(axis, t),
+                APPROACH_TIME + SETTLE_TIME + RUN_TIME,
+                SAMPLE_PERIOD,
+                PREVIEW,
+            )?;
+            for (index, f, e) in coupling_pairs(axis, &run, spacing_um) {
+                let total = f
+                    .iter()
+                    .zip(&e)
+                    .map(|(f, e)| e + applied_eval(index, *f))
+                    .collect();
+                pairs[index] = Some((f, total));
+            }
+        }
+        let fit = |index: usize, e: &[f64], f: &[f64]| {
+            fit_compensation(f, e).map_err(|source| StageError::Decoupling {
+                index: index + 1,
+                source,
+            })
+        };
+        let pairs = pairs.map(|p| p.expect("every compensation has its run"));
+        let d1 = fit(0, &pairs[0].1, &pairs[0].0)?;
+        let d2 = fit(1, &pairs[1].1, &pairs[1].0)?;
+        let d3 = fit(2, &pairs[2].1, &pairs[2].0)?;
+        // y's two compensations add up (y_r = y_d + D3 + D4), and the
+        // rotation run holds x at home, so its y error also holds the static
+        // coupling of the x pair at home, which D3 already compensates: D4
+        // gets what D3 leaves of it (otherwise the offset is compensated
+        // twice).
+        let x_home_share = d3.eval(HOME[0]) - applied_eval(2, HOME[0]);
+        let theta_target: Vec<f64> = pairs[3].1.iter().map(|e| e - x_home_share).collect();
+        let d4 = fit(3, &theta_target, &pairs[3].0)?;
+        let fitted = [d1, d2, d3, d4];
+        controller.decoupling_params = decoupling_params(&fitted);
+        all_rounds.push(fitted);
+    }
+    controller.decoupling = true;
+    Ok(StageIdentification {
+        controller,
+        x_fit: FitSummary::of(&x_fit),
+        y_fit: FitSummary::of(&y_fit),
+        rounds: all_rounds,
+    })
+}
