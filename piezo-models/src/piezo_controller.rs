@@ -158,9 +158,26 @@ impl ControllerParams {
     }
 }
 
+/// The `stage` preset: seed 000's identification procedure run on the
+/// FlexureStage plant by `piezo-identify stage` (`make stage-preset`).
+const STAGE_PRESET_JSON: &str = include_str!("../presets/piezo_controller_stage.json");
+
+impl ControllerParams {
+    /// The controller identified on this project's FlexureStage plant as
+    /// seed 000 identified its own stage: eq. (6) records and inverse-model
+    /// fits of x and y, single-axis runs and fitted decoupling compensations.
+    /// The paper's own numbers ([`ControllerParams::paper`]) describe the
+    /// paper's stage, not this plant.
+    pub fn stage() -> Self {
+        serde_json::from_str(STAGE_PRESET_JSON)
+            .expect("presets/piezo_controller_stage.json must parse (a test checks it)")
+    }
+}
+
+/// PiezoController's start values: the [`ControllerParams::stage`] preset.
 impl Default for ControllerParams {
     fn default() -> Self {
-        ControllerParams::paper()
+        ControllerParams::stage()
     }
 }
 
