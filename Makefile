@@ -20,7 +20,7 @@ PLANT := FlexureStage:fmu-plant:flexure-stage-describe:libfmu_plant.so
 CONTROLLER := PiezoController:fmu-controller:piezo-controller-describe:libfmu_controller.so
 FMU_SPECS := $(PLANT) $(CONTROLLER)
 
-.PHONY: all fmus test demo lint rust-test python-test model-descriptions system-deps venv clean
+.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset identify system-deps venv clean
 
 all: fmus
 
@@ -79,8 +79,32 @@ python-test: fmus venv
 
 test: lint rust-test python-test
 
+# The main job: seed 000's experiments in closed loop (CSV, PNG, report.md in
+# out/demo), then the plant's fingerprints beside the paper (out/plant).
 demo: fmus venv
+	$(PY) -m demo --out out/demo
 	$(PY) tests/fingerprint_report.py --fmu $(DIST)/FlexureStage.fmu --out out/plant
+	@echo "report: out/demo/report.md (plant: out/plant/index.html)"
+
+# Re-identifies the controller on the plant (seed 000 §3.1 and §4) and bakes
+# the result into PiezoController's start values. Run after a plant change.
+stage-preset: fmus
+	$(CARGO) build --release --locked -p piezo-identify
+	mkdir -p out/stage
+	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu --rounds 3 \
+	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
+	$(MAKE) model-descriptions fmus
+
+# Seed 000's identification figures: the model comparison on the plant
+# (F of eq. 7, evaluation time) and the real P-885 stack (unseen test file).
+identify: system-deps
+	$(CARGO) build --release --locked -p piezo-identify
+	mkdir -p out/identify
+	$(RELEASE)/piezo-identify compare --synthetic | tee out/identify/compare.txt
+	$(RELEASE)/piezo-identify inverse-pi piezo-identify/tests/data/piezo-p885/Model_Vi_Do.dat \
+	  --input 0 --output 4 --rate 200 --warm-up 0.1 --smooth 2 --rate-independent --decimation 2 \
+	  --validate piezo-identify/tests/data/piezo-p885/Test_Vi_Do_Di.dat \
+	  --out out/identify/p885_inverse_pi.json | tee out/identify/p885.txt
 
 clean:
 	rm -rf $(BUILD) $(DIST) out
