@@ -95,8 +95,9 @@ stage-preset: fmus
 	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
 
-# Seed 000's identification figures: the model comparison on the plant
-# (F of eq. 7, evaluation time) and the real P-885 stack (unseen test file).
+# The identification figures: seed 000's model comparison on the plant (F of
+# eq. 7, evaluation time), and the real P-885 stack (unseen test file) fitted
+# by seed 000's modified inverse P-I and by seed 001's Bouc-Wen (GA-PSO + LM).
 identify: system-deps
 	$(CARGO) build --release --locked -p piezo-identify
 	mkdir -p out/identify
@@ -105,6 +106,11 @@ identify: system-deps
 	  --input 0 --output 4 --rate 200 --warm-up 0.1 --smooth 2 --rate-independent --decimation 2 \
 	  --validate piezo-identify/tests/data/piezo-p885/Test_Vi_Do_Di.dat \
 	  --out out/identify/p885_inverse_pi.json | tee out/identify/p885.txt
+	$(RELEASE)/piezo-identify bouc-wen piezo-identify/tests/data/piezo-p885/Model_Vi_Do.dat \
+	  --input 0 --output 4 --rate 200 --warm-up 0.1 --smooth 2 --decimation 2 \
+	  --validate piezo-identify/tests/data/piezo-p885/Test_Vi_Do_Di.dat \
+	  --out out/identify/p885_bouc_wen.json --report out/identify/p885_bouc_wen_report.json \
+	  | tee out/identify/p885_bouc_wen.txt
 
 clean:
 	rm -rf $(BUILD) $(DIST) out

@@ -1,5 +1,6 @@
 //! Identification of seed 000's modified inverse Prandtl-Ishlinskii model (and
-//! its traditional and classical rivals) from voltage/displacement data.
+//! its traditional and classical rivals) and of seed 001's asymmetric Bouc-Wen
+//! model from voltage/displacement data.
 //!
 //! - [`data`]: reads a numeric record (columns by index or header name, time
 //!   column or sample rate) and refuses malformed files with `file:line:
@@ -27,15 +28,21 @@
 //!   single-axis coupling errors.
 //! - [`stage`]: the whole procedure on a plant FMU, giving the `stage`
 //!   controller preset.
+//! - [`gapso`]: seed 001's GA-PSO, a bounded global minimiser (rayon,
+//!   deterministic for a seed).
+//! - [`bouc_wen_fit`]: seed 001's asymmetric Bouc-Wen model (eq. 3-4) fitted
+//!   by GA-PSO on eq. (5), then refined by Levenberg-Marquardt.
 //!
 //! The models know nothing of files; the `piezo-identify` binary does the I/O.
 //! `README.md` beside this crate gives the method, every reading of the paper
 //! and the measured figures.
 
+pub mod bouc_wen_fit;
 pub mod compare;
 pub mod data;
 pub mod decoupling;
 pub mod fit;
+pub mod gapso;
 pub mod least_squares;
 pub mod models;
 pub mod plant;

@@ -10,12 +10,17 @@ use std::sync::Mutex;
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+use piezo_identify::bouc_wen_fit::{
+    BoucWenFitOptions, BoucWenModelFit, PredictionError, SHAPE_PARAMETERS, default_shape_bounds,
+    identify_bouc_wen, predict, prediction_error,
+};
 use piezo_identify::compare::{
     IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE, compare_inverse_models, synthetic_plant_record,
 };
 use piezo_identify::decoupling::fit_compensation;
 use piezo_identify::fit::{FitQuality, score};
-use piezo_identify::plant::PlantFmu;
+use piezo_identify::gapso::{Bounds, GaPsoOptions};
+use piezo_identify::plant::{PlantFmu, RecordAxis, sine_records};
 use piezo_identify::stage::identify_stage;
 use piezo_identify::validation::{
     ErrorReport, ScaleReference, centred_moving_average, displacement_offset, shifted,
@@ -54,6 +59,85 @@ enum Command {
     /// Fit one decoupling compensation D(f) = clamp(dk*f + db, q, p) (seed 000
     /// eq. 11, Table 2) to a record of (driving demand, coupling error).
     Decoupling(DecouplingArgs),
+    /// Fit seed 001's asymmetric Bouc-Wen model (eq. 3-4) by GA-PSO on the
+    /// RMS of eq. (5), then refine it by Levenberg-Marquardt; from a record
+    /// (voltage, displacement) or from a plant FMU driven by seed 001 §5.2's
+    /// sine. Also fits the coupling models H_XY, H_YX: give the coupled
+    /// displacement as the output (or --read coupled).
+    BoucWen(BoucWenArgs),
+}
+
+#[derive(Args)]
+struct BoucWenArgs {
+    /// Identification record (or --plant).
+    #[arg(required_unless_present = "plant", conflicts_with = "plant")]
+    file: Option<PathBuf>,
+    #[command(flatten)]
+    columns: ColumnArgs,
+    /// Drive this plant FMU (FlexureStage's interface) instead of reading a
+    /// file: a sine from 0 V to --peak at --frequency on one axis.
+    #[arg(long)]
+    plant: Option<PathBuf>,
+    /// Axis the plant run drives: y (u1) or x (u2 = u3).
+    #[arg(long, default_value = "y", value_parser = ["x", "y"])]
+    drive: String,
+    /// Displacement the plant run fits: the driven axis's (H_XX, H_YY) or
+    /// the other axis's (the coupling H_XY, H_YX of eq. 8).
+    #[arg(long, default_value = "driven", value_parser = ["driven", "coupled"])]
+    read: String,
+    /// Frequency of the plant run's sine [Hz] (seed 001 §5.2: 2).
+    #[arg(long, default_value_t = 2.0)]
+    frequency: f64,
+    /// Peak command of the plant run's sine [V] (seed 001 §5.2: 10).
+    #[arg(long, default_value_t = 10.0)]
+    peak: f64,
+    /// Periods of the plant run; the first is the warm-up unless --warm-up.
+    #[arg(long, default_value_t = 3.0)]
+    periods: f64,
+    /// Sample rate of the plant run [Hz].
+    #[arg(long, default_value_t = 10_000.0)]
+    plant_rate: f64,
+    /// Validation record (same columns and sampling), not used by the fit.
+    #[arg(long, conflicts_with = "plant")]
+    validate: Option<PathBuf>,
+    /// Particles of the swarm.
+    #[arg(long, default_value_t = 40)]
+    population: usize,
+    /// GA-PSO generations at most.
+    #[arg(long, default_value_t = 150)]
+    generations: usize,
+    /// Seed of GA-PSO's random stream.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// GA-PSO evaluates every N-th sample (refinement and errors use all);
+    /// default 1 for a file, 10 for a plant run.
+    #[arg(long)]
+    decimation: Option<usize>,
+    /// Seconds at the start that drive the model but are not fitted nor
+    /// scored; default 0 for a file, one period for a plant run.
+    #[arg(long)]
+    warm_up: Option<f64>,
+    /// Half width [samples] of a centred moving average applied to the
+    /// displacement before fitting and evaluation (0: none).
+    #[arg(long, default_value_t = 0)]
+    smooth: usize,
+    /// Take the output as zero at rest instead of fitting a sensor offset.
+    #[arg(long)]
+    no_offset: bool,
+    /// Stop at the GA-PSO optimum, as seed 001 does.
+    #[arg(long)]
+    no_refine: bool,
+    /// Search box of the scaled shape, e.g. "beta=0:10,gamma=-10:10,n=1:3,delta=-2:2"
+    /// (u scaled by max|u|, y by its span, A = 1; any subset).
+    #[arg(long)]
+    bounds: Option<String>,
+    /// Write the fitted parameters (piezo_models::BoucWenParams) as JSON.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Write the whole identification (both fits, offset, history, times,
+    /// validation errors) as JSON.
+    #[arg(long)]
+    report: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -213,6 +297,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => compare(args),
         Command::Stage(args) => stage(args),
         Command::Decoupling(args) => decoupling(args),
+        Command::BoucWen(args) => bouc_wen(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -241,6 +326,11 @@ fn resolve_offset(text: &str, y: &[f64], warm_up_samples: usize) -> Result<f64, 
 /// A progress bar on stderr for `total` starts, hidden when stderr is not a
 /// terminal; ticked from the rayon workers.
 fn progress_bar(total: usize, message: &str) -> ProgressBar {
+    progress_bar_of(total, message, "starts")
+}
+
+/// As [`progress_bar`], counting `unit`.
+fn progress_bar_of(total: usize, message: &str, unit: &str) -> ProgressBar {
     let target = if std::io::stderr().is_terminal() {
         ProgressDrawTarget::stderr()
     } else {
@@ -248,9 +338,11 @@ fn progress_bar(total: usize, message: &str) -> ProgressBar {
     };
     let bar = ProgressBar::with_draw_target(Some(total as u64), target);
     bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} starts, {elapsed}")
-            .expect("the template is valid")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(&format!(
+            "{{msg}} [{{bar:30}}] {{pos}}/{{len}} {unit}, {{elapsed}}"
+        ))
+        .expect("the template is valid")
+        .progress_chars("=> "),
     );
     bar.set_message(message.to_owned());
     bar
@@ -591,5 +683,216 @@ fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
         "coupling error span {:.6} um; residual span {:.6} um, RMS {:.6} um",
         c.error_span, c.residual_span, c.residual_rms
     );
+    Ok(())
+}
+
+/// Parses `name=lo:hi` pairs into `bounds` (the shape of
+/// `bouc_wen_fit::SHAPE_PARAMETERS`).
+fn parse_shape_bounds(text: &str, bounds: &mut Bounds) -> Result<(), String> {
+    for item in text.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+        let problem = |why: &str| format!("--bounds {item}: {why}");
+        let (name, range) = item
+            .split_once('=')
+            .ok_or_else(|| problem("write name=lower:upper"))?;
+        let index = SHAPE_PARAMETERS
+            .iter()
+            .position(|p| *p == name.trim())
+            .ok_or_else(|| {
+                problem(&format!(
+                    "the parameters are {}",
+                    SHAPE_PARAMETERS.join(", ")
+                ))
+            })?;
+        let (lo, hi) = range
+            .split_once(':')
+            .ok_or_else(|| problem("write name=lower:upper"))?;
+        let number = |t: &str| {
+            t.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| problem(&format!("{t:?} is not a finite number")))
+        };
+        let (lo, hi) = (number(lo)?, number(hi)?);
+        if lo >= hi {
+            return Err(problem("lower must be below upper"));
+        }
+        bounds.lower[index] = lo;
+        bounds.upper[index] = hi;
+    }
+    Ok(())
+}
+
+/// The identification record of `bouc-wen`: a file or a plant run. Returns
+/// the record, its name and the default (decimation, warm-up seconds).
+fn bouc_wen_record(args: &BoucWenArgs) -> Result<(Record, String, usize, f64), String> {
+    if let Some(path) = &args.plant {
+        let plant = PlantFmu::open(path).map_err(|e| e.to_string())?;
+        let axis = if args.drive == "x" {
+            RecordAxis::X
+        } else {
+            RecordAxis::Y
+        };
+        for (name, value) in [
+            ("--frequency", args.frequency),
+            ("--peak", args.peak),
+            ("--periods", args.periods),
+            ("--plant-rate", args.plant_rate),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(format!("{name} must be positive (got {value})"));
+            }
+        }
+        let (driven, coupled) = sine_records(
+            &plant,
+            axis,
+            args.frequency,
+            args.peak,
+            args.periods,
+            args.plant_rate,
+        )
+        .map_err(|e| e.to_string())?;
+        let record = if args.read == "coupled" {
+            coupled
+        } else {
+            driven
+        };
+        let name = format!(
+            "{} driving {} with a {} Hz sine 0..{} V, reading the {} displacement",
+            path.display(),
+            args.drive,
+            args.frequency,
+            args.peak,
+            args.read
+        );
+        Ok((record, name, 10, 1.0 / args.frequency))
+    } else {
+        let path = args.file.as_ref().expect("clap requires a file or --plant");
+        let record = read(path, &args.columns.read_options()?)?;
+        Ok((record, path.display().to_string(), 1, 0.0))
+    }
+}
+
+fn print_bouc_wen_fit(name: &str, fit: &BoucWenModelFit) {
+    let p = &fit.params;
+    println!(
+        "  {name:<8} eq. (5) RMS {:.6} um, max |error| {:.6} um; offset {:.6} um",
+        fit.rms, fit.max_error, fit.offset
+    );
+    println!(
+        "           p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}",
+        p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta
+    );
+}
+
+fn print_prediction(name: &str, e: &PredictionError) {
+    println!(
+        "  {name:<8} error RMS {:.4} um ({:.3} % of stroke {:.3} um), range {:+.4}..{:+.4} um, max |error| {:.3} %",
+        e.rms, e.rms_percent, e.stroke, e.min, e.max, e.max_percent
+    );
+}
+
+fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
+    let (record, name, default_decimation, default_warm_up) = bouc_wen_record(args)?;
+    let dt = record.sample_period;
+    let warm_up_seconds = args.warm_up.unwrap_or(default_warm_up);
+    let warm_up_samples = (warm_up_seconds / dt).round() as usize;
+    let mut bounds = default_shape_bounds();
+    if let Some(text) = &args.bounds {
+        parse_shape_bounds(text, &mut bounds)?;
+    }
+    let options = BoucWenFitOptions {
+        gapso: GaPsoOptions {
+            population: args.population,
+            generations: args.generations,
+            seed: args.seed,
+            ..GaPsoOptions::default()
+        },
+        bounds,
+        decimation: args.decimation.unwrap_or(default_decimation),
+        warm_up_samples,
+        fit_offset: !args.no_offset,
+        refine: !args.no_refine,
+    };
+    let y = centred_moving_average(&record.output, args.smooth);
+    println!("{}", describe(&record, &name));
+    println!(
+        "GA-PSO: {} particles, at most {} generations, seed {}, every {} sample(s); first {} samples ({} s) not fitted",
+        options.gapso.population,
+        options.gapso.generations,
+        options.gapso.seed,
+        options.decimation,
+        warm_up_samples,
+        warm_up_seconds
+    );
+    let bar = progress_bar_of(options.gapso.generations, "GA-PSO", "generations");
+    let fit = identify_bouc_wen(&record.input, &y, &options, |generation, best| {
+        bar.set_position(generation as u64 + 1);
+        bar.set_message(format!("GA-PSO, best RMS {best:.4e} um"));
+    })
+    .map_err(|e| format!("{name}: {e}"))?;
+    bar.finish_and_clear();
+
+    println!(
+        "\nGA-PSO: {} evaluations in {} generations, {:.2} s",
+        fit.gapso_evaluations,
+        fit.history.len(),
+        fit.gapso_seconds
+    );
+    print_bouc_wen_fit("GA-PSO", &fit.gapso);
+    if let Some(refined) = &fit.refined {
+        println!(
+            "Levenberg-Marquardt from the GA-PSO optimum: {} evaluations, {:.2} s",
+            fit.refinement_evaluations, fit.refinement_seconds
+        );
+        print_bouc_wen_fit("refined", refined);
+    }
+
+    let mut validation_errors = Vec::new();
+    if let Some(path) = &args.validate {
+        let validation = read(path, &args.columns.read_options()?)?;
+        let y_validation = centred_moving_average(&validation.output, args.smooth);
+        let warm_up = (warm_up_seconds / validation.sample_period).round() as usize;
+        if warm_up >= validation.input.len() {
+            return Err(format!("{}: no sample after the warm-up", path.display()));
+        }
+        println!("\n{}", describe(&validation, &path.display().to_string()));
+        println!(
+            "validation record (not seen by the fit; models from rest, the identified offset; {} scored samples):",
+            validation.input.len() - warm_up
+        );
+        let mut fits = vec![("GA-PSO", &fit.gapso)];
+        if let Some(refined) = &fit.refined {
+            fits.push(("refined", refined));
+        }
+        for (fit_name, model) in fits {
+            let predicted = predict(model.params, model.offset, &validation.input);
+            let error = prediction_error(&predicted, &y_validation, warm_up);
+            print_prediction(fit_name, &error);
+            validation_errors.push((fit_name, error));
+        }
+    }
+
+    if let Some(out) = &args.out {
+        let json = serde_json::to_string_pretty(&fit.best().params)
+            .map_err(|e| format!("cannot serialise the parameters: {e}"))?;
+        std::fs::write(out, json + "\n").map_err(|e| format!("{}: {e}", out.display()))?;
+        println!("\nparameters written to {}", out.display());
+    }
+    if let Some(path) = &args.report {
+        let report = serde_json::json!({
+            "record": name,
+            "options": options,
+            "identification": fit,
+            "validation": validation_errors
+                .iter()
+                .map(|(fit_name, e)| serde_json::json!({ "fit": fit_name, "error": e }))
+                .collect::<Vec<_>>(),
+        });
+        let json = serde_json::to_string_pretty(&report)
+            .map_err(|e| format!("cannot serialise the report: {e}"))?;
+        std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        println!("report written to {}", path.display());
+    }
     Ok(())
 }

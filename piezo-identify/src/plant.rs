@@ -239,6 +239,52 @@ pub fn eq6_record(
     })
 }
 
+/// Seed 001 §5.2's identification run: a sine of `frequency` [Hz] between 0
+/// and `peak` [V] (u = peak·(1 − cos 2πft)/2, from rest; the actuators cannot
+/// take a negative voltage) on one axis's channel(s), the other channels at
+/// 0 V, for `periods` periods at `sample_rate`. Returns two records with the
+/// same input: the driven axis's displacement (for H_XX, H_YY) and the other
+/// axis's (the coupled displacement, for H_XY, H_YX; eq. 8). Sample n pairs
+/// the command held over [t_n, t_n+1] with the displacements at t_n+1.
+pub fn sine_records(
+    plant: &PlantFmu,
+    axis: RecordAxis,
+    frequency: f64,
+    peak: f64,
+    periods: f64,
+    sample_rate: f64,
+) -> Result<(Record, Record), PlantError> {
+    let mut session = plant.session()?;
+    let h = 1.0 / sample_rate;
+    let samples = (periods / frequency * sample_rate).round() as usize;
+    let mut input = Vec::with_capacity(samples);
+    let mut driven = Vec::with_capacity(samples);
+    let mut coupled = Vec::with_capacity(samples);
+    for n in 0..samples {
+        let t = n as f64 * h;
+        let u = 0.5 * peak * (1.0 - (2.0 * std::f64::consts::PI * frequency * t).cos());
+        let commands = match axis {
+            RecordAxis::Y => [u, 0.0, 0.0],
+            RecordAxis::X => [0.0, u, u],
+        };
+        let s = session.step(commands, h)?;
+        let (x, y) = (0.5 * (s[1] + s[2]), s[0]);
+        input.push(u);
+        let (own, other) = match axis {
+            RecordAxis::Y => (y, x),
+            RecordAxis::X => (x, y),
+        };
+        driven.push(own);
+        coupled.push(other);
+    }
+    let record = |output| Record {
+        input: input.clone(),
+        output,
+        sample_period: h,
+    };
+    Ok((record(driven), record(coupled)))
+}
+
 /// A closed-loop run: the demands and the sensor readings at every
 /// communication point.
 #[derive(Clone, Debug, Default)]

@@ -144,3 +144,88 @@ fn compare_reports_three_models() {
         assert!(report.contains(model), "{report}");
     }
 }
+
+/// `bouc-wen`: a record of a known Bouc-Wen model (time, volts, microns)
+/// gives both fits, the parameters as BoucWenParams JSON and the report; a
+/// malformed file or search box is refused with what is wrong.
+#[test]
+fn bouc_wen_fits_a_file_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("bw.csv");
+    let truth = piezo_models::BoucWenParams {
+        p: 0.13,
+        q: -0.87,
+        a: 0.0245,
+        beta: 0.05,
+        gamma: 0.005,
+        n: 1.0,
+        delta: 0.0004,
+    };
+    let u: Vec<f64> = (0..800)
+        .map(|n| 50.0 * (1.0 - (2.0 * std::f64::consts::PI * n as f64 / 200.0).cos()))
+        .collect();
+    let y = piezo_models::simulate(truth, &u);
+    let mut text = String::from("time,volts,microns\n");
+    for (n, (u, y)) in u.iter().zip(&y).enumerate() {
+        text.push_str(&format!("{},{u},{y}\n", n as f64 * 0.005));
+    }
+    std::fs::write(&data, text).unwrap();
+    let data = data.to_str().unwrap();
+    let json = dir.path().join("bw.json");
+    let report = dir.path().join("bw_report.json");
+    let output = run(&[
+        "bouc-wen",
+        data,
+        "--input",
+        "volts",
+        "--output",
+        "microns",
+        "--time",
+        "time",
+        "--generations",
+        "40",
+        "--no-offset",
+        "--out",
+        json.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let printed = stdout(&output);
+    assert!(
+        printed.contains("800 samples, 4.00 s at 200.000000 Hz"),
+        "{printed}"
+    );
+    assert!(printed.contains("GA-PSO"), "{printed}");
+    assert!(printed.contains("refined"), "{printed}");
+    let fitted: piezo_models::BoucWenParams =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let fitted = fitted.with_state_scale(fitted.q / truth.q);
+    assert!((fitted.p - truth.p).abs() < 0.01 * truth.p, "{fitted:?}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert!(report["identification"]["refined"]["rms"].as_f64().unwrap() < 1e-3);
+
+    let output = run(&["bouc-wen", data, "--time", "time", "--bounds", "n=3:1"]);
+    assert!(!output.status.success());
+    assert_eq!(
+        stderr(&output),
+        "--bounds n=3:1: lower must be below upper\n"
+    );
+    let output = run(&["bouc-wen", data, "--time", "time", "--bounds", "alpha=0:1"]);
+    assert!(!output.status.success());
+    assert_eq!(
+        stderr(&output),
+        "--bounds alpha=0:1: the parameters are beta, gamma, n, delta\n"
+    );
+
+    let bad = dir.path().join("bad.dat");
+    std::fs::write(&bad, "0 1\n0.5 2\n1.0 x\n").unwrap();
+    let bad = bad.to_str().unwrap();
+    let output = run(&["bouc-wen", bad, "--rate", "100"]);
+    assert!(!output.status.success());
+    assert_eq!(
+        stderr(&output),
+        format!("{bad}:3: field 1 (\"x\") is not a number\n")
+    );
+}

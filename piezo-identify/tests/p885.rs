@@ -30,7 +30,7 @@ use piezo_identify::validation::{
     ErrorReport, ScaleReference, centred_moving_average, displacement_offset, shifted,
 };
 use piezo_identify::{
-    ClassicalPi, Column, FitOptions, FitQuality, ReadOptions, Sampling, fit_classical_pi,
+    ClassicalPi, Column, FitOptions, FitQuality, ReadOptions, Record, Sampling, fit_classical_pi,
     fit_modified_inverse_pi, read_record,
 };
 use piezo_models::ModifiedInversePi;
@@ -54,16 +54,24 @@ fn print(name: &str, quality: &FitQuality, reference: &ScaleReference) {
     );
 }
 
-#[test]
-fn proposed_model_predicts_the_unseen_p885_file_better_than_classical_pi() {
+/// The identification and the unseen test record: input column 0 [V],
+/// displacement column 4 [µm], 200 Hz.
+fn p885_records() -> (Record, Record) {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(DATA);
     let columns = ReadOptions {
         input: Column::Index(0),
         output: Column::Index(4),
         sampling: Sampling::Rate(200.0),
     };
-    let identification = read_record(&dir.join("Model_Vi_Do.dat"), &columns).unwrap();
-    let test = read_record(&dir.join("Test_Vi_Do_Di.dat"), &columns).unwrap();
+    (
+        read_record(&dir.join("Model_Vi_Do.dat"), &columns).unwrap(),
+        read_record(&dir.join("Test_Vi_Do_Di.dat"), &columns).unwrap(),
+    )
+}
+
+#[test]
+fn proposed_model_predicts_the_unseen_p885_file_better_than_classical_pi() {
+    let (identification, test) = p885_records();
     assert_eq!(identification.input.len(), 8027);
     assert_eq!(test.input.len(), 14155);
     let dt = identification.sample_period;
@@ -153,5 +161,82 @@ fn proposed_model_predicts_the_unseen_p885_file_better_than_classical_pi() {
         "proposed {} V vs classical {} V RMS on the unseen file",
         proposed_test.rms,
         best_classical
+    );
+}
+
+/// Seed 001's model on the same real records: the asymmetric Bouc-Wen model
+/// fitted by GA-PSO (eq. 5), refined by Levenberg-Marquardt, predicting the
+/// displacement of the unseen file from its voltage. Same smoothing and
+/// warm-up as above; the sensor offset is fitted with p and q.
+///
+/// The yardstick is the best model without hysteresis, y = g·u + offset by
+/// least squares on the identification file: whatever the Bouc-Wen model
+/// adds must show on data it has not seen.
+#[test]
+fn bouc_wen_predicts_the_unseen_p885_file_better_than_a_linear_model() {
+    use piezo_identify::bouc_wen_fit::{
+        BoucWenFitOptions, identify_bouc_wen, predict, prediction_error,
+    };
+    use piezo_identify::least_squares::solve_least_squares;
+
+    let (identification, test) = p885_records();
+    let y = centred_moving_average(&identification.output, SMOOTHING_HALF_WIDTH);
+    let y_test = centred_moving_average(&test.output, SMOOTHING_HALF_WIDTH);
+    let u = &identification.input;
+
+    let options = BoucWenFitOptions {
+        decimation: 2,
+        warm_up_samples: WARM_UP,
+        ..BoucWenFitOptions::default()
+    };
+    let fit = identify_bouc_wen(u, &y, &options, |_, _| {}).unwrap();
+    let best = fit.best();
+    let gapso_test = prediction_error(
+        &predict(fit.gapso.params, fit.gapso.offset, &test.input),
+        &y_test,
+        WARM_UP,
+    );
+    let refined_test = prediction_error(
+        &predict(best.params, best.offset, &test.input),
+        &y_test,
+        WARM_UP,
+    );
+
+    let rows = u.len() - WARM_UP;
+    let regressors =
+        nalgebra::DMatrix::from_fn(rows, 2, |i, j| if j == 0 { u[WARM_UP + i] } else { 1.0 });
+    let line = solve_least_squares(regressors, &y[WARM_UP..]).coefficients;
+    let linear_test: Vec<f64> = test.input.iter().map(|v| line[0] * v + line[1]).collect();
+    let linear_test = prediction_error(&linear_test, &y_test, WARM_UP);
+
+    println!(
+        "Bouc-Wen on Model_Vi_Do.dat: GA-PSO RMS {:.4} um ({} evaluations, {:.1} s), refined {:.4} um; {:?}, offset {:.3} um",
+        fit.gapso.rms, fit.gapso_evaluations, fit.gapso_seconds, best.rms, best.params, best.offset
+    );
+    for (name, e) in [
+        ("GA-PSO", &gapso_test),
+        ("refined", &refined_test),
+        ("linear", &linear_test),
+    ] {
+        println!(
+            "Test_Vi_Do_Di.dat (unseen) {name:<8} RMS {:.4} um ({:.2} % of {:.2} um), range {:+.3}..{:+.3} um",
+            e.rms, e.rms_percent, e.stroke, e.min, e.max
+        );
+    }
+
+    assert!(best.rms <= fit.gapso.rms);
+    // Measured: 0.97 um, 2.37 % of the unseen file's stroke (README); the
+    // bound leaves room for the search's seed-to-seed spread, not for a
+    // regression to the linear model's figure.
+    assert!(
+        refined_test.rms_percent < 3.0,
+        "refined Bouc-Wen RMS {:.3} % on the unseen file",
+        refined_test.rms_percent
+    );
+    assert!(
+        refined_test.rms < 0.6 * linear_test.rms,
+        "Bouc-Wen {} um vs linear {} um RMS on the unseen file",
+        refined_test.rms,
+        linear_test.rms
     );
 }

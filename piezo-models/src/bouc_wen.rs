@@ -48,6 +48,32 @@ pub struct BoucWenParams {
     pub delta: f64,
 }
 
+impl BoucWenParams {
+    /// The same input-output map with the hysteretic state scaled by `s > 0`
+    /// (h' = s·h). Eq. (3)-(4) hold one redundant degree of freedom: with
+    ///
+    /// ```text
+    /// q' = q/s,  A' = s·A,  β' = β·s^(1−n),  γ' = γ·s^(1−n),  δ' = s·δ
+    /// ```
+    ///
+    /// h' obeys eq. (3) with the primed parameters and q'·h' = q·h, so no
+    /// record can tell the two sets apart. Identification therefore fixes one
+    /// of them (see `piezo-identify`'s Bouc-Wen fit) and comparisons of
+    /// parameter sets first bring them to a common scale.
+    pub fn with_state_scale(&self, s: f64) -> BoucWenParams {
+        let shape = s.powf(1.0 - self.n);
+        BoucWenParams {
+            p: self.p,
+            q: self.q / s,
+            a: self.a * s,
+            beta: self.beta * shape,
+            gamma: self.gamma * shape,
+            n: self.n,
+            delta: self.delta * s,
+        }
+    }
+}
+
 /// Largest input substep used by [`simulate`] [V]: the RK4 error per volt is then
 /// far below a picometre for the loop shapes of this project (memory lengths of
 /// tens of volts).
@@ -174,6 +200,24 @@ pub fn simulate(params: BoucWenParams, inputs: &[f64]) -> Vec<f64> {
             model.output()
         })
         .collect()
+}
+
+/// The hysteretic state h after each input of `inputs`, written to `states`
+/// (one per input), from rest, with input substeps of at most `max_du`: the
+/// allocation-free core of [`simulate`] for callers that evaluate many
+/// parameter sets on one record.
+pub fn hysteretic_states_into(
+    params: BoucWenParams,
+    inputs: &[f64],
+    max_du: f64,
+    states: &mut [f64],
+) {
+    assert_eq!(inputs.len(), states.len(), "one state per input");
+    let mut model = AsymmetricBoucWen::new(params);
+    for (&u, h) in inputs.iter().zip(states.iter_mut()) {
+        model.advance_to(u, max_du);
+        *h = model.hysteretic_state();
+    }
 }
 
 #[cfg(test)]
@@ -326,5 +370,38 @@ mod tests {
         let mut model = AsymmetricBoucWen::new(bw);
         model.advance_to(10.0, SIMULATE_MAX_DU);
         assert_eq!(y[1], model.output());
+    }
+
+    /// eq. (3)-(4) cannot tell a set from its state-scaled twin.
+    #[test]
+    fn state_scaling_leaves_the_output_unchanged() {
+        let bw = params(1.7, 2e-4);
+        let path = [0.0, 80.0, 20.0, 100.0, 35.0, 60.0, 0.0];
+        let y = simulate(bw, &path);
+        for s in [0.01, 0.5, 3.0, 250.0] {
+            let twin = simulate(bw.with_state_scale(s), &path);
+            for (a, b) in y.iter().zip(&twin) {
+                assert!(
+                    (a - b).abs() < 1e-9 * (1.0 + a.abs()),
+                    "s = {s}: {a} vs {b}"
+                );
+            }
+        }
+        let round_trip = bw.with_state_scale(4.0).with_state_scale(0.25);
+        assert!((round_trip.beta - bw.beta).abs() < 1e-15);
+        assert!((round_trip.q - bw.q).abs() < 1e-15);
+    }
+
+    #[test]
+    fn hysteretic_states_into_follows_the_model() {
+        let bw = params(1.5, 1e-4);
+        let inputs = [10.0, 50.0, 20.0];
+        let mut states = [0.0; 3];
+        hysteretic_states_into(bw, &inputs, SIMULATE_MAX_DU, &mut states);
+        let mut model = AsymmetricBoucWen::new(bw);
+        for (u, h) in inputs.iter().zip(states) {
+            model.advance_to(*u, SIMULATE_MAX_DU);
+            assert_eq!(model.hysteretic_state(), h);
+        }
     }
 }

@@ -20,7 +20,7 @@ pub mod piezo_controller;
 pub mod sensor_noise;
 
 pub use amplifier::{Amplifier, AmplifierParams};
-pub use bouc_wen::{AsymmetricBoucWen, BoucWenParams, simulate};
+pub use bouc_wen::{AsymmetricBoucWen, BoucWenParams, hysteretic_states_into, simulate};
 pub use creep::Creep;
 pub use decoupling::{DecoupledReferences, DecouplingParams, decouple};
 pub use flexure_stage::{
