@@ -20,7 +20,7 @@ PLANT := FlexureStage:fmu-plant:flexure-stage-describe:libfmu_plant.so
 CONTROLLER := PiezoController:fmu-controller:piezo-controller-describe:libfmu_controller.so
 FMU_SPECS := $(PLANT) $(CONTROLLER)
 
-.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset identify system-deps venv clean
+.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset xy200s-preset identify system-deps venv clean
 
 all: fmus
 
@@ -94,6 +94,15 @@ stage-preset: fmus
 	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu --rounds 3 \
 	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
+
+# Seed 001's XY200S stage as a FlexureStage parameter set, converted from the
+# printed Tables 1-2 (piezo-identify/src/xy200s.rs says how); a test fails
+# when the committed preset and a fresh conversion differ.
+xy200s-preset: system-deps
+	$(CARGO) build --release --locked -p piezo-identify
+	mkdir -p out/xy200s
+	$(RELEASE)/piezo-identify xy200s-preset --out piezo-models/presets/xy200s_stage.json \
+	  --report out/xy200s/conversion.json
 
 # The identification figures: seed 000's model comparison on the plant (F of
 # eq. 7, evaluation time), and the real P-885 stack (unseen test file) fitted

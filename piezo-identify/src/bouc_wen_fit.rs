@@ -48,6 +48,10 @@ pub const SHAPE_PARAMETERS: [&str; 4] = ["beta", "gamma", "n", "delta"];
 /// (RK4, error far below the data's noise; see `piezo_models::bouc_wen`).
 const SUBSTEPS_PER_INPUT_SCALE: f64 = 500.0;
 
+/// |h̃| beyond which a candidate shape counts as diverged (h̃ is of order one
+/// for any shape that describes a loop).
+const DIVERGED_STATE: f64 = 1e12;
+
 /// Smallest n: below 1, |h|^(n−1) is singular at h = 0.
 const MIN_EXPONENT: f64 = 1.0;
 
@@ -190,7 +194,12 @@ impl ScaledRecord {
         let rows = self.input.len() - self.scored_from;
         let columns = if self.fit_offset { 3 } else { 2 };
         let scored = self.scored_from..self.input.len();
-        if states[scored.clone()].iter().any(|h| !h.is_finite()) {
+        // A shape far outside the data's range can drive h to overflow; such
+        // a candidate is unusable, not an error (and QR must not see it).
+        if states[scored.clone()]
+            .iter()
+            .any(|h| h.is_nan() || h.abs() >= DIVERGED_STATE)
+        {
             return None;
         }
         let regressors = DMatrix::from_fn(rows, columns, |i, j| match j {
@@ -199,6 +208,9 @@ impl ScaledRecord {
             _ => 1.0,
         });
         let solution = solve_least_squares(regressors, &self.output[scored.clone()]);
+        if !solution.coefficients.iter().all(|c| c.is_finite()) {
+            return None;
+        }
         let mut coefficients = [0.0; 3];
         coefficients[..columns].copy_from_slice(&solution.coefficients);
         let residuals = scored
@@ -543,6 +555,21 @@ mod tests {
                 scales.output * scaled
             );
         }
+    }
+
+    /// γ̃ = −100 with n = 2 makes dh̃/dũ = 1 + 100·h̃² on the way up: h̃
+    /// blows up within a fraction of the input range. Such a candidate is
+    /// scored unusable; it must not reach the QR solver as inf/NaN.
+    #[test]
+    fn a_diverging_shape_is_unusable_not_a_panic() {
+        let record = ScaledRecord {
+            input: (0..200).map(|i| i as f64 / 200.0).collect(),
+            output: (0..200).map(|i| i as f64 / 200.0).collect(),
+            scored_from: 0,
+            fit_offset: true,
+        };
+        assert_eq!(record.rms(&[0.0, -100.0, 2.0, 0.0]), f64::INFINITY);
+        assert!(record.rms(&[1.0, 0.0, 2.0, 0.0]).is_finite());
     }
 
     #[test]

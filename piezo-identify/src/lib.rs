@@ -32,6 +32,8 @@
 //!   deterministic for a seed).
 //! - [`bouc_wen_fit`]: seed 001's asymmetric Bouc-Wen model (eq. 3-4) fitted
 //!   by GA-PSO on eq. (5), then refined by Levenberg-Marquardt.
+//! - [`xy200s`]: seed 001's XY200S stage as a FlexureStage preset, converted
+//!   from the printed Tables 1-2 by identification.
 //!
 //! The models know nothing of files; the `piezo-identify` binary does the I/O.
 //! `README.md` beside this crate gives the method, every reading of the paper
@@ -49,6 +51,7 @@ pub mod plant;
 pub mod regressors;
 pub mod stage;
 pub mod validation;
+pub mod xy200s;
 
 pub use data::{Column, DataError, ReadOptions, Record, Sampling, read_record};
 pub use fit::{

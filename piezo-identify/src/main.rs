@@ -65,6 +65,19 @@ enum Command {
     /// sine. Also fits the coupling models H_XY, H_YX: give the coupled
     /// displacement as the output (or --read coupled).
     BoucWen(BoucWenArgs),
+    /// Build seed 001's XY200S stage as a FlexureStage parameter set from
+    /// the printed Tables 1-2 (units and conversion: piezo_identify::xy200s).
+    Xy200sPreset(Xy200sPresetArgs),
+}
+
+#[derive(Args)]
+struct Xy200sPresetArgs {
+    /// Write the stage parameters (piezo_models::FlexureStageParams) here.
+    #[arg(long)]
+    out: PathBuf,
+    /// Write the conversion of each printed model (fit RMS, scaling) here.
+    #[arg(long)]
+    report: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -298,6 +311,7 @@ fn main() -> ExitCode {
         Command::Stage(args) => stage(args),
         Command::Decoupling(args) => decoupling(args),
         Command::BoucWen(args) => bouc_wen(args),
+        Command::Xy200sPreset(args) => xy200s_preset(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -893,6 +907,38 @@ fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
             .map_err(|e| format!("cannot serialise the report: {e}"))?;
         std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
         println!("report written to {}", path.display());
+    }
+    Ok(())
+}
+
+fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), String> {
+    let json = serde_json::to_string_pretty(value)
+        .map_err(|e| format!("cannot serialise {}: {e}", path.display()))?;
+    std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), String> {
+    let preset = piezo_identify::xy200s::xy200s_preset().map_err(|e| e.to_string())?;
+    for model in &preset.models {
+        let p = &model.identified;
+        println!(
+            "{}: printed model spans {:.3} um on the 2 Hz 0..150 V run; rate-independent fit RMS {:.4} um ({:.3} %); output scaled by {:.4}",
+            model.name,
+            model.printed_span_um,
+            model.rms_um,
+            100.0 * model.rms_um / model.printed_span_um,
+            model.stroke_scale
+        );
+        println!(
+            "    p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}",
+            p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta
+        );
+    }
+    write_json(&args.out, &preset.stage)?;
+    println!("stage parameters written to {}", args.out.display());
+    if let Some(report) = &args.report {
+        write_json(report, &preset.models)?;
+        println!("conversion report written to {}", report.display());
     }
     Ok(())
 }

@@ -85,6 +85,21 @@ pub struct FlexureStageParams {
 /// The calibrated preset, the single source of the default parameters.
 const PRESET_JSON: &str = include_str!("../presets/flexure_stage.json");
 
+/// Seed 001's XY200S stage as a parameter set of this model, built from the
+/// paper's Tables 1-2 by `piezo-identify xy200s-preset` (readings, units and
+/// conversion in `piezo_identify::xy200s`).
+const XY200S_JSON: &str = include_str!("../presets/xy200s_stage.json");
+
+impl FlexureStageParams {
+    /// The XY200S preset (seed 001 §5.1): PZT1 is the Y actuator, PZT2 and
+    /// PZT3 both the X actuator (drive them together), amplifier 0..10 V to
+    /// 0..150 V, strokes 144.37 µm (x) and 149.27 µm (y).
+    pub fn xy200s() -> Self {
+        serde_json::from_str(XY200S_JSON)
+            .expect("presets/xy200s_stage.json must parse (a test checks it)")
+    }
+}
+
 impl Default for FlexureStageParams {
     fn default() -> Self {
         serde_json::from_str(PRESET_JSON)
