@@ -83,6 +83,11 @@ pub struct BoucWenFitOptions {
     /// Fit a constant sensor offset with p and q (else the output is taken
     /// as zero at rest).
     pub fit_offset: bool,
+    /// Accept only models whose every branch rises with the input on the
+    /// record (dy/du > 0), i.e. models with an inverse for feedforward (off
+    /// by default: seed 001 fits the data without it, and a measured loop
+    /// fitted best may turn back briefly at reversals).
+    pub monotone: bool,
     /// Refine the GA-PSO optimum by Levenberg-Marquardt.
     pub refine: bool,
 }
@@ -95,6 +100,7 @@ impl Default for BoucWenFitOptions {
             decimation: 1,
             warm_up_samples: 0,
             fit_offset: true,
+            monotone: false,
             refine: true,
         }
     }
@@ -150,6 +156,16 @@ pub enum BoucWenFitError {
     NoInput,
     #[error("the output is constant: there is no response to fit")]
     NoResponse,
+    #[error(
+        "no shape in the search box gives a usable model (every candidate diverged{}); widen --bounds",
+        ", or drew a branch that falls as the input rises"
+    )]
+    NoUsableShape,
+    #[error(
+        "the GA-PSO optimum, searched on every {decimation}th sample, is unusable on the whole \
+         record (it diverges or draws a falling branch there); search with --decimation 1"
+    )]
+    UnusableOnAllSamples { decimation: usize },
     #[error("decimation must be at least 1")]
     Decimation,
     #[error("GA-PSO: {0}")]
@@ -163,6 +179,7 @@ struct ScaledRecord {
     /// First fitted sample.
     scored_from: usize,
     fit_offset: bool,
+    monotone: bool,
 }
 
 impl ScaledRecord {
@@ -172,6 +189,7 @@ impl ScaledRecord {
             output: self.output.iter().step_by(step).copied().collect(),
             scored_from: self.scored_from.div_ceil(step),
             fit_offset: self.fit_offset,
+            monotone: self.monotone,
         }
     }
 
@@ -213,6 +231,9 @@ impl ScaledRecord {
         }
         let mut coefficients = [0.0; 3];
         coefficients[..columns].copy_from_slice(&solution.coefficients);
+        if self.monotone && !self.is_increasing(shape, &states, coefficients) {
+            return None;
+        }
         let residuals = scored
             .map(|i| {
                 coefficients[0] * self.input[i] + coefficients[1] * states[i] + coefficients[2]
@@ -220,6 +241,30 @@ impl ScaledRecord {
             })
             .collect();
         Some((coefficients, residuals))
+    }
+
+    /// Whether dy/du = p̃ + q̃·dh̃/dũ (eq. 3-4) is positive at the start and
+    /// the end of every input segment, in the segment's direction: every
+    /// branch the record draws then rises with the input, and the model has
+    /// the inverse that seed 001's feedforward (eq. 6) needs.
+    fn is_increasing(&self, shape: &[f64], states: &[f64], coefficients: [f64; 3]) -> bool {
+        let params = scaled_params(shape);
+        let slope = |u: f64, h: f64, direction: f64| {
+            let abs_h = h.abs();
+            let pow = abs_h.powf(params.n - 1.0);
+            let dh = params.a - params.beta * direction * pow * h - params.gamma * pow * abs_h
+                + params.delta * u;
+            coefficients[0] + coefficients[1] * dh
+        };
+        let (mut u0, mut h0) = (0.0, 0.0);
+        for (&u1, &h1) in self.input.iter().zip(states) {
+            let direction = (u1 - u0).signum();
+            if u1 != u0 && (slope(u0, h0, direction) <= 0.0 || slope(u1, h1, direction) <= 0.0) {
+                return false;
+            }
+            (u0, h0) = (u1, h1);
+        }
+        true
     }
 
     /// Eq. (5) in scaled units; infinite for an unusable shape.
@@ -396,6 +441,7 @@ pub fn identify_bouc_wen(
         output: output.iter().map(|y| y / scales.output).collect(),
         scored_from: options.warm_up_samples,
         fit_offset: options.fit_offset,
+        monotone: options.monotone,
     };
     let searched = record.decimated(options.decimation);
 
@@ -407,18 +453,22 @@ pub fn identify_bouc_wen(
         |generation, best| progress(generation, best * scales.output),
     )?;
     let gapso_seconds = started.elapsed().as_secs_f64();
-    let gapso_fit = model_fit(&record, &search.best, scales);
+    if !search.fitness.is_finite() {
+        return Err(BoucWenFitError::NoUsableShape);
+    }
+    let gapso_fit =
+        model_fit(&record, &search.best, scales).ok_or(BoucWenFitError::UnusableOnAllSamples {
+            decimation: options.decimation,
+        })?;
 
     let started = Instant::now();
     let (refined, refinement_evaluations) = if options.refine {
         let (shape, evaluations) = refine(&record, &search.best);
-        let fit = model_fit(&record, &shape, scales);
         // LM accepts only descending steps; keep GA-PSO's fit if a rounding
         // of the re-evaluation says otherwise.
-        let fit = if fit.rms <= gapso_fit.rms {
-            fit
-        } else {
-            gapso_fit.clone()
+        let fit = match model_fit(&record, &shape, scales) {
+            Some(fit) if fit.rms <= gapso_fit.rms => fit,
+            _ => gapso_fit.clone(),
         };
         (Some(fit), evaluations)
     } else {
@@ -435,18 +485,18 @@ pub fn identify_bouc_wen(
     })
 }
 
-fn model_fit(record: &ScaledRecord, shape: &[f64], scales: Scales) -> BoucWenModelFit {
-    let (coefficients, residuals) = record
-        .project(shape)
-        .expect("GA-PSO and LM return shapes with a finite fitness");
+/// The fit of `shape` on the whole record; None when the shape is unusable
+/// there (it can pass on the searched samples and not on all of them).
+fn model_fit(record: &ScaledRecord, shape: &[f64], scales: Scales) -> Option<BoucWenModelFit> {
+    let (coefficients, residuals) = record.project(shape)?;
     let (params, offset) = physical(shape, coefficients, scales);
     let max_error = residuals.iter().fold(0.0_f64, |m, r| m.max(r.abs()));
-    BoucWenModelFit {
+    Some(BoucWenModelFit {
         params,
         offset,
         rms: root_mean_square(&residuals) * scales.output,
         max_error: max_error * scales.output,
-    }
+    })
 }
 
 /// Levenberg-Marquardt on the projected residual from `start`; returns the
@@ -541,6 +591,7 @@ mod tests {
             output: vec![0.0; input.len()],
             scored_from: 0,
             fit_offset: true,
+            monotone: false,
         };
         let states = record.states(&shape);
         let (params, offset) = physical(&shape, coefficients, scales);
@@ -567,9 +618,28 @@ mod tests {
             output: (0..200).map(|i| i as f64 / 200.0).collect(),
             scored_from: 0,
             fit_offset: true,
+            monotone: false,
         };
         assert_eq!(record.rms(&[0.0, -100.0, 2.0, 0.0]), f64::INFINITY);
         assert!(record.rms(&[1.0, 0.0, 2.0, 0.0]).is_finite());
+    }
+
+    /// A model whose output falls as the input rises has no inverse: with
+    /// `monotone` it is unusable, without it the projection fits it.
+    #[test]
+    fn the_monotone_option_rejects_a_falling_model() {
+        let ramp: Vec<f64> = (0..100).map(|i| i as f64 / 100.0).collect();
+        let record = |monotone| ScaledRecord {
+            input: ramp.clone(),
+            output: ramp.iter().map(|u| -u).collect(),
+            scored_from: 0,
+            fit_offset: false,
+            monotone,
+        };
+        // β = γ = δ = 0, n = 1: h = ũ, so the best fit is y = −ũ, slope −1.
+        let linear = [0.0, 0.0, 1.0, 0.0];
+        assert!(record(false).rms(&linear) < 1e-12);
+        assert_eq!(record(true).rms(&linear), f64::INFINITY);
     }
 
     #[test]

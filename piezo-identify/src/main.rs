@@ -137,6 +137,10 @@ struct BoucWenArgs {
     /// Take the output as zero at rest instead of fitting a sensor offset.
     #[arg(long)]
     no_offset: bool,
+    /// Accept only models whose every branch rises with the input on the
+    /// record: models with an inverse, as feedforward (eq. 6) needs.
+    #[arg(long)]
+    monotone: bool,
     /// Stop at the GA-PSO optimum, as seed 001 does.
     #[arg(long)]
     no_refine: bool,
@@ -826,6 +830,7 @@ fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
         decimation: args.decimation.unwrap_or(default_decimation),
         warm_up_samples,
         fit_offset: !args.no_offset,
+        monotone: args.monotone,
         refine: !args.no_refine,
     };
     let y = centred_moving_average(&record.output, args.smooth);

@@ -23,14 +23,14 @@
 //! the XY200S amplifier's 0..150 V (10 V command × gain 15: seed 001's "10 V"
 //! identification sine is the command), y in millimetres, and eq. (3)'s
 //! asymmetry term taken literally in time (δ·u·sgn(u̇)) at the 2 Hz of the
-//! identification, H_XX reaches 142 µm from rest at 150 V (its model below;
-//! 1.5 % short of the stated X stroke of 144.37 µm) and the coupling models
+//! identification, H_XX reaches 138 µm from rest at 150 V (its model below;
+//! 4.5 % short of the stated X stroke of 144.37 µm) and the coupling models
 //! draw 3.3 µm and 8.0 µm loops: the only reading found under which the
 //! printed H_XX and the stated stroke agree (with u the 0..10 V command it
 //! would reach under 10 µm). Under it H_YY reaches only 31 µm against the
 //! stated 149.27 µm, and no common unit makes both printed actuator models
 //! match both strokes; so the preset scales each actuator model's output (p
-//! and q) to its stated stroke (X by 1.015, Y by 4.86) and takes the coupling
+//! and q) to its stated stroke (X by 1.047, Y by 4.82) and takes the coupling
 //! models as printed.
 //!
 //! # From the printed (rate-dependent) reading to the plant's
@@ -250,6 +250,10 @@ pub fn conversion_options() -> BoucWenFitOptions {
         decimation: 20,
         warm_up_samples: 0,
         fit_offset: false,
+        // The plant's actuators must rise with their voltage on every
+        // branch: the printed H_XX, fitted freely, turns back near 0 V,
+        // which no inverse feedforward can follow.
+        monotone: true,
         bounds: Bounds {
             lower: vec![0.0, -100.0, 1.0, -20.0],
             upper: vec![100.0, 100.0, 5.0, 20.0],

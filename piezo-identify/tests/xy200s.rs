@@ -32,10 +32,11 @@ fn committed_preset_is_the_conversion_of_the_printed_tables() {
         [PRINTED_H_XX, PRINTED_H_YY, PRINTED_H_XY, PRINTED_H_YX]
     );
     // The rate-independent reading cannot follow the printed asymmetry term
-    // exactly (it acts in time, not in voltage). Measured: H_XX 2.66 %, H_YY
-    // 0.77 %, H_XY 0.10 %, H_YX 0.035 % of each printed span; the bounds
-    // catch a conversion that falls off its optimum.
-    for (model, bound_percent) in preset.models.iter().zip([3.0, 1.0, 0.2, 0.1]) {
+    // exactly (it acts in time, not in voltage), and the plant's models must
+    // rise on every branch. Measured: H_XX 3.13 %, H_YY 1.19 %, H_XY 0.10 %,
+    // H_YX 0.035 % of each printed span; the bounds catch a conversion that
+    // falls off its optimum.
+    for (model, bound_percent) in preset.models.iter().zip([3.5, 1.5, 0.2, 0.1]) {
         let percent = 100.0 * model.rms_um / model.printed_span_um;
         assert!(percent < bound_percent, "{}: {percent} %", model.name);
     }

@@ -49,6 +49,22 @@ pub struct BoucWenParams {
 }
 
 impl BoucWenParams {
+    /// The model of the map u' ↦ H[g·u']: the same actuator seen from an
+    /// input `g` times smaller (e.g. amplifier volts to command volts through
+    /// an amplifier of gain g). From eq. (3) with du = g·du':
+    /// p' = g·p, A' = g·A, β' = g·β, γ' = g·γ, δ' = g²·δ.
+    pub fn with_input_scale(&self, g: f64) -> BoucWenParams {
+        BoucWenParams {
+            p: self.p * g,
+            q: self.q,
+            a: self.a * g,
+            beta: self.beta * g,
+            gamma: self.gamma * g,
+            n: self.n,
+            delta: self.delta * g * g,
+        }
+    }
+
     /// The same input-output map with the hysteretic state scaled by `s > 0`
     /// (h' = s·h). Eq. (3)-(4) hold one redundant degree of freedom: with
     ///
@@ -117,6 +133,22 @@ impl AsymmetricBoucWen {
     /// The last input u [V].
     pub fn input(&self) -> f64 {
         self.u
+    }
+
+    /// dy/du at the current point for an input moving in the direction of
+    /// `direction` (its sign): p + q·dh/du, with dh/du from eq. (3) in the
+    /// module's reading. Used by the inverse model's Newton steps.
+    pub fn output_slope(&self, direction: f64) -> f64 {
+        let p = &self.params;
+        let abs_h = self.h.abs();
+        let pow = if p.n == 1.0 {
+            1.0
+        } else {
+            abs_h.powf(p.n - 1.0)
+        };
+        let state_slope = p.a - p.beta * direction.signum() * pow * self.h - p.gamma * pow * abs_h
+            + p.delta * self.u;
+        p.p + p.q * state_slope
     }
 
     /// Back to rest: h = 0, u = 0.
@@ -402,6 +434,23 @@ mod tests {
         for (u, h) in inputs.iter().zip(states) {
             model.advance_to(*u, SIMULATE_MAX_DU);
             assert_eq!(model.hysteretic_state(), h);
+        }
+    }
+
+    #[test]
+    fn input_scaling_sees_the_same_actuator_through_a_gain() {
+        let bw = params(1.5, 2e-4);
+        let path = [0.0, 80.0, 20.0, 100.0, 35.0, 60.0];
+        let y = simulate(bw, &path);
+        let commands: Vec<f64> = path.iter().map(|u| u / 10.0).collect();
+        let mut model = AsymmetricBoucWen::new(bw.with_input_scale(10.0));
+        for (u, y) in commands.iter().zip(&y) {
+            model.advance_to(*u, SIMULATE_MAX_DU / 10.0);
+            assert!(
+                (model.output() - y).abs() < 1e-9,
+                "{} vs {y}",
+                model.output()
+            );
         }
     }
 }

@@ -4,7 +4,9 @@
 //! ([`AsymmetricBoucWen`]), the amplifier, creep, structural modes and sensor
 //! noise, and the 3-DOF stage of seed 000 that combines them
 //! ([`FlexureStage`]); and the control math of seed 000, starting with the
-//! modified inverse Prandtl-Ishlinskii feedforward ([`ModifiedInversePi`]).
+//! modified inverse Prandtl-Ishlinskii feedforward ([`ModifiedInversePi`]),
+//! and of seed 001: the inverse Bouc-Wen feedforward and model-based
+//! decoupling ([`InverseBoucWen`], [`CouplingEstimator`]).
 //! `MODEL.md` beside this crate gives the equations, the
 //! integration scheme and the calibration.
 
@@ -14,6 +16,7 @@ pub mod creep;
 pub mod decoupling;
 pub mod fingerprint;
 pub mod flexure_stage;
+pub mod inverse_bouc_wen;
 pub mod inverse_pi;
 pub mod oscillator;
 pub mod piezo_controller;
@@ -26,6 +29,9 @@ pub use decoupling::{DecoupledReferences, DecouplingParams, decouple};
 pub use flexure_stage::{
     ActuatorParams, CouplingParams, FlexureStage, FlexureStageParams, ParamError, Pose,
     SolverParams, StepReport,
+};
+pub use inverse_bouc_wen::{
+    BoucWenFeedforward, BoucWenModels, CouplingEstimate, CouplingEstimator, InverseBoucWen,
 };
 pub use inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 pub use oscillator::{ModeParams, ModeSet, Oscillator};
