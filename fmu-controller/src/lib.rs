@@ -16,7 +16,9 @@ use fmi2_cosim::{
     BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
     UnitDefinition, Variability, Variable, units,
 };
-use piezo_models::{ControllerOutput, ControllerParams, PiezoController};
+use piezo_models::{
+    ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel, PiezoController,
+};
 use serde::{Deserialize, Serialize};
 
 /// The FMU's model: the parameters the importer sets, the inputs it writes,
@@ -32,6 +34,24 @@ pub struct PiezoControllerFmu {
     /// Whether limiting of each command was already logged (once per channel,
     /// not at every step).
     saturation_reported: [bool; 3],
+    /// The Integer codes of `hysteresis_model` and `decoupling_model` as the
+    /// importer set them; checked and turned into the selectors at
+    /// initialization (a wrong code is refused there, by name).
+    selector_codes: [i32; 2],
+}
+
+/// The selector value of an Integer code, if it is one.
+fn selected<T: Copy>(codes: &[(i32, T)], code: i32) -> Option<T> {
+    codes.iter().find(|(c, _)| *c == code).map(|(_, v)| *v)
+}
+
+/// The Integer code of a selector value (`CODES` of piezo-models).
+fn code_of<T: PartialEq + Copy>(codes: &[(i32, T)], value: T) -> i32 {
+    codes
+        .iter()
+        .find(|(_, v)| *v == value)
+        .map(|(c, _)| *c)
+        .expect("every selector value has a code")
 }
 
 impl PiezoControllerFmu {
@@ -97,6 +117,31 @@ const UNITS: &[UnitDefinition] = &[
     UnitDefinition {
         name: "V/um3",
         base: volt_per(3, 0, 1e18),
+        display_units: &[],
+    },
+    // Seed 001's Bouc-Wen models in command volts: p and A in µm/V, δ in µm/V².
+    UnitDefinition {
+        name: "um/V",
+        base: BaseUnit {
+            kg: -1,
+            m: -1,
+            s: 3,
+            a: 1,
+            factor: 1e-6,
+            ..BaseUnit::NONE
+        },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "um/V2",
+        base: BaseUnit {
+            kg: -2,
+            m: -3,
+            s: 6,
+            a: 2,
+            factor: 1e-6,
+            ..BaseUnit::NONE
+        },
         display_units: &[],
     },
     // Δk4 turns a rotation demand in millidegrees into micrometres (the unit
@@ -223,6 +268,86 @@ macro_rules! inverse_pi_parameters {
     }};
 }
 
+/// One fixed parameter `<prefix>.<name>` at `params.bouc_wen.<model>.<field>`.
+macro_rules! bouc_wen_parameter {
+    ($prefix:literal, $model:ident, $name:literal, $field:ident, $description:expr, $unit:literal, [$min:expr, $max:expr]) => {
+        Variable::real_parameter(
+            concat!($prefix, ".", $name),
+            $description,
+            $unit,
+            Variability::Fixed,
+            |m: &PiezoControllerFmu| m.params.bouc_wen.$model.$field,
+            |m: &mut PiezoControllerFmu, v: f64| m.params.bouc_wen.$model.$field = v,
+        )
+        .range($min, $max)
+        .model_path(concat!(
+            "bouc_wen.",
+            stringify!($model),
+            ".",
+            stringify!($field)
+        ))
+    };
+}
+
+/// The seven parameters of one of seed 001's asymmetric Bouc-Wen models
+/// (eq. 3-4; u the channel command [V], y and h [µm]).
+macro_rules! bouc_wen_parameters {
+    ($prefix:literal, $model:ident, $who:literal) => {
+        [
+            bouc_wen_parameter!($prefix, $model, "p", p,
+                concat!($who, ": p, linear gain of the command in the output y = p·u + q·h (seed 001 eq. 4)"),
+                "um/V", [None, None]),
+            bouc_wen_parameter!($prefix, $model, "q", q,
+                concat!($who, ": q, weight of the hysteretic state h in the output (seed 001 eq. 4)"),
+                "", [None, None]),
+            bouc_wen_parameter!($prefix, $model, "A", a,
+                concat!($who, ": A, input gain of the hysteretic state (seed 001 eq. 3)"),
+                "um/V", [None, None]),
+            bouc_wen_parameter!($prefix, $model, "beta", beta,
+                concat!($who, ": beta, direction-dependent shape coefficient [um^(1-n)/V] (seed 001 eq. 3)"),
+                "", [None, None]),
+            bouc_wen_parameter!($prefix, $model, "gamma", gamma,
+                concat!($who, ": gamma, direction-independent shape coefficient [um^(1-n)/V] (seed 001 eq. 3)"),
+                "", [None, None]),
+            bouc_wen_parameter!($prefix, $model, "n", n,
+                concat!($who, ": n, sharpness of the branch transitions, n >= 1 (seed 001 eq. 3)"),
+                "", [Some(1.0), None]),
+            bouc_wen_parameter!($prefix, $model, "delta", delta,
+                concat!($who, ": delta, asymmetry coefficient, read rate-independently as delta·u·du/dt (seed 001 eq. 3)"),
+                "um/V2", [None, None]),
+        ]
+    };
+}
+
+/// Seed 001's feedforward and decoupling: the two selectors and the four
+/// Bouc-Wen models.
+const SEED_001: [Variable<PiezoControllerFmu>; 30] = fmi2_cosim::variables::concat(&[
+    &[
+        Variable::<PiezoControllerFmu>::integer_parameter(
+            "hysteresis_model",
+            "Feedforward model: 1 = seed 000's modified inverse P-I (eq. 3-5), 2 = seed 001's inverse Bouc-Wen (eq. 6)",
+            Variability::Fixed,
+            |m| m.selector_codes[0],
+            |m, v| m.selector_codes[0] = v,
+        )
+        .integer_range(Some(1), Some(2))
+        .model_path("hysteresis_model"),
+        Variable::<PiezoControllerFmu>::integer_parameter(
+            "decoupling_model",
+            "Decoupling law applied when decoupling is on: 1 = seed 000's piecewise-linear D1..D4 (eq. 11-12), 2 = seed 001's model-based H_XY, H_YX (eq. 7-16)",
+            Variability::Fixed,
+            |m| m.selector_codes[1],
+            |m, v| m.selector_codes[1] = v,
+        )
+        .integer_range(Some(1), Some(2))
+        .model_path("decoupling_model"),
+    ],
+    &bouc_wen_parameters!("bouc_wen.x", x, "H_XX, Bouc-Wen model of each x-pair channel (PZT2, PZT3) to x"),
+    &bouc_wen_parameters!("bouc_wen.y", y, "H_YY, Bouc-Wen model of PZT1's channel to y"),
+    &bouc_wen_parameters!("bouc_wen.x_from_y", x_from_y, "H_XY, coupling of PZT1's channel into x"),
+    &bouc_wen_parameters!("bouc_wen.y_from_x", y_from_x, "H_YX, coupling of the x pair's mean command into y"),
+]);
+
 /// Inputs and outputs: the names users wire.
 const PORTS: [Variable<PiezoControllerFmu>; 22] = [
     Variable::real_input(
@@ -288,19 +413,19 @@ const PORTS: [Variable<PiezoControllerFmu>; 22] = [
     ),
     output!(
         "u1_ff",
-        "Feedforward part of u1: the inverse P-I model of y (seed 000 eq. 3)",
+        "Feedforward part of u1: the inverse hysteresis model of y (seed 000 eq. 3 or seed 001 eq. 6)",
         "V",
         feedforward[0]
     ),
     output!(
         "u2_ff",
-        "Feedforward part of u2: the inverse P-I model of x at x_r2",
+        "Feedforward part of u2: the inverse hysteresis model of x at x_r2",
         "V",
         feedforward[1]
     ),
     output!(
         "u3_ff",
-        "Feedforward part of u3: the inverse P-I model of x at x_r3",
+        "Feedforward part of u3: the inverse hysteresis model of x at x_r3",
         "V",
         feedforward[2]
     ),
@@ -361,12 +486,12 @@ const PORTS: [Variable<PiezoControllerFmu>; 22] = [
 const SETTINGS: [Variable<PiezoControllerFmu>; 12] = [
     switch!(
         "feedforward",
-        "Apply the inverse P-I feedforward (seed 000 eq. 3)",
+        "Apply the inverse hysteresis feedforward (hysteresis_model selects it)",
         feedforward
     ),
     switch!(
         "decoupling",
-        "Apply the decoupling law to the inverse models' inputs (seed 000 eq. 11-12)",
+        "Apply the decoupling law (decoupling_model selects it) to the inverse models' inputs",
         decoupling
     ),
     switch!(
@@ -430,8 +555,14 @@ const DECOUPLING: [Variable<PiezoControllerFmu>; 16] = fmi2_cosim::variables::co
 ]);
 
 /// Every variable, in value-reference order.
-static VARIABLES: [Variable<PiezoControllerFmu>; 114] =
-    fmi2_cosim::variables::concat(&[&PORTS, &SETTINGS, &X_MODEL, &Y_MODEL, &DECOUPLING]);
+static VARIABLES: [Variable<PiezoControllerFmu>; 144] = fmi2_cosim::variables::concat(&[
+    &PORTS,
+    &SETTINGS,
+    &X_MODEL,
+    &Y_MODEL,
+    &DECOUPLING,
+    &SEED_001,
+]);
 
 /// The FMI name of the parameter the model calls `path` (its serde path).
 fn fmi_name(path: &str) -> Option<&'static str> {
@@ -446,7 +577,9 @@ impl CoSimModel for PiezoControllerFmu {
         model_identifier: "PiezoController",
         model_name: "PiezoController",
         description: "Controller of the 3-DOF piezo flexure stage: modified inverse \
-                      Prandtl-Ishlinskii feedforward, PI feedback and decoupling (seed 000)",
+                      Prandtl-Ishlinskii (seed 000) or inverse Bouc-Wen (seed 001) \
+                      feedforward, PI feedback, piecewise-linear (seed 000) or model-based \
+                      (seed 001) decoupling",
         author: "piezo-fmu project",
         version: env!("CARGO_PKG_VERSION"),
         license: "MIT OR Apache-2.0",
@@ -466,10 +599,15 @@ impl CoSimModel for PiezoControllerFmu {
         let params = ControllerParams::default();
         let controller = PiezoController::new(params.clone())
             .expect("the shipped preset validates (tested in piezo-models)");
+        let selector_codes = [
+            code_of(&HysteresisModel::CODES, params.hysteresis_model),
+            code_of(&DecouplingModel::CODES, params.decoupling_model),
+        ];
         PiezoControllerFmu {
             params,
             references: [0.0; 3],
             sensors: [0.0; 3],
+            selector_codes,
             controller,
             saturation_reported: [false; 3],
         }
@@ -480,6 +618,27 @@ impl CoSimModel for PiezoControllerFmu {
         ctx: &mut Context<'_>,
         _start_time: f64,
     ) -> Result<(), ModelError> {
+        let refused = |name: &str, code: i32, allowed: &str| {
+            ModelError(format!(
+                "parameter {name} = {code} is not allowed: {allowed}"
+            ))
+        };
+        self.params.hysteresis_model = selected(&HysteresisModel::CODES, self.selector_codes[0])
+            .ok_or_else(|| {
+                refused(
+                    "hysteresis_model",
+                    self.selector_codes[0],
+                    "1 (modified inverse P-I) or 2 (Bouc-Wen)",
+                )
+            })?;
+        self.params.decoupling_model = selected(&DecouplingModel::CODES, self.selector_codes[1])
+            .ok_or_else(|| {
+                refused(
+                    "decoupling_model",
+                    self.selector_codes[1],
+                    "1 (piecewise-linear) or 2 (model-based)",
+                )
+            })?;
         // The controller starts with empty integrators and de-energized
         // backlash memories (seed 000 eq. 1: zero initial state).
         self.controller = PiezoController::new(self.params.clone()).map_err(|e| {
@@ -491,9 +650,11 @@ impl CoSimModel for PiezoControllerFmu {
         })?;
         self.saturation_reported = [false; 3];
         ctx.event(format_args!(
-            "controller built from the parameters: feedforward {}, decoupling {}, feedback x/y/theta {}/{}/{}",
+            "controller built from the parameters: feedforward {} ({:?}), decoupling {} ({:?}), feedback x/y/theta {}/{}/{}",
             self.params.feedforward,
+            self.params.hysteresis_model,
             self.params.decoupling,
+            self.params.decoupling_model,
             self.params.feedback_x,
             self.params.feedback_y,
             self.params.feedback_theta

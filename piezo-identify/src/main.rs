@@ -649,6 +649,9 @@ fn stage(args: &StageArgs) -> Result<(), String> {
             fit.f, fit.rms_v, fit.max_v
         );
     }
+    for (name, rms) in &identified.bouc_wen_fits {
+        println!("{name} Bouc-Wen model on seed 001's 2 Hz sine: eq. (5) RMS {rms:.6} um");
+    }
     for (round, compensations) in identified.rounds.iter().enumerate() {
         println!("decoupling round {}:", round + 1);
         for (i, c) in compensations.iter().enumerate() {

@@ -17,6 +17,15 @@
 //!    what D3 leaves of the rotation run's y error, since y_r = y_d + D3 + D4
 //!    applies both.
 //!
+//! 4. Seed 001's models (§5.2-5.3): a 2 Hz sine from 0 to 10 V drives PZT1
+//!    and, separately, the x pair from rest (three periods at 10 kHz); the
+//!    asymmetric Bouc-Wen models H_YY, H_XX of the driven axes (with the
+//!    `monotone` option: the feedforward inverts them) and H_XY, H_YX of the
+//!    coupled displacements are fitted by GA-PSO and Levenberg-Marquardt
+//!    ([`crate::bouc_wen_fit`]), in command volts, with no offset (the plant
+//!    starts at rest at 0). They fill `bouc_wen` of the preset; the preset
+//!    keeps seed 000's feedforward and decoupling selected.
+//!
 //! Single-axis runs: home x = 8 µm, y = 7 µm, θ = 0; the reference moves from
 //! the origin to the start by a raised cosine over 0.5 s, holds 0.5 s, then a
 //! 1 Hz sine of 10 µm peak to peak about home starting at the bottom (θ:
@@ -25,14 +34,19 @@
 
 use std::f64::consts::PI;
 
-use piezo_models::{ControllerParams, DecouplingParams, InversePiParams, PiGains};
+use piezo_models::{
+    BoucWenModels, BoucWenParams, ControllerParams, DecouplingModel, DecouplingParams,
+    HysteresisModel, InversePiParams, PiGains,
+};
 use serde::Serialize;
 
+use crate::bouc_wen_fit::{BoucWenFitError, BoucWenFitOptions, identify_bouc_wen};
 use crate::decoupling::{
     Compensation, DecouplingError, NO_CUTOFF, decoupling_params, fit_compensation,
 };
 use crate::fit::{Fit, FitError, FitOptions, StartResult, fit_modified_inverse_pi_with_progress};
-use crate::plant::{PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record};
+use crate::gapso::GaPsoOptions;
+use crate::plant::{PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record, sine_records};
 
 pub const HOME: [f64; 3] = [8.0, 7.0, 0.0];
 pub const APPROACH_TIME: f64 = 0.5;
@@ -121,6 +135,63 @@ pub struct StageIdentification {
     pub y_fit: FitSummary,
     /// Compensations of each round.
     pub rounds: Vec<[Compensation; 4]>,
+    /// Seed 001's models: name and eq. (5) RMS of the refined fit [µm].
+    pub bouc_wen_fits: Vec<(String, f64)>,
+}
+
+/// Seed 001 §5.2's identification run on the plant: 2 Hz, 0 to 10 V.
+const BOUC_WEN_HZ: f64 = 2.0;
+const BOUC_WEN_PEAK: f64 = 10.0;
+const BOUC_WEN_PERIODS: f64 = 3.0;
+
+/// Step 4 (module comment): the four Bouc-Wen models in command volts.
+fn fit_bouc_wen_models(
+    plant: &PlantFmu,
+    progress: &dyn Fn(&str),
+) -> Result<(BoucWenModels, Vec<(String, f64)>), StageError> {
+    let mut fitted: Vec<(BoucWenParams, (String, f64))> = Vec::new();
+    for (axis, own, coupled) in [
+        (RecordAxis::X, "H_XX", "H_YX"),
+        (RecordAxis::Y, "H_YY", "H_XY"),
+    ] {
+        progress(&format!(
+            "seed 001 sine run and Bouc-Wen fits of {own} and {coupled}"
+        ));
+        let (driven, coupling) = sine_records(
+            plant,
+            axis,
+            BOUC_WEN_HZ,
+            BOUC_WEN_PEAK,
+            BOUC_WEN_PERIODS,
+            1.0 / SAMPLE_PERIOD,
+        )?;
+        for (name, record, monotone) in [(own, &driven, true), (coupled, &coupling, false)] {
+            let options = BoucWenFitOptions {
+                gapso: GaPsoOptions::default(),
+                decimation: 10,
+                warm_up_samples: 0,
+                fit_offset: false,
+                monotone,
+                ..BoucWenFitOptions::default()
+            };
+            let fit = identify_bouc_wen(&record.input, &record.output, &options, |_, _| {})
+                .map_err(|source| StageError::BoucWen {
+                    model: name,
+                    source,
+                })?;
+            fitted.push((fit.best().params, (name.to_owned(), fit.best().rms)));
+        }
+    }
+    let models = BoucWenModels {
+        x: fitted[0].0,
+        y_from_x: fitted[1].0,
+        y: fitted[2].0,
+        x_from_y: fitted[3].0,
+    };
+    Ok((
+        models,
+        fitted.into_iter().map(|(_, summary)| summary).collect(),
+    ))
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -151,6 +222,12 @@ pub enum StageError {
         axis: &'static str,
         #[source]
         source: FitError,
+    },
+    #[error("fitting the Bouc-Wen model {model}: {source}")]
+    BoucWen {
+        model: &'static str,
+        #[source]
+        source: BoucWenFitError,
     },
     #[error("fitting compensation D{index}: {source}")]
     Decoupling {
@@ -192,6 +269,7 @@ pub fn identify_stage(
         fits.push(fit);
     }
     let (x_fit, y_fit) = (fits.remove(0), fits.remove(0));
+    let (bouc_wen, bouc_wen_fits) = fit_bouc_wen_models(plant, progress)?;
     let mut controller = ControllerParams {
         feedforward: true,
         decoupling: false,
@@ -209,6 +287,9 @@ pub fn identify_stage(
             p: [NO_CUTOFF; 4],
             q: [-NO_CUTOFF; 4],
         },
+        hysteresis_model: HysteresisModel::ModifiedPi,
+        decoupling_model: DecouplingModel::PiecewiseLinear,
+        bouc_wen,
         command_min: 0.0,
         command_max,
     };
@@ -282,5 +363,6 @@ pub fn identify_stage(
         x_fit: FitSummary::of(&x_fit),
         y_fit: FitSummary::of(&y_fit),
         rounds: all_rounds,
+        bouc_wen_fits,
     })
 }

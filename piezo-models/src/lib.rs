@@ -36,6 +36,7 @@ pub use inverse_bouc_wen::{
 pub use inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 pub use oscillator::{ModeParams, ModeSet, Oscillator};
 pub use piezo_controller::{
-    ControllerOutput, ControllerParams, PiController, PiGains, PiezoController,
+    ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel, PiController, PiGains,
+    PiezoController,
 };
 pub use sensor_noise::{SensorNoise, SensorNoiseParams};

@@ -24,8 +24,10 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::bouc_wen::BoucWenParams;
 use crate::decoupling::{DecoupledReferences, DecouplingParams, decouple};
 use crate::flexure_stage::{FlexureStageParams, ParamError};
+use crate::inverse_bouc_wen::{BoucWenFeedforward, BoucWenModels, CouplingEstimator};
 use crate::inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 
 /// Proportional and integral gains of one axis [V/µm, V/(µm·s)].
@@ -60,6 +62,44 @@ impl PiController {
     }
 }
 
+/// Which inverse hysteresis model the feedforward uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HysteresisModel {
+    /// Seed 000's modified inverse Prandtl-Ishlinskii model (eq. 3-5).
+    ModifiedPi,
+    /// Seed 001's inverse asymmetric Bouc-Wen model (eq. 6).
+    BoucWen,
+}
+
+/// Which law corrects the references for the cross-axis coupling when
+/// `decoupling` is on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DecouplingModel {
+    /// Seed 000's piecewise-linear compensations D1..D4 (eq. 11-12).
+    PiecewiseLinear,
+    /// Seed 001's coupling models H_XY, H_YX run on the applied commands
+    /// (eq. 7-16).
+    ModelBased,
+}
+
+/// Integer codes of the two selectors, as the FMU's Integer parameters carry
+/// them (1-based, in the order above).
+impl HysteresisModel {
+    pub const CODES: [(i32, HysteresisModel); 2] = [
+        (1, HysteresisModel::ModifiedPi),
+        (2, HysteresisModel::BoucWen),
+    ];
+}
+
+impl DecouplingModel {
+    pub const CODES: [(i32, DecouplingModel); 2] = [
+        (1, DecouplingModel::PiecewiseLinear),
+        (2, DecouplingModel::ModelBased),
+    ];
+}
+
 /// Everything that defines the controller.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -80,6 +120,12 @@ pub struct ControllerParams {
     /// PZT1.
     pub y_model: InversePiParams,
     pub decoupling_params: DecouplingParams,
+    /// Feedforward model (fixed while running).
+    pub hysteresis_model: HysteresisModel,
+    /// Decoupling law (fixed while running; `decoupling` switches it).
+    pub decoupling_model: DecouplingModel,
+    /// Seed 001's four Bouc-Wen models, in command volts.
+    pub bouc_wen: BoucWenModels,
     /// Command range of every channel [V] (0..10 V: the actuators cannot retract).
     pub command_min: f64,
     pub command_max: f64,
@@ -102,6 +148,11 @@ impl ControllerParams {
             x_model: models.x,
             y_model: models.y,
             decoupling_params: DecouplingParams::paper(),
+            hysteresis_model: HysteresisModel::ModifiedPi,
+            decoupling_model: DecouplingModel::PiecewiseLinear,
+            // Seed 000 has no Bouc-Wen models; those identified on this
+            // project's plant stand in, so the seed 001 paths can be tried.
+            bouc_wen: ControllerParams::stage().bouc_wen,
             command_min: 0.0,
             command_max: 10.0,
         }
@@ -140,6 +191,14 @@ impl ControllerParams {
                 "> command_min (finite)",
             ));
         }
+        for (name, model) in [
+            ("bouc_wen.x", &self.bouc_wen.x),
+            ("bouc_wen.y", &self.bouc_wen.y),
+            ("bouc_wen.x_from_y", &self.bouc_wen.x_from_y),
+            ("bouc_wen.y_from_x", &self.bouc_wen.y_from_x),
+        ] {
+            validate_bouc_wen(name, model)?;
+        }
         self.x_model.validate("x_model")?;
         self.y_model.validate("y_model")?;
         let d = &self.decoupling_params;
@@ -156,6 +215,36 @@ impl ControllerParams {
         }
         Ok(())
     }
+}
+
+/// Finite parameters, n ≥ 1 (|h|^(n−1) at h = 0), and p ≠ 0 for the inverse
+/// of eq. (6) (checked for every model; the coupling models are only run
+/// forward, where p = 0 is fine, but p ≠ 0 costs nothing to ask).
+fn validate_bouc_wen(name: &str, model: &BoucWenParams) -> Result<(), ParamError> {
+    for (field, value) in [
+        ("p", model.p),
+        ("q", model.q),
+        ("a", model.a),
+        ("beta", model.beta),
+        ("gamma", model.gamma),
+        ("delta", model.delta),
+    ] {
+        if !value.is_finite() {
+            return Err(ParamError {
+                parameter: format!("{name}.{field}"),
+                value,
+                allowed: "finite".to_owned(),
+            });
+        }
+    }
+    if !(model.n.is_finite() && model.n >= 1.0) {
+        return Err(ParamError {
+            parameter: format!("{name}.n"),
+            value: model.n,
+            allowed: "n >= 1 (finite)".to_owned(),
+        });
+    }
+    Ok(())
 }
 
 /// The `stage` preset: seed 000's identification procedure run on the
@@ -204,6 +293,11 @@ pub struct PiezoController {
     params: ControllerParams,
     /// Inverse models of PZT1, PZT2, PZT3.
     models: [ModifiedInversePi; 3],
+    /// Seed 001's inverse models of PZT1, PZT2, PZT3 (run only when
+    /// selected: `hysteresis_model` is fixed while running).
+    bouc_wen: BoucWenFeedforward,
+    /// Seed 001's coupling models (run only with the model-based law).
+    coupling: CouplingEstimator,
     /// Previous inputs of the three models, for the rates of eq. (4).
     previous_references: Option<[f64; 3]>,
     pi_x: PiController,
@@ -221,6 +315,10 @@ const Y_DIRECTIONS: [f64; 3] = [1.0, 0.0, 0.0];
 const X_DIRECTIONS: [f64; 3] = [0.0, 1.0, 1.0];
 const THETA_DIRECTIONS: [f64; 3] = [0.0, 1.0, -1.0];
 
+/// Input substep of the Bouc-Wen models [V of command]: one RK4 step per
+/// sample at 10 kHz for any command the stage follows.
+const BOUC_WEN_MAX_DU: f64 = 0.01;
+
 impl PiezoController {
     pub fn new(params: ControllerParams) -> Result<Self, ParamError> {
         params.validate()?;
@@ -230,6 +328,8 @@ impl PiezoController {
                 ModifiedInversePi::new(params.x_model),
                 ModifiedInversePi::new(params.x_model),
             ],
+            bouc_wen: BoucWenFeedforward::new(&params.bouc_wen, BOUC_WEN_MAX_DU),
+            coupling: CouplingEstimator::new(&params.bouc_wen, BOUC_WEN_MAX_DU),
             params,
             previous_references: None,
             pi_x: PiController::default(),
@@ -263,6 +363,8 @@ impl PiezoController {
         for model in &mut self.models {
             model.reset();
         }
+        self.bouc_wen.reset();
+        self.coupling.reset();
         self.previous_references = None;
         self.pi_x.reset();
         self.pi_y.reset();
@@ -289,28 +391,54 @@ impl PiezoController {
         let half_spacing_um = 0.5 * p.sensor_spacing_mm * 1e3;
         let x_d2 = x_ref + theta_ref * half_spacing_um;
         let x_d3 = x_ref - theta_ref * half_spacing_um;
-        let (decoupled, references) = if p.decoupling {
-            let d = decouple(&p.decoupling_params, x_d2, x_d3, y_ref, p.sensor_spacing_mm);
-            (d, [d.y_r(y_ref), d.x_r2, d.x_r3])
-        } else {
-            let d = DecoupledReferences {
-                x_r2: x_d2,
-                x_r3: x_d3,
-                y_rx: y_ref,
-                y_rtheta: y_ref,
-            };
-            (d, [y_ref, x_d2, x_d3])
+        let (decoupled, references) = match (p.decoupling, p.decoupling_model) {
+            (true, DecouplingModel::PiecewiseLinear) => {
+                let d = decouple(&p.decoupling_params, x_d2, x_d3, y_ref, p.sensor_spacing_mm);
+                (d, [d.y_r(y_ref), d.x_r2, d.x_r3])
+            }
+            (true, DecouplingModel::ModelBased) => {
+                // Seed 001 eq. (9)-(16) as a correction of the references:
+                // subtract the coupled displacements H_XY[v_y], H_YX[v_x].
+                let estimate = self.coupling.estimate();
+                let y_r = y_ref - estimate.y_from_x;
+                let d = DecoupledReferences {
+                    x_r2: x_d2 - estimate.x_from_y,
+                    x_r3: x_d3 - estimate.x_from_y,
+                    y_rx: y_r,
+                    y_rtheta: y_ref,
+                };
+                (d, [y_r, d.x_r2, d.x_r3])
+            }
+            (false, _) => {
+                let d = DecoupledReferences {
+                    x_r2: x_d2,
+                    x_r3: x_d3,
+                    y_rx: y_ref,
+                    y_rtheta: y_ref,
+                };
+                (d, [y_ref, x_d2, x_d3])
+            }
         };
         let previous = self.previous_references.unwrap_or(references);
         self.previous_references = Some(references);
-        // The models always advance, so switching the feedforward on later
-        // starts from memories that followed the demand.
+        // The selected models always advance (the P-I memories here, the
+        // Bouc-Wen states after limiting below), so switching the
+        // feedforward on later starts from memories that followed the demand.
         let mut feedforward = [0.0; 3];
-        for (channel, model) in self.models.iter_mut().enumerate() {
-            let rate = (references[channel] - previous[channel]) / dt;
-            let u = model.evaluate(references[channel], rate);
-            if p.feedforward {
-                feedforward[channel] = u;
+        match p.hysteresis_model {
+            HysteresisModel::ModifiedPi => {
+                for (channel, model) in self.models.iter_mut().enumerate() {
+                    let rate = (references[channel] - previous[channel]) / dt;
+                    let u = model.evaluate(references[channel], rate);
+                    if p.feedforward {
+                        feedforward[channel] = u;
+                    }
+                }
+            }
+            HysteresisModel::BoucWen => {
+                if p.feedforward {
+                    feedforward = self.bouc_wen.commands(references);
+                }
             }
         }
 
@@ -353,8 +481,16 @@ impl PiezoController {
                 0
             }
         });
+        let u = raw.map(|u| u.clamp(lo, hi));
+        // Seed 001's models follow the commands actually applied.
+        if p.hysteresis_model == HysteresisModel::BoucWen {
+            self.bouc_wen.commit(u);
+        }
+        if p.decoupling_model == DecouplingModel::ModelBased {
+            self.coupling.commit(u);
+        }
         self.output = ControllerOutput {
-            u: raw.map(|u| u.clamp(lo, hi)),
+            u,
             feedforward,
             feedback,
             e_x,

@@ -214,3 +214,56 @@ fn the_stage_preset_is_an_identified_controller_and_the_default() {
         assert!(dk.abs() > 0.01, "D{} slope {dk}", i + 1);
     }
 }
+
+/// Seed 001's path inside the sampled controller: with `hysteresis_model`
+/// Bouc-Wen the feedforward is the exact inverse of eq. (6) of each channel
+/// (its model's output at the commands equals the references), and with the
+/// model-based law the references are the demands minus the coupling
+/// models' outputs at the commands applied so far.
+#[test]
+fn seed_001_feedforward_and_model_based_decoupling_follow_their_models() {
+    use piezo_models::{AsymmetricBoucWen, DecouplingModel, HysteresisModel};
+    let mut p = ControllerParams::stage();
+    p.feedback_x = false;
+    p.feedback_y = false;
+    p.feedback_theta = false;
+    p.decoupling = true;
+    p.hysteresis_model = HysteresisModel::BoucWen;
+    p.decoupling_model = DecouplingModel::ModelBased;
+    let half_l_um = 0.5 * p.sensor_spacing_mm * 1e3;
+    let mut controller = PiezoController::new(p.clone()).unwrap();
+    let mut forward = [p.bouc_wen.y, p.bouc_wen.x, p.bouc_wen.x].map(AsymmetricBoucWen::new);
+    let mut x_from_y = AsymmetricBoucWen::new(p.bouc_wen.x_from_y);
+    let mut y_from_x = AsymmetricBoucWen::new(p.bouc_wen.y_from_x);
+    for n in 0..5000 {
+        let t = n as f64 * DT;
+        let (x_ref, y_ref) = (6.0 + 2.0 * (7.0 * t).sin(), 6.0 + 5.0 * (3.0 * t).sin());
+        let theta_ref = 4e-5 * (5.0 * t).cos();
+        let out = controller.step(x_ref, y_ref, theta_ref, [0.0; 3], DT);
+        let references = [
+            y_ref - y_from_x.output(),
+            x_ref + theta_ref * half_l_um - x_from_y.output(),
+            x_ref - theta_ref * half_l_um - x_from_y.output(),
+        ];
+        assert!(
+            (out.decoupled.y_rx - references[0]).abs() < 1e-12,
+            "sample {n}"
+        );
+        assert!(
+            (out.decoupled.x_r2 - references[1]).abs() < 1e-12,
+            "sample {n}"
+        );
+        for c in 0..3 {
+            assert_eq!(out.u[c], out.feedforward[c], "no feedback, no limiting");
+            forward[c].advance_to(out.u[c], 0.01);
+            assert!(
+                (forward[c].output() - references[c]).abs() < 1e-9,
+                "channel {c}, sample {n}: {} vs {}",
+                forward[c].output(),
+                references[c]
+            );
+        }
+        x_from_y.advance_to(out.u[0], 0.01);
+        y_from_x.advance_to(0.5 * (out.u[1] + out.u[2]), 0.01);
+    }
+}

@@ -1,0 +1,85 @@
+"""Seed 001's paths of PiezoController through the FMU, beside FlexureStage:
+the inverse Bouc-Wen feedforward (hysteresis_model = 2) and the model-based
+decoupling (decoupling_model = 2), selected by Integer parameters, with the
+stage preset's Bouc-Wen models (identified on FlexureStage by
+`piezo-identify stage`).
+
+Seed 001 §5.3's experiment on seed 000's stage: y follows a 2 Hz sine of
+2 um amplitude by feedforward alone while x is held at its home (above 0 V:
+the actuators cannot retract, so a coupling can only be cancelled from a
+home), no feedback. The x displacement the y motion causes is the coupling.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from demo.cosim import Fmu, simulate
+from tests.conftest import REPO_ROOT
+
+PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
+CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
+HOME_X, HOME_Y = 8.0, 7.0
+
+
+def reference(t):
+    """Raised-cosine approach to the home over 0.5 s, hold, then from t = 1 s
+    the 2 Hz, 2 um sine on y."""
+    approach = np.where(t < 0.5, 0.5 * (1 - np.cos(np.pi * np.minimum(t, 0.5) / 0.5)), 1.0)
+    sine = np.where(t > 1.0, 2.0 * np.sin(2 * np.pi * 2.0 * (t - 1.0)), 0.0)
+    return np.column_stack((HOME_X * approach, HOME_Y * approach + sine, np.zeros_like(t)))
+
+
+def seed001_parameters(decoupling: bool) -> dict:
+    return {
+        "feedforward": True,
+        "feedback_x": False,
+        "feedback_y": False,
+        "feedback_theta": False,
+        "hysteresis_model": 2,
+        "decoupling_model": 2,
+        "decoupling": decoupling,
+    }
+
+
+@pytest.fixture(scope="module")
+def fmus():
+    for path in (PLANT, CONTROLLER):
+        if not path.is_file():
+            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
+    with Fmu(PLANT) as plant, Fmu(CONTROLLER) as controller:
+        yield plant, controller
+
+
+def coupling_and_tracking(run):
+    """x span and y RMS error over the last period (t >= 2 s)."""
+    last = run.t >= 2.0
+    x = 0.5 * (run["s2"] + run["s3"])[last]
+    y_error = (run["s1"] - run.references[:, 1])[last]
+    return float(np.ptp(x)), float(np.sqrt(np.mean(y_error**2)))
+
+
+def test_an_unknown_selector_code_is_refused_at_initialization(fmus):
+    _, controller = fmus
+    for name in ("hysteresis_model", "decoupling_model"):
+        with pytest.raises(Exception):
+            controller.instance("refused", {name: 3}).free()
+
+
+def test_model_based_decoupling_shrinks_the_coupling_seed_001_measured(fmus):
+    plant, controller = fmus
+    without = simulate(plant, controller, reference, 2.5, controller_parameters=seed001_parameters(False))
+    with_ = simulate(plant, controller, reference, 2.5, controller_parameters=seed001_parameters(True))
+    span_without, _ = coupling_and_tracking(without)
+    span_with, y_rms = coupling_and_tracking(with_)
+    reduction = 100 * (1 - span_with / span_without)
+    print(
+        f"x coupling span {span_without:.4f} um without, {span_with:.4f} um with model-based "
+        f"decoupling ({reduction:.1f} % less; seed 001 measured 73.2 %); y RMS {y_rms:.4f} um"
+    )
+    # Seed 001 reduced its coupling by 73 %; the issue asks for better.
+    assert reduction > 73.2
+    # Feedforward alone, identified models, seed 000's creeping stage: y
+    # follows its 4 um swing to a few per cent.
+    assert y_rms < 0.15
