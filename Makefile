@@ -53,6 +53,13 @@ fmus: system-deps
 	  $(RELEASE)/fmu-pack --description $(BUILD)/$$id --binary $(RELEASE)/$$lib \
 	    --platform linux64 --out $(DIST)/$$id.fmu; \
 	done
+	@# Parameter sets by FMI name, to load a preset into an FMU before
+	@# initialization (fmpy start_values, a Simulink mask, an SSP .ssv).
+	mkdir -p $(DIST)/presets
+	$(RELEASE)/flexure-stage-parameters seed000 $(DIST)/presets/FlexureStage.seed000.json
+	$(RELEASE)/flexure-stage-parameters xy200s $(DIST)/presets/FlexureStage.xy200s.json
+	$(RELEASE)/piezo-controller-parameters stage $(DIST)/presets/PiezoController.stage.json
+	$(RELEASE)/piezo-controller-parameters paper $(DIST)/presets/PiezoController.paper.json
 
 # Rewrites the committed modelDescription/*.xml after an interface change
 # (a test fails while they differ from a fresh generation).

@@ -371,6 +371,23 @@ impl Instance<'_> {
         }
     }
 
+    pub fn set_integer(&self, vrs: &[u32], values: &[i32]) -> sys::fmi2Status {
+        assert_eq!(vrs.len(), values.len());
+        unsafe {
+            self.b()
+                .fmi2SetInteger(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        }
+    }
+
+    pub fn set_boolean(&self, vrs: &[u32], values: &[bool]) -> sys::fmi2Status {
+        assert_eq!(vrs.len(), values.len());
+        let values: Vec<sys::fmi2Boolean> = values.iter().map(|b| i32::from(*b)).collect();
+        unsafe {
+            self.b()
+                .fmi2SetBoolean(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        }
+    }
+
     pub fn get_real(&self, vrs: &[u32]) -> (sys::fmi2Status, Vec<f64>) {
         let mut values = vec![f64::NAN; vrs.len()];
         let status = unsafe {

@@ -18,6 +18,7 @@ mod instance;
 pub mod logging;
 pub mod model;
 pub mod model_description;
+pub mod parameter_set;
 pub mod resources;
 pub mod status;
 pub mod units;

@@ -55,6 +55,23 @@ fn code_of<T: PartialEq + Copy>(codes: &[(i32, T)], value: T) -> i32 {
 }
 
 impl PiezoControllerFmu {
+    /// A model holding `params` as its parameter values (as if an importer
+    /// had set each of them), with an idle controller.
+    pub fn with_params(params: ControllerParams) -> Result<Self, piezo_models::ParamError> {
+        let controller = PiezoController::new(params.clone())?;
+        let selector_codes = [
+            code_of(&HysteresisModel::CODES, params.hysteresis_model),
+            code_of(&DecouplingModel::CODES, params.decoupling_model),
+        ];
+        Ok(PiezoControllerFmu {
+            params,
+            references: [0.0; 3],
+            sensors: [0.0; 3],
+            selector_codes,
+            controller,
+            saturation_reported: [false; 3],
+        })
+    }
     pub fn params(&self) -> &ControllerParams {
         &self.params
     }
@@ -596,21 +613,8 @@ impl CoSimModel for PiezoControllerFmu {
     }
 
     fn new() -> Self {
-        let params = ControllerParams::default();
-        let controller = PiezoController::new(params.clone())
-            .expect("the shipped preset validates (tested in piezo-models)");
-        let selector_codes = [
-            code_of(&HysteresisModel::CODES, params.hysteresis_model),
-            code_of(&DecouplingModel::CODES, params.decoupling_model),
-        ];
-        PiezoControllerFmu {
-            params,
-            references: [0.0; 3],
-            sensors: [0.0; 3],
-            selector_codes,
-            controller,
-            saturation_reported: [false; 3],
-        }
+        Self::with_params(ControllerParams::default())
+            .expect("the shipped preset validates (tested in piezo-models)")
     }
 
     fn exit_initialization_mode(

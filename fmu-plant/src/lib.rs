@@ -26,6 +26,17 @@ pub struct FlexureStageFmu {
 }
 
 impl FlexureStageFmu {
+    /// A model holding `params` as its parameter values (as if an importer
+    /// had set each of them), at rest.
+    pub fn with_params(params: FlexureStageParams) -> Result<Self, piezo_models::ParamError> {
+        let stage = FlexureStage::new(params.clone())?;
+        Ok(FlexureStageFmu {
+            params,
+            commands: [0.0; 3],
+            stage,
+            clip_reported: [false; 3],
+        })
+    }
     pub fn params(&self) -> &FlexureStageParams {
         &self.params
     }
@@ -427,15 +438,8 @@ impl CoSimModel for FlexureStageFmu {
     }
 
     fn new() -> Self {
-        let params = FlexureStageParams::default();
-        let stage = FlexureStage::new(params.clone())
-            .expect("the shipped preset validates (tested in piezo-models)");
-        FlexureStageFmu {
-            params,
-            commands: [0.0; 3],
-            stage,
-            clip_reported: [false; 3],
-        }
+        Self::with_params(FlexureStageParams::default())
+            .expect("the shipped preset validates (tested in piezo-models)")
     }
 
     fn exit_initialization_mode(

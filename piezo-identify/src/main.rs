@@ -20,7 +20,7 @@ use piezo_identify::compare::{
 use piezo_identify::decoupling::fit_compensation;
 use piezo_identify::fit::{FitQuality, score};
 use piezo_identify::gapso::{Bounds, GaPsoOptions};
-use piezo_identify::plant::{PlantFmu, RecordAxis, sine_records};
+use piezo_identify::plant::{PlantFmu, RecordAxis, read_parameter_set, sine_records};
 use piezo_identify::stage::identify_stage;
 use piezo_identify::validation::{
     ErrorReport, ScaleReference, centred_moving_average, displacement_offset, shifted,
@@ -91,6 +91,9 @@ struct BoucWenArgs {
     /// file: a sine from 0 V to --peak at --frequency on one axis.
     #[arg(long)]
     plant: Option<PathBuf>,
+    /// Parameter set the plant is loaded with (JSON by FMI name).
+    #[arg(long, requires = "plant")]
+    plant_parameters: Option<PathBuf>,
     /// Axis the plant run drives: y (u1) or x (u2 = u3).
     #[arg(long, default_value = "y", value_parser = ["x", "y"])]
     drive: String,
@@ -163,6 +166,10 @@ struct StageArgs {
     /// outputs s1..s3 [um], parameter L [mm]).
     #[arg(long, default_value = "dist/FlexureStage.fmu")]
     plant: PathBuf,
+    /// Parameter set the plant is loaded with (JSON by FMI name, as
+    /// `flexure-stage-parameters xy200s` writes); default its start values.
+    #[arg(long)]
+    plant_parameters: Option<PathBuf>,
     #[command(flatten)]
     search: SearchArgs,
     /// Rounds of decoupling runs: the second refits what the first leaves.
@@ -627,7 +634,7 @@ fn compare(args: &CompareArgs) -> Result<(), String> {
 const STAGE_DECIMATION: usize = 20;
 
 fn stage(args: &StageArgs) -> Result<(), String> {
-    let plant = PlantFmu::open(&args.plant).map_err(|e| e.to_string())?;
+    let plant = open_plant(&args.plant, args.plant_parameters.as_deref())?;
     let options = args
         .search
         .options(piezo_identify::stage::SAMPLE_PERIOD, STAGE_DECIMATION);
@@ -748,7 +755,7 @@ fn parse_shape_bounds(text: &str, bounds: &mut Bounds) -> Result<(), String> {
 /// the record, its name and the default (decimation, warm-up seconds).
 fn bouc_wen_record(args: &BoucWenArgs) -> Result<(Record, String, usize, f64), String> {
     if let Some(path) = &args.plant {
-        let plant = PlantFmu::open(path).map_err(|e| e.to_string())?;
+        let plant = open_plant(path, args.plant_parameters.as_deref())?;
         let axis = if args.drive == "x" {
             RecordAxis::X
         } else {
@@ -949,4 +956,15 @@ fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), String> {
         println!("conversion report written to {}", report.display());
     }
     Ok(())
+}
+
+/// Opens a plant FMU, loaded with the parameter set at `parameters` if given.
+fn open_plant(path: &Path, parameters: Option<&Path>) -> Result<PlantFmu, String> {
+    let plant = PlantFmu::open(path).map_err(|e| e.to_string())?;
+    match parameters {
+        Some(set) => plant
+            .with_parameters(&read_parameter_set(set)?)
+            .map_err(|e| e.to_string()),
+        None => Ok(plant),
+    }
 }

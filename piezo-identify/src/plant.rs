@@ -40,6 +40,50 @@ pub struct PlantFmu {
     _unpacked: tempfile::TempDir,
     u: [u32; 3],
     s: [u32; 3],
+    /// Parameter values set in initialization mode of every session (a
+    /// preset; e.g. from `flexure-stage-parameters xy200s`).
+    parameters: Vec<(String, u32, TypedValue)>,
+}
+
+/// A parameter value as a parameter-set JSON holds it (the variable's own
+/// type decides Real or Integer).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParameterValue {
+    Number(f64),
+    Boolean(bool),
+}
+
+/// A value ready for the setter of its variable's type.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum TypedValue {
+    Real(f64),
+    Integer(i32),
+    Boolean(bool),
+}
+
+/// Reads a parameter set `{ "<FMI name>": value, ... }` (the format
+/// `flexure-stage-parameters` writes).
+pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let map: serde_json::Map<String, serde_json::Value> = serde_json::from_str(&text)
+        .map_err(|e| format!("{}:{}:{}: {e}", path.display(), e.line(), e.column()))?;
+    map.into_iter()
+        .map(|(name, value)| {
+            let value = match value {
+                serde_json::Value::Bool(b) => ParameterValue::Boolean(b),
+                serde_json::Value::Number(n) => {
+                    ParameterValue::Number(n.as_f64().expect("serde_json numbers convert to f64"))
+                }
+                other => {
+                    return Err(format!(
+                        "{}: parameter {name}: {other} is neither a number nor a Boolean",
+                        path.display()
+                    ));
+                }
+            };
+            Ok((name, value))
+        })
+        .collect()
 }
 
 fn platform_folder() -> &'static str {
@@ -106,12 +150,56 @@ impl PlantFmu {
             _unpacked: unpacked,
             u,
             s,
+            parameters: Vec::new(),
         })
     }
 
-    /// The value of a parameter's start attribute, e.g. `L`.
+    /// Every session will set these parameters (FMI name, value) before
+    /// initialization. Refuses a name the plant does not have or a value of
+    /// another type than the variable's.
+    pub fn with_parameters(
+        mut self,
+        parameters: &[(String, ParameterValue)],
+    ) -> Result<PlantFmu, PlantError> {
+        for (name, value) in parameters {
+            let problem = |problem: String| PlantError::Interface {
+                path: self.path.clone(),
+                problem,
+            };
+            let variable = self
+                .fmu
+                .find(name)
+                .ok_or_else(|| problem(format!("no parameter {name}")))?;
+            let typed = match (variable.kind, value) {
+                ("Real", ParameterValue::Number(v)) => TypedValue::Real(*v),
+                ("Integer", ParameterValue::Number(v))
+                    if v.fract() == 0.0 && v.abs() <= f64::from(i32::MAX) =>
+                {
+                    TypedValue::Integer(*v as i32)
+                }
+                ("Boolean", ParameterValue::Boolean(v)) => TypedValue::Boolean(*v),
+                (kind, value) => {
+                    return Err(problem(format!(
+                        "{name} is a {kind} variable; the parameter set gives {value:?}"
+                    )));
+                }
+            };
+            self.parameters.push((name.clone(), variable.vr, typed));
+        }
+        Ok(self)
+    }
+
+    /// The value a Real parameter has in every session, e.g. `L`: the one
+    /// set by [`with_parameters`](Self::with_parameters), else its start
+    /// attribute.
     pub fn start(&self, name: &str) -> Option<f64> {
-        self.fmu.find(name).and_then(|v| v.start)
+        self.parameters
+            .iter()
+            .find_map(|(n, _, value)| match value {
+                TypedValue::Real(v) if n == name => Some(*v),
+                _ => None,
+            })
+            .or_else(|| self.fmu.find(name).and_then(|v| v.start))
     }
 
     /// A fresh instance at rest, initialized at t = 0 with its start values.
@@ -137,6 +225,20 @@ impl PlantFmu {
         session.check("fmi2SetupExperiment", status)?;
         let status = session.instance.enter_init();
         session.check("fmi2EnterInitializationMode", status)?;
+        for (_, vr, value) in &self.parameters {
+            let (call, status) = match value {
+                TypedValue::Real(v) => ("fmi2SetReal", session.instance.set_real(&[*vr], &[*v])),
+                TypedValue::Integer(v) => (
+                    "fmi2SetInteger",
+                    session.instance.set_integer(&[*vr], &[*v]),
+                ),
+                TypedValue::Boolean(v) => (
+                    "fmi2SetBoolean",
+                    session.instance.set_boolean(&[*vr], &[*v]),
+                ),
+            };
+            session.check(call, status)?;
+        }
         let status = session.instance.exit_init();
         session.check("fmi2ExitInitializationMode", status)?;
         Ok(session)
