@@ -20,7 +20,7 @@ PLANT := FlexureStage:fmu-plant:flexure-stage-describe:libfmu_plant.so
 CONTROLLER := PiezoController:fmu-controller:piezo-controller-describe:libfmu_controller.so
 FMU_SPECS := $(PLANT) $(CONTROLLER)
 
-.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset xy200s-preset identify system-deps venv clean
+.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset xy200s-preset xy200s-controller-preset identify system-deps venv clean
 
 all: fmus
 
@@ -60,6 +60,8 @@ fmus: system-deps
 	$(RELEASE)/flexure-stage-parameters xy200s $(DIST)/presets/FlexureStage.xy200s.json
 	$(RELEASE)/piezo-controller-parameters stage $(DIST)/presets/PiezoController.stage.json
 	$(RELEASE)/piezo-controller-parameters paper $(DIST)/presets/PiezoController.paper.json
+	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_xy200s.json \
+	  $(DIST)/presets/PiezoController.xy200s.json
 
 # Rewrites the committed modelDescription/*.xml after an interface change
 # (a test fails while they differ from a fresh generation).
@@ -101,6 +103,19 @@ stage-preset: fmus
 	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu --rounds 3 \
 	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
+
+# PiezoController identified on the XY200S preset of FlexureStage, by the same
+# procedure as the stage preset, about a home at the same fraction of the
+# strokes (90, 85 um) and with the PI gains scaled by the inverse of the
+# XY200S's um per volt relative to seed 000's stage (x 12 %, y 11 %: 0.085).
+xy200s-controller-preset: fmus
+	$(CARGO) build --release --locked -p piezo-identify
+	mkdir -p out/stage
+	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu \
+	  --plant-parameters $(DIST)/presets/FlexureStage.xy200s.json --home 90,85 --gain-scale 0.085 \
+	  --rounds 3 --out piezo-models/presets/piezo_controller_xy200s.json \
+	  --report out/stage/xy200s_identification.json
+	$(MAKE) fmus
 
 # Seed 001's XY200S stage as a FlexureStage parameter set, converted from the
 # printed Tables 1-2 (piezo-identify/src/xy200s.rs says how); a test fails

@@ -31,8 +31,10 @@ them):
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -202,38 +204,81 @@ def experiments() -> list[Experiment]:
     return runs
 
 
+# The stages seed 001's experiments run on: FlexureStage as it starts, and
+# its XY200S parameter set with the controller identified on it (both sets
+# written by `make fmus` from the Rust tables). The XY200S home sits at the
+# same fraction of its strokes as seed 000's (piezo-identify's --home).
+S001_STAGES = {
+    "flexure": {"home": HOME, "plant": None, "controller": None},
+    "xy200s": {
+        "home": (90.0, 85.0, 0.0),
+        "plant": "FlexureStage.xy200s.json",
+        "controller": "PiezoController.xy200s.json",
+    },
+}
+
+
+def preset(name: str | None) -> dict:
+    """A parameter set of dist/presets by file name (empty for None)."""
+    if name is None:
+        return {}
+    path = Path(__file__).resolve().parent.parent / "dist" / "presets" / name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: run `make fmus` first")
+    return json.loads(path.read_text())
+
+
+def s001_key(stage: str, method: str, rest: str) -> str:
+    prefix = "s001" if stage == "flexure" else f"s001_{stage}"
+    return f"{prefix}_{method}_{rest}"
+
+
 def seed001_experiments() -> list[Experiment]:
-    """Seed 001 §5.2-5.3 on FlexureStage, by both methods: feedforward only
-    (no feedback, as seed 001), 2 Hz sines about the single-axis home; for
-    the linearity runs the other axis is demanded at 0 (seed 001: 0 V), for
-    the coupling runs it is held at its home (where a coupling can be
-    cancelled)."""
+    """Seed 001 §5.2-5.3 on both stages, by both methods: feedforward only
+    (no feedback, as seed 001), 2 Hz sines about the stage's single-axis
+    home; for the linearity runs the other axis is demanded at 0 (seed 001:
+    0 V), for the coupling runs it is held at its home (where a coupling can
+    be cancelled)."""
     runs = []
-    for method, selectors in METHODS.items():
-        for axis in ("x", "y"):
-            amplitude = S001_LINEARITY_UM[axis]
-            centre = HOME[0] if axis == "x" else HOME[1]
-            # Seed 001 §5.2 holds the other axis at 0 V: its demand is 0 here,
-            # so no coupling offsets the linearity.
+    for stage, setup in S001_STAGES.items():
+        home = setup["home"]
+        plant = {**preset(setup["plant"]), **PLANT_PARAMETERS}
+        base = preset(setup["controller"])
+
+        def path(axis, amplitude, other_at_zero, home=home):
             other = "y" if axis == "x" else "x"
-            path = pose(**{axis: sine_up_from_bottom(amplitude, S001_HZ, centre),
-                           other: np.zeros_like})
-            runs.append(Experiment(
-                f"s001_{method}_linearity_{axis}",
-                f"{axis} 2 Hz sine of {amplitude} um, feedforward only ({method}'s method)",
-                "seed 001 §5.2", path, 2.0, 1.0,
-                {**NO_FEEDBACK, **selectors, "decoupling": False}, axis))
-        for axis in ("y", "x"):
-            centre = HOME[0] if axis == "x" else HOME[1]
-            path = pose(**{axis: sine_up_from_bottom(S001_COUPLING_UM, S001_HZ, centre)})
-            for decoupling in (False, True):
-                tag = "decoupled" if decoupling else "coupled"
+            index = {"x": 0, "y": 1}
+
+            def columns(tau):
+                cols = [np.full(len(tau), home[0]), np.full(len(tau), home[1]),
+                        np.zeros(len(tau))]
+                cols[index[axis]] = sine_up_from_bottom(amplitude, S001_HZ, home[index[axis]])(tau)
+                if other_at_zero:
+                    cols[index[other]] = np.zeros(len(tau))
+                return np.column_stack(cols)
+
+            return columns
+
+        for method, selectors in METHODS.items():
+            for axis in ("x", "y"):
+                amplitude = S001_LINEARITY_UM[axis]
                 runs.append(Experiment(
-                    f"s001_{method}_coupling_{axis}_{tag}",
-                    f"{axis} 2 Hz sine of 2 um, other axis held, feedforward only"
-                    f"{' + decoupling' if decoupling else ''} ({method}'s method)",
-                    "seed 001 §5.3", path, 2.0, 1.0,
-                    {**NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis))
+                    s001_key(stage, method, f"linearity_{axis}"),
+                    f"{axis} 2 Hz sine of {amplitude} um, feedforward only ({method}'s method, "
+                    f"{stage})",
+                    "seed 001 §5.2", path(axis, amplitude, True), 2.0, 1.0,
+                    {**base, **NO_FEEDBACK, **selectors, "decoupling": False}, axis,
+                    plant=plant))
+            for axis in ("y", "x"):
+                for decoupling in (False, True):
+                    tag = "decoupled" if decoupling else "coupled"
+                    runs.append(Experiment(
+                        s001_key(stage, method, f"coupling_{axis}_{tag}"),
+                        f"{axis} 2 Hz sine of 2 um, other axis held, feedforward only"
+                        f"{' + decoupling' if decoupling else ''} ({method}'s method, {stage})",
+                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), 2.0, 1.0,
+                        {**base, **NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis,
+                        plant=plant))
     return runs
 
 

@@ -67,6 +67,18 @@ pub fn default_shape_bounds() -> Bounds {
     }
 }
 
+/// A box ten times [`default_shape_bounds`] in β̃, γ̃ and δ̃, and n up to
+/// 5: for loops far from a plain piezo's, such as those the printed models
+/// of seed 001 draw (their conversion reaches β̃ ≈ 51 and n ≈ 2.8) and the
+/// XY200S actuators built from them. GA-PSO then needs more generations to
+/// search it as finely.
+pub fn wide_shape_bounds() -> Bounds {
+    Bounds {
+        lower: vec![0.0, -100.0, MIN_EXPONENT, -20.0],
+        upper: vec![100.0, 100.0, 5.0, 20.0],
+    }
+}
+
 /// Settings of [`identify_bouc_wen`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BoucWenFitOptions {

@@ -21,7 +21,7 @@ use piezo_identify::decoupling::fit_compensation;
 use piezo_identify::fit::{FitQuality, score};
 use piezo_identify::gapso::{Bounds, GaPsoOptions};
 use piezo_identify::plant::{PlantFmu, RecordAxis, read_parameter_set, sine_records};
-use piezo_identify::stage::identify_stage;
+use piezo_identify::stage::{StageConditions, identify_stage};
 use piezo_identify::validation::{
     ErrorReport, ScaleReference, centred_moving_average, displacement_offset, shifted,
 };
@@ -172,6 +172,13 @@ struct StageArgs {
     plant_parameters: Option<PathBuf>,
     #[command(flatten)]
     search: SearchArgs,
+    /// Home of the single-axis runs, "X,Y" in um (seed 000's stage: 8,7).
+    #[arg(long, default_value = "8,7")]
+    home: String,
+    /// Factor on the §3.2 PI gains for the single-axis runs (1 for seed
+    /// 000's stage; the inverse of the stage's um per volt relative to it).
+    #[arg(long, default_value_t = 1.0)]
+    gain_scale: f64,
     /// Rounds of decoupling runs: the second refits what the first leaves.
     #[arg(long, default_value_t = 2)]
     rounds: usize,
@@ -647,7 +654,24 @@ fn stage(args: &StageArgs) -> Result<(), String> {
         }
     };
     let tick = |_: usize| bar.inc(1);
-    let identified = identify_stage(&plant, &options, args.rounds, &step, &tick)
+    let home: Vec<f64> = args
+        .home
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .filter(|v| v.len() == 2)
+        .ok_or_else(|| format!("--home {}: give X,Y in um, e.g. 8,7", args.home))?;
+    if !(args.gain_scale.is_finite() && args.gain_scale > 0.0) {
+        return Err(format!(
+            "--gain-scale {}: give a positive factor",
+            args.gain_scale
+        ));
+    }
+    let conditions = StageConditions {
+        home: [home[0], home[1], 0.0],
+        gain_scale: args.gain_scale,
+    };
+    let identified = identify_stage(&plant, &options, args.rounds, &conditions, &step, &tick)
         .map_err(|e| format!("{}: {e}", args.plant.display()))?;
     bar.finish_and_clear();
     for (name, fit) in [("x", &identified.x_fit), ("y", &identified.y_fit)] {

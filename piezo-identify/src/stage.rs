@@ -40,7 +40,9 @@ use piezo_models::{
 };
 use serde::Serialize;
 
-use crate::bouc_wen_fit::{BoucWenFitError, BoucWenFitOptions, identify_bouc_wen};
+use crate::bouc_wen_fit::{
+    BoucWenFitError, BoucWenFitOptions, identify_bouc_wen, wide_shape_bounds,
+};
 use crate::decoupling::{
     Compensation, DecouplingError, NO_CUTOFF, decoupling_params, fit_compensation,
 };
@@ -70,11 +72,41 @@ pub enum DrivenAxis {
     Theta,
 }
 
-/// The reference of a single-axis run at time `t` (x [µm], y [µm], θ [rad]).
+/// Where and how hard the single-axis runs drive a stage: the defaults are
+/// seed 000's (home x 8 µm, y 7 µm on its 12 µm strokes; the §3.2 PI gains).
+/// Another stage needs its own: a home where its actuators sit well above
+/// 0 V, and PI gains scaled by the inverse of its gain in µm per command
+/// volt relative to seed 000's stage, which keeps the loop gain that
+/// Ziegler-Nichols gave seed 000 (seed 001's XY200S moves 12x further per
+/// volt, and the §3.2 gains make its loops unstable).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct StageConditions {
+    /// x [µm], y [µm], θ [rad].
+    pub home: [f64; 3],
+    /// Factor on both PI gain pairs of §3.2.
+    pub gain_scale: f64,
+}
+
+impl Default for StageConditions {
+    fn default() -> Self {
+        StageConditions {
+            home: HOME,
+            gain_scale: 1.0,
+        }
+    }
+}
+
+/// The reference of a single-axis run at time `t` (x [µm], y [µm], θ [rad])
+/// about seed 000's home.
 pub fn single_axis_reference(axis: DrivenAxis, t: f64) -> [f64; 3] {
+    single_axis_reference_about(axis, HOME, t)
+}
+
+/// The reference of a single-axis run about `home`.
+pub fn single_axis_reference_about(axis: DrivenAxis, home: [f64; 3], t: f64) -> [f64; 3] {
     let start = APPROACH_TIME + SETTLE_TIME;
     let path = |tau: f64| {
-        let mut pose = HOME;
+        let mut pose = home;
         let phase = 2.0 * PI * SINE_HZ * tau;
         match axis {
             DrivenAxis::Y => pose[1] += SINE_AMPLITUDE_UM * (phase - PI / 2.0).sin(),
@@ -166,9 +198,15 @@ fn fit_bouc_wen_models(
             1.0 / SAMPLE_PERIOD,
         )?;
         for (name, record, monotone) in [(own, &driven, true), (coupled, &coupling, false)] {
+            // The wide box: a stage's loops need not look like seed 000's
+            // (the XY200S's, converted from seed 001's printed models, lie
+            // outside the default box).
             let options = BoucWenFitOptions {
                 gapso: GaPsoOptions::default(),
-                decimation: 10,
+                bounds: wide_shape_bounds(),
+                // The monotone check must hold on every sample, which a
+                // search on a decimated record does not see.
+                decimation: if monotone { 1 } else { 10 },
                 warm_up_samples: 0,
                 fit_offset: false,
                 monotone,
@@ -244,6 +282,7 @@ pub fn identify_stage(
     plant: &PlantFmu,
     options: &FitOptions,
     rounds: usize,
+    conditions: &StageConditions,
     progress: &dyn Fn(&str),
     fit_progress: &(dyn Fn(usize) + Sync),
 ) -> Result<StageIdentification, StageError> {
@@ -276,8 +315,14 @@ pub fn identify_stage(
         feedback_x: true,
         feedback_y: true,
         feedback_theta: true,
-        translation_gains: PiGains { kp: 0.05, ki: 50.0 },
-        rotation_gains: PiGains { kp: 0.06, ki: 70.0 },
+        translation_gains: PiGains {
+            kp: 0.05 * conditions.gain_scale,
+            ki: 50.0 * conditions.gain_scale,
+        },
+        rotation_gains: PiGains {
+            kp: 0.06 * conditions.gain_scale,
+            ki: 70.0 * conditions.gain_scale,
+        },
         sensor_spacing_mm: spacing_mm,
         x_model: x_fit.params,
         y_model: y_fit.params,
@@ -321,7 +366,7 @@ pub fn identify_stage(
             let run = closed_loop(
                 plant,
                 &run_params,
-                |t| single_axis_reference(axis, t),
+                |t| single_axis_reference_about(axis, conditions.home, t),
                 APPROACH_TIME + SETTLE_TIME + RUN_TIME,
                 SAMPLE_PERIOD,
                 PREVIEW,
@@ -350,7 +395,7 @@ pub fn identify_stage(
         // coupling of the x pair at home, which D3 already compensates: D4
         // gets what D3 leaves of it (otherwise the offset is compensated
         // twice).
-        let x_home_share = d3.eval(HOME[0]) - applied_eval(2, HOME[0]);
+        let x_home_share = d3.eval(conditions.home[0]) - applied_eval(2, conditions.home[0]);
         let theta_target: Vec<f64> = pairs[3].1.iter().map(|e| e - x_home_share).collect();
         let d4 = fit(3, &theta_target, &pairs[3].0)?;
         let fitted = [d1, d2, d3, d4];

@@ -48,8 +48,10 @@
 use piezo_models::{BoucWenParams, FlexureStageParams};
 use serde::{Deserialize, Serialize};
 
-use crate::bouc_wen_fit::{BoucWenFitError, BoucWenFitOptions, identify_bouc_wen, predict};
-use crate::gapso::{Bounds, GaPsoOptions};
+use crate::bouc_wen_fit::{
+    BoucWenFitError, BoucWenFitOptions, identify_bouc_wen, predict, wide_shape_bounds,
+};
+use crate::gapso::GaPsoOptions;
 
 /// Seed 001 Table 1, H_XX, as printed (u in V, y in mm, eq. 3 in time).
 pub const PRINTED_H_XX: BoucWenParams = BoucWenParams {
@@ -241,9 +243,8 @@ fn scaled_output(params: BoucWenParams, factor: f64) -> BoucWenParams {
 /// Settings of the conversion fits: GA-PSO on every 20th sample (500 Hz,
 /// 250 samples per period), no sensor offset (the printed models start at
 /// rest at 0), every sample scored (the rise from rest is part of the plant),
-/// and a search box ten times the default's in β̃, γ̃, δ̃ and up to n = 5: the
-/// printed shapes are far from the loops the default box is made for (the
-/// coupling fits reach β̃ ≈ 51 and n ≈ 2.8 in it).
+/// and the wide search box: the printed shapes are far from the loops the
+/// default box is made for.
 pub fn conversion_options() -> BoucWenFitOptions {
     BoucWenFitOptions {
         gapso: GaPsoOptions::default(),
@@ -254,10 +255,7 @@ pub fn conversion_options() -> BoucWenFitOptions {
         // branch: the printed H_XX, fitted freely, turns back near 0 V,
         // which no inverse feedforward can follow.
         monotone: true,
-        bounds: Bounds {
-            lower: vec![0.0, -100.0, 1.0, -20.0],
-            upper: vec![100.0, 100.0, 5.0, 20.0],
-        },
+        bounds: wide_shape_bounds(),
         ..BoucWenFitOptions::default()
     }
 }
