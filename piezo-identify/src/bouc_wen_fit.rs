@@ -129,6 +129,9 @@ pub struct BoucWenModelFit {
     pub rms: f64,
     /// Largest |error| there [output units].
     pub max_error: f64,
+    /// Signed extremes of the error (model − measurement) there [output
+    /// units]: seed 001 §5.2 reports its fits this way.
+    pub error_range: (f64, f64),
 }
 
 /// GA-PSO's fit and its refinement.
@@ -185,6 +188,7 @@ pub enum BoucWenFitError {
 }
 
 /// A record in the scaled units of the module comment.
+#[derive(Clone)]
 struct ScaledRecord {
     input: Vec<f64>,
     output: Vec<f64>,
@@ -503,19 +507,31 @@ fn model_fit(record: &ScaledRecord, shape: &[f64], scales: Scales) -> Option<Bou
     let (coefficients, residuals) = record.project(shape)?;
     let (params, offset) = physical(shape, coefficients, scales);
     let max_error = residuals.iter().fold(0.0_f64, |m, r| m.max(r.abs()));
+    let low = residuals.iter().copied().fold(f64::INFINITY, f64::min);
+    let high = residuals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     Some(BoucWenModelFit {
         params,
         offset,
         rms: root_mean_square(&residuals) * scales.output,
         max_error: max_error * scales.output,
+        error_range: (low * scales.output, high * scales.output),
     })
 }
 
 /// Levenberg-Marquardt on the projected residual from `start`; returns the
 /// shape and the residual evaluations spent.
 fn refine(record: &ScaledRecord, start: &[f64]) -> (Vec<f64>, usize) {
+    // LM needs a residual at every trial point: a trial that breaks the
+    // monotone condition (a forward difference across its edge, say) would
+    // stop it at once. It therefore minimises the unconstrained residual and
+    // the result is checked against `record`'s own conditions below (the
+    // caller keeps GA-PSO's fit if it fails them).
+    let unconstrained = ScaledRecord {
+        monotone: false,
+        ..record.clone()
+    };
     let problem = ProjectedResidual {
-        record,
+        record: &unconstrained,
         shape: LmVector::from_column_slice(start),
         evaluations: std::cell::Cell::new(0),
     };

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use piezo_identify::bouc_wen_fit::{
     BoucWenFitOptions, BoucWenModelFit, PredictionError, SHAPE_PARAMETERS, default_shape_bounds,
-    identify_bouc_wen, predict, prediction_error,
+    identify_bouc_wen, predict, prediction_error, wide_shape_bounds,
 };
 use piezo_identify::compare::{
     IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE, compare_inverse_models, synthetic_plant_record,
@@ -151,6 +151,11 @@ struct BoucWenArgs {
     /// (u scaled by max|u|, y by its span, A = 1; any subset).
     #[arg(long)]
     bounds: Option<String>,
+    /// Start from the wide box (ten times the default in beta, gamma, delta;
+    /// n up to 5) before --bounds: for loops unlike a plain piezo's, such as
+    /// the XY200S's.
+    #[arg(long)]
+    wide_bounds: bool,
     /// Write the fitted parameters (piezo_models::BoucWenParams) as JSON.
     #[arg(long)]
     out: Option<PathBuf>,
@@ -828,8 +833,8 @@ fn bouc_wen_record(args: &BoucWenArgs) -> Result<(Record, String, usize, f64), S
 fn print_bouc_wen_fit(name: &str, fit: &BoucWenModelFit) {
     let p = &fit.params;
     println!(
-        "  {name:<8} eq. (5) RMS {:.6} um, max |error| {:.6} um; offset {:.6} um",
-        fit.rms, fit.max_error, fit.offset
+        "  {name:<8} eq. (5) RMS {:.6} um, max |error| {:.6} um, error range {:+.4}..{:+.4} um; offset {:.6} um",
+        fit.rms, fit.max_error, fit.error_range.0, fit.error_range.1, fit.offset
     );
     println!(
         "           p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}",
@@ -849,7 +854,11 @@ fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
     let dt = record.sample_period;
     let warm_up_seconds = args.warm_up.unwrap_or(default_warm_up);
     let warm_up_samples = (warm_up_seconds / dt).round() as usize;
-    let mut bounds = default_shape_bounds();
+    let mut bounds = if args.wide_bounds {
+        wide_shape_bounds()
+    } else {
+        default_shape_bounds()
+    };
     if let Some(text) = &args.bounds {
         parse_shape_bounds(text, &mut bounds)?;
     }
