@@ -36,4 +36,5 @@ fmi2_conformance::conformance_tests!(
     reset_restores_start_values,
     logging_follows_debug_logging,
     instances_are_independent,
+    instances_step_identically_in_threads,
 );
