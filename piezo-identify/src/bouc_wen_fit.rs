@@ -266,11 +266,7 @@ impl ScaledRecord {
     fn is_increasing(&self, shape: &[f64], states: &[f64], coefficients: [f64; 3]) -> bool {
         let params = scaled_params(shape);
         let slope = |u: f64, h: f64, direction: f64| {
-            let abs_h = h.abs();
-            let pow = abs_h.powf(params.n - 1.0);
-            let dh = params.a - params.beta * direction * pow * h - params.gamma * pow * abs_h
-                + params.delta * u;
-            coefficients[0] + coefficients[1] * dh
+            coefficients[0] + coefficients[1] * params.state_slope(u, h, direction)
         };
         let (mut u0, mut h0) = (0.0, 0.0);
         for (&u1, &h1) in self.input.iter().zip(states) {

@@ -45,6 +45,7 @@
 //! experiment the printed ones came from. [`Xy200sPreset::models`] keeps
 //! the RMS of each conversion.
 
+use piezo_models::bouc_wen::rk4_path;
 use piezo_models::{BoucWenParams, FlexureStageParams};
 use serde::{Deserialize, Serialize};
 
@@ -144,7 +145,6 @@ pub fn identification_input() -> Vec<f64> {
 pub fn printed_response(params: &BoucWenParams, input: &[f64], dt: f64) -> Vec<f64> {
     let mut h = 0.0;
     let mut u_previous = 0.0;
-    let substep = dt / PRINTED_SUBSTEPS as f64;
     input
         .iter()
         .map(|&u| {
@@ -159,14 +159,8 @@ pub fn printed_response(params: &BoucWenParams, input: &[f64], dt: f64) -> Vec<f
                     - params.gamma * rate * pow * abs_h
                     + params.delta * u_now * direction
             };
-            for k in 0..PRINTED_SUBSTEPS {
-                let t = k as f64 * substep;
-                let k1 = derivative(t, h);
-                let k2 = derivative(t + 0.5 * substep, h + 0.5 * substep * k1);
-                let k3 = derivative(t + 0.5 * substep, h + 0.5 * substep * k2);
-                let k4 = derivative(t + substep, h + substep * k3);
-                h += substep / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
-            }
+            // Time plays the input's part: RK4 over [0, dt] of the sample.
+            h = rk4_path(0.0, h, dt, PRINTED_SUBSTEPS, derivative);
             u_previous = u;
             params.p * u + params.q * h
         })

@@ -49,6 +49,19 @@ pub struct BoucWenParams {
 }
 
 impl BoucWenParams {
+    /// dh/du of eq. (3) (this module's reading) at input `u`, state `h`, for
+    /// an input moving in the direction of `direction` (its sign).
+    pub fn state_slope(&self, u: f64, h: f64, direction: f64) -> f64 {
+        let abs_h = h.abs();
+        let pow = if self.n == 1.0 {
+            1.0
+        } else {
+            abs_h.powf(self.n - 1.0)
+        };
+        self.a - self.beta * direction.signum() * pow * h - self.gamma * pow * abs_h
+            + self.delta * u
+    }
+
     /// The model of the map u' ↦ H[g·u']: the same actuator seen from an
     /// input `g` times smaller (e.g. amplifier volts to command volts through
     /// an amplifier of gain g). From eq. (3) with du = g·du':
@@ -140,15 +153,7 @@ impl AsymmetricBoucWen {
     /// module's reading. Used by the inverse model's Newton steps.
     pub fn output_slope(&self, direction: f64) -> f64 {
         let p = &self.params;
-        let abs_h = self.h.abs();
-        let pow = if p.n == 1.0 {
-            1.0
-        } else {
-            abs_h.powf(p.n - 1.0)
-        };
-        let state_slope = p.a - p.beta * direction.signum() * pow * self.h - p.gamma * pow * abs_h
-            + p.delta * self.u;
-        p.p + p.q * state_slope
+        p.p + p.q * p.state_slope(self.u, self.h, direction)
     }
 
     /// Back to rest: h = 0, u = 0.
@@ -203,8 +208,16 @@ impl AsymmetricBoucWen {
 
 /// Classical RK4 for dh/du = f(u, h) from (u0, h0) over `du_total` in `substeps`
 /// equal substeps. Substep starts are computed from u0 (no accumulated drift).
+/// Any scalar ODE fits: `piezo-identify` integrates seed 001's printed,
+/// time-domain reading of eq. (3) with it (u standing for time).
 #[inline(always)]
-fn rk4_path(u0: f64, h0: f64, du_total: f64, substeps: usize, f: impl Fn(f64, f64) -> f64) -> f64 {
+pub fn rk4_path(
+    u0: f64,
+    h0: f64,
+    du_total: f64,
+    substeps: usize,
+    f: impl Fn(f64, f64) -> f64,
+) -> f64 {
     let du = du_total / substeps as f64;
     let half = 0.5 * du;
     let mut h = h0;
