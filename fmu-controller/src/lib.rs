@@ -682,6 +682,18 @@ impl CoSimModel for PiezoControllerFmu {
         let out = self
             .controller
             .step(x_ref, y_ref, theta_ref, self.sensors, step_size);
+        if let Some(channel) = out.u.iter().position(|u| !u.is_finite()) {
+            // Finite inputs and validated parameters can still overflow (e.g.
+            // gains near f64::MAX); a NaN command must not reach the plant.
+            return Err(ModelError(format!(
+                "t = {current_time}: output u{} = {} is not finite (feedforward {} V, feedback \
+                 {} V); check the gains and model parameters",
+                channel + 1,
+                out.u[channel],
+                out.feedforward[channel],
+                out.feedback[channel]
+            )));
+        }
         // Limiting is part of normal operation (a demand of 0 µm asks for a
         // slightly negative voltage; anti-windup handles it), so it is an
         // event, logged once per channel, not a warning.

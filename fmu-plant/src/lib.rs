@@ -468,10 +468,19 @@ impl CoSimModel for FlexureStageFmu {
         step_size: f64,
     ) -> Result<Status, ModelError> {
         let report = self.stage.step(self.commands, step_size);
-        if !report.state_finite {
+        if let Some(fault) = report.fault {
+            // Never hand a diverged state on as outputs: the importer gets
+            // fmi2Error and the instance stays unusable until reset.
             return Err(ModelError(format!(
-                "the stage state became non-finite during the step to t = {} (commands {:?} V)",
+                "the stage diverged in the step from t = {current_time} to t = {}: {} = {} \
+                 (non-finite, or beyond {} um / {} rad) with commands u1..u3 = {:?} V; check \
+                 the hysteresis parameters (a Bouc-Wen model with beta + gamma < 0 grows \
+                 without bound)",
                 current_time + step_size,
+                fault.variable,
+                fault.value,
+                piezo_models::flexure_stage::DIVERGED_DISPLACEMENT_UM,
+                piezo_models::flexure_stage::DIVERGED_ROTATION_RAD,
                 self.commands
             )));
         }

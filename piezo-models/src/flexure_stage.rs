@@ -276,9 +276,57 @@ pub struct Pose {
 pub struct StepReport {
     /// Per channel: the amplifier limits cut the target G·u this step.
     pub clipped: [bool; 3],
-    /// Every state variable is finite after the step (false after a NaN command).
-    pub state_finite: bool,
+    /// The first state variable that is non-finite or beyond any physical
+    /// bound after the step (after a NaN command, or a parameter set whose
+    /// hysteresis diverges); `None` when the state is sound.
+    pub fault: Option<StateFault>,
 }
+
+/// A state variable that left the physical domain: the stage has diverged and
+/// its outputs mean nothing from here on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StateFault {
+    /// What the variable is, for the user (a static name: the step reports it
+    /// without allocating).
+    pub variable: &'static str,
+    pub value: f64,
+}
+
+/// |displacement| beyond which the stage has diverged [µm]: 1 m, four orders
+/// above the largest stroke any preset has (150 µm), so it never trips on a
+/// sound state and catches a divergence while its numbers still print.
+pub const DIVERGED_DISPLACEMENT_UM: f64 = 1e6;
+/// |θ_z| beyond which the stage has diverged [rad]: a flexure platform turned
+/// by a radian is not a flexure any more (its range is ~1e-4 rad).
+pub const DIVERGED_ROTATION_RAD: f64 = 1.0;
+
+const ACTUATOR_STATES: [&str; 3] = [
+    "hysteretic state h of PZT1 (actuators[0].hysteresis)",
+    "hysteretic state h of PZT2 (actuators[1].hysteresis)",
+    "hysteretic state h of PZT3 (actuators[2].hysteresis)",
+];
+const COUPLING_STATES: [&str; 4] = [
+    "hysteretic state h of the coupling x from PZT1 (coupling.x_from_pzt1)",
+    "hysteretic state h of the coupling s2 - s3 from PZT1 (coupling.rot_from_pzt1)",
+    "hysteretic state h of the coupling y from PZT2 (coupling.y_from_pzt2)",
+    "hysteretic state h of the coupling y from PZT3 (coupling.y_from_pzt3)",
+];
+const CREEP_STATES: [&str; 3] = [
+    "creep displacement of PZT1",
+    "creep displacement of PZT2",
+    "creep displacement of PZT3",
+];
+const AMPLIFIER_STATES: [&str; 3] = [
+    "amplifier output voltage of PZT1",
+    "amplifier output voltage of PZT2",
+    "amplifier output voltage of PZT3",
+];
+const MODE_POSITIONS: [&str; 3] = ["platform x", "platform y", "platform theta_z"];
+const MODE_VELOCITIES: [&str; 3] = [
+    "platform x velocity",
+    "platform y velocity",
+    "platform theta_z velocity",
+];
 
 /// Index of the amplifier channel that drives each coupling model, in the
 /// order x_from_pzt1, rot_from_pzt1, y_from_pzt2, y_from_pzt3.
@@ -458,7 +506,7 @@ impl FlexureStage {
         self.noise.draw();
         StepReport {
             clipped,
-            state_finite: self.state_is_finite(),
+            fault: self.state_fault(),
         }
     }
 
@@ -559,17 +607,57 @@ impl FlexureStage {
         self.piece
     }
 
-    fn state_is_finite(&self) -> bool {
-        self.amplifier.voltages().iter().all(|v| v.is_finite())
-            && self
-                .actuators
-                .iter()
-                .chain(&self.couplings)
-                .all(|m| m.hysteretic_state().is_finite())
-            && self.creep.iter().all(|c| c.value().is_finite())
-            && self.modes.iter().all(|m| {
-                let s = m.state();
-                s.position.is_finite() && s.velocity.is_finite()
+    /// The first state variable that is non-finite or beyond the divergence
+    /// bounds, in the order amplifier, actuators, couplings, creep, modes.
+    fn state_fault(&self) -> Option<StateFault> {
+        let finite =
+            |variable, value: f64| (!value.is_finite()).then_some(StateFault { variable, value });
+        let bounded = |variable, value: f64, bound: f64| {
+            (value.is_nan() || value.abs() > bound).then_some(StateFault { variable, value })
+        };
+        let voltages = self.amplifier.voltages();
+        (0..3)
+            .find_map(|i| finite(AMPLIFIER_STATES[i], voltages[i]))
+            .or_else(|| {
+                (0..3).find_map(|i| {
+                    bounded(
+                        ACTUATOR_STATES[i],
+                        self.actuators[i].hysteretic_state(),
+                        DIVERGED_DISPLACEMENT_UM,
+                    )
+                })
+            })
+            .or_else(|| {
+                (0..4).find_map(|i| {
+                    // All four are displacements at the sensors [µm], the
+                    // rotational one a difference s2 − s3.
+                    bounded(
+                        COUPLING_STATES[i],
+                        self.couplings[i].hysteretic_state(),
+                        DIVERGED_DISPLACEMENT_UM,
+                    )
+                })
+            })
+            .or_else(|| {
+                (0..3).find_map(|i| {
+                    bounded(
+                        CREEP_STATES[i],
+                        self.creep[i].value(),
+                        DIVERGED_DISPLACEMENT_UM,
+                    )
+                })
+            })
+            .or_else(|| {
+                (0..3).find_map(|i| {
+                    let state = self.modes[i].state();
+                    let bound = if i == 2 {
+                        DIVERGED_ROTATION_RAD
+                    } else {
+                        DIVERGED_DISPLACEMENT_UM
+                    };
+                    bounded(MODE_POSITIONS[i], state.position, bound)
+                        .or_else(|| finite(MODE_VELOCITIES[i], state.velocity))
+                })
             })
     }
 
@@ -633,9 +721,32 @@ mod tests {
         for _ in 0..100 {
             let report = stage.step([0.0; 3], 1e-4);
             assert_eq!(report.clipped, [false; 3]);
-            assert!(report.state_finite);
+            assert_eq!(report.fault, None);
         }
         assert_eq!(stage.pose(), Pose::default());
+    }
+
+    /// beta + gamma < 0 with n = 2: dh/du = A + 0.68·h² escapes to infinity
+    /// near 21 V of travel; the step that crosses the bound names the state.
+    #[test]
+    fn a_diverging_hysteresis_state_is_named() {
+        let mut params = FlexureStageParams::default();
+        params.coupling.y_from_pzt3.beta = -0.55;
+        params.coupling.y_from_pzt3.gamma = -0.13;
+        let mut stage = FlexureStage::new(params).unwrap();
+        let mut fault = None;
+        for k in 1..=20_000 {
+            fault = stage.step([0.0, 0.0, 5e-4 * k as f64], 1e-4).fault;
+            if fault.is_some() {
+                break;
+            }
+        }
+        let fault = fault.expect("the state diverges before 10 V of command");
+        assert_eq!(
+            fault.variable,
+            "hysteretic state h of the coupling y from PZT3 (coupling.y_from_pzt3)"
+        );
+        assert!(fault.value.is_nan() || fault.value.abs() > DIVERGED_DISPLACEMENT_UM);
     }
 
     #[test]
@@ -643,9 +754,11 @@ mod tests {
         let mut stage = FlexureStage::new(FlexureStageParams::default()).unwrap();
         let report = stage.step([11.0, -0.5, 5.0], 1e-4);
         assert_eq!(report.clipped, [true, true, false]);
-        assert!(report.state_finite);
+        assert_eq!(report.fault, None);
         let report = stage.step([f64::NAN, 0.0, 0.0], 1e-4);
-        assert!(!report.state_finite);
+        let fault = report.fault.expect("a NaN command is reported");
+        assert_eq!(fault.variable, "amplifier output voltage of PZT1");
+        assert!(fault.value.is_nan());
     }
 
     /// The amplifier is exact: after a step of h from rest with command u, the

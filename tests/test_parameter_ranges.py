@@ -1,0 +1,251 @@
+"""Parameters out of their physical range, and states that leave it.
+
+Through the C ABI (fmpy's FMU2Slave with a recording logger), for both FMUs:
+
+- every parameter with a declared `min`/`max` in modelDescription.xml is refused
+  at fmi2ExitInitializationMode when set outside it, with fmi2Error and a log
+  line naming the parameter, the value and the declared range;
+- the ranges a declaration cannot express (strict bounds such as L > 0, one
+  parameter against another such as v_max > v_min) are refused the same way,
+  with the model's own rule in the message;
+- a refused instance recovers with fmi2Reset;
+- (a NaN or infinite parameter never gets that far: fmi2SetReal refuses it, as
+  the conformance harness checks for every variable);
+- a parameter set that passes every check but lets the hysteresis diverge, and
+  controller gains that overflow, end the step with fmi2Error naming the state
+  or output and the time, never with a silent NaN.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import tempfile
+
+import fmpy
+import pytest
+from fmpy import fmi2
+from fmpy.fmi1 import FMICallException
+
+from tests.conftest import REPO_ROOT, FmuEnv, STATUS_NAMES
+
+MODELS = ("FlexureStage", "PiezoController")
+
+
+def make_env(model_name: str) -> FmuEnv:
+    path = REPO_ROOT / "dist" / f"{model_name}.fmu"
+    if not path.is_file():
+        pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
+    return FmuEnv(path, fmpy.extract(str(path), unzipdir=tempfile.mkdtemp(prefix="ranges_")))
+
+
+@pytest.fixture(scope="module")
+def envs():
+    made = {name: make_env(name) for name in MODELS}
+    yield made
+    for env in made.values():
+        env.free_all()
+        shutil.rmtree(env.unzip_dir, ignore_errors=True)
+
+
+def refused_at_exit_initialization(env: FmuEnv, values: dict) -> list:
+    """Sets `values` in initialization mode and returns the error records that
+    fmi2ExitInitializationMode logged while refusing them."""
+    slave = env.instantiate("ranges", logging_on=False)
+    slave.fmu.setupExperiment(startTime=0.0)
+    slave.fmu.enterInitializationMode()
+    for name, value in values.items():
+        # Setting is accepted: a parameter is checked as a whole set, when the
+        # importer says it is complete (FMI 2.0.4 §4.2.4).
+        status = {"Real": slave.set_real, "Integer": slave.set_integer}[env.types[name]](
+            {name: value})
+        assert status == fmi2.fmi2OK, f"setting {name} = {value} returned {status}"
+    slave.log.clear()
+    with pytest.raises(FMICallException) as info:
+        slave.fmu.exitInitializationMode()
+    assert info.value.status == fmi2.fmi2Error, STATUS_NAMES.get(info.value.status)
+    errors = [r for r in slave.log.records if r.status == fmi2.fmi2Error]
+    assert errors, f"fmi2ExitInitializationMode refused {values} without a log line"
+    # The standard allows fmi2Reset from the error state; the instance is
+    # usable again with its start values.
+    assert slave.fmu.fmi2Reset(slave.fmu.component) == fmi2.fmi2OK, slave.log.dump()
+    slave.initialize()
+    assert step_status(slave, 1e-4) == fmi2.fmi2OK, slave.log.dump()
+    slave.free()
+    return errors
+
+
+def step_status(slave, step: float) -> int:
+    """fmi2DoStep's status, whatever it is (fmpy raises above fmi2Warning)."""
+    try:
+        slave.fmu.doStep(slave.time, step)
+    except FMICallException as e:
+        return e.status
+    finally:
+        slave.time += step
+    return fmi2.fmi2OK
+
+
+def declared_ranges(env: FmuEnv):
+    for v in env.md.modelVariables:
+        if v.causality == "parameter" and v.type in ("Real", "Integer") and (
+                v.min is not None or v.max is not None):
+            yield v
+
+
+def outside(v) -> list:
+    """One value below the declared min and one above the declared max."""
+    cast = int if v.type == "Integer" else float
+    values = []
+    if v.min is not None:
+        low = cast(v.min)
+        values.append(low - max(1, abs(low)))
+    if v.max is not None:
+        high = cast(v.max)
+        values.append(high + max(1, abs(high)))
+    return values
+
+
+def test_every_declared_range_is_enforced(envs):
+    checked = 0
+    names = set()
+    for env in envs.values():
+        parameters = list(declared_ranges(env))
+        assert parameters, f"{env.md.modelName} declares no parameter range"
+        for v in parameters:
+            for value in outside(v):
+                errors = refused_at_exit_initialization(env, {v.name: value})
+                text = " ".join(r.text for r in errors)
+                low = "-inf" if v.min is None else f"{float(v.min):g}"
+                high = "inf" if v.max is None else f"{float(v.max):g}"
+                assert v.name in text, text
+                assert f"= {value:g} is outside its allowed range [{low}, {high}]" in text, text
+                checked += 1
+                names.add(v.name)
+    print(f"{checked} out-of-range values refused at fmi2ExitInitializationMode")
+    # The ranges the physics fixes are declared (a lost declaration fails here).
+    assert {"pzt[1].n", "coupling.x_from_pzt1.n", "amplifier.gain", "mode.x.damping",
+            "solver.max_voltage_step", "noise.seed", "translation.kp", "rotation.ki", "x.c",
+            "y.u1max", "bouc_wen.y_from_x.n", "hysteresis_model", "L"} <= names, names
+
+
+# The issue's list, and the rules no min/max can declare. Each case: the FMU,
+# the values set, and what the message must contain besides the parameter's
+# name and value.
+PHYSICAL_RANGE_CASES = [
+    # negative thresholds (seed 000 eq. 5: d = c·[0,1,3,5,7,9], r = u1max·[…])
+    ("PiezoController", {"x.c": -0.5}, "x.c", "-0.5", "[0, inf]"),
+    ("PiezoController", {"y.u1max": -11.0}, "y.u1max", "-11", "[0, inf]"),
+    # c = 0 makes every dead-zone threshold 0: not increasing
+    ("PiezoController", {"x.c": 0.0}, "x.c", "= 0", "c > 0"),
+    ("PiezoController", {"y.u1max": 0.0}, "y.u1max", "= 0", "u1max > 0"),
+    # Bouc-Wen n below 1 (|h|^(n-1) must stay finite at h = 0)
+    ("FlexureStage", {"pzt[2].n": 0.5}, "pzt[2].n", "0.5", "[1, inf]"),
+    ("FlexureStage", {"coupling.y_from_pzt3.n": 0.99}, "coupling.y_from_pzt3.n", "0.99",
+     "[1, inf]"),
+    ("PiezoController", {"bouc_wen.y.n": 0.9}, "bouc_wen.y.n", "0.9", "[1, inf]"),
+    # negative and zero gains
+    ("PiezoController", {"translation.kp": -0.05}, "translation.kp", "-0.05", "[0, inf]"),
+    ("PiezoController", {"rotation.ki": -70.0}, "rotation.ki", "-70", "[0, inf]"),
+    ("FlexureStage", {"amplifier.gain": -10.0}, "amplifier.gain", "-10", "[0, inf]"),
+    ("FlexureStage", {"amplifier.gain": 0.0}, "amplifier.gain", "= 0", "gain > 0"),
+    # a zero sensor spacing L (theta = (s2 - s3) / L)
+    ("PiezoController", {"L": 0.0}, "L", "= 0", "> 0"),
+    ("FlexureStage", {"L": 0.0}, "L", "= 0", "> 0"),
+    # bounds that depend on another parameter
+    ("PiezoController", {"command_min": 5.0, "command_max": 5.0}, "command_max", "= 5",
+     "> command_min"),
+    ("FlexureStage", {"amplifier.v_max": -1.0}, "amplifier.v_max", "= -1", "v_max > v_min"),
+    ("FlexureStage", {"pzt[1].creep_time": 1e-5}, "pzt[1].creep_time", "0.00001",
+     "creep_time > 10 x amplifier time constant"),
+    # no mode without a frequency; damping within its declared [0, 1]
+    ("FlexureStage", {"mode.theta.frequency": 0.0}, "mode.theta.frequency", "= 0", "> 0"),
+    ("FlexureStage", {"mode.x.damping": 1.5}, "mode.x.damping", "1.5", "[0, 1]"),
+    # selectors
+    ("PiezoController", {"hysteresis_model": 3}, "hysteresis_model", "3", "[1, 2]"),
+]
+
+
+@pytest.mark.parametrize("model_name, values, name, value_text, rule", PHYSICAL_RANGE_CASES,
+                         ids=[f"{c[0]}-{c[2]}={list(c[1].values())[-1]}"
+                              for c in PHYSICAL_RANGE_CASES])
+def test_parameters_out_of_physical_range_are_refused(envs, model_name, values, name,
+                                                      value_text, rule):
+    errors = refused_at_exit_initialization(envs[model_name], values)
+    text = " ".join(r.text for r in errors)
+    assert "fmi2ExitInitializationMode" in text, text
+    assert name in text, text
+    assert value_text in text, text
+    assert rule in text, text
+
+
+@pytest.mark.parametrize("step", [0.0, -1e-4, math.nan, math.inf])
+def test_controller_sample_period_must_be_positive(envs, step):
+    """The controller samples once per communication step (its sample period
+    is the step size), so a period that is not positive is a refused step."""
+    slave = envs["PiezoController"].instantiate("period")
+    slave.initialize()
+    slave.log.clear()
+    status = step_status(slave, step)
+    assert status == fmi2.fmi2Error, STATUS_NAMES.get(status)
+    assert slave.log.matching("fmi2DoStep", status=fmi2.fmi2Error), slave.log.dump()
+    slave.free()
+
+
+def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
+    """beta + gamma < 0 passes every parameter check (softening hysteresis is a
+    legitimate shape over a short travel) but with n = 2 the state escapes to
+    infinity within ~21 V of travel: dh/du = A + 0.68·h². The step where it
+    happens must fail, naming the state and the time."""
+    env = envs["FlexureStage"]
+    slave = env.instantiate("diverging")
+    slave.initialize(start_values={
+        "coupling.x_from_pzt1.beta": -0.55,
+        "coupling.x_from_pzt1.gamma": -0.13,
+    })
+    # A ramp of the command, 5 V/s: the escape near 21 V of amplifier output
+    # (2.1 V of command) comes after some 4000 steps, not in the first.
+    status = fmi2.fmi2OK
+    steps = 0
+    while status == fmi2.fmi2OK and steps < 20_000:
+        slave.set_real({"u1": 5.0 * slave.time})
+        status = step_status(slave, 1e-4)
+        steps += 1
+    assert status == fmi2.fmi2Error, f"no error after {steps} steps: {slave.log.dump()}"
+    assert 2000 < steps < 8000, steps
+    failed_at = slave.time
+    message = " ".join(r.text for r in slave.log.matching("diverged", status=fmi2.fmi2Error))
+    assert "coupling x from PZT1" in message, slave.log.dump()
+    reported = re.search(r"to t = ([-+0-9.e]+)", message)
+    assert reported and abs(float(reported.group(1)) - failed_at) < 1e-9, (failed_at, message)
+    # The instance is in the error state: stepping on is refused, not NaN.
+    assert step_status(slave, 1e-4) == fmi2.fmi2Error
+    print(f"diverged after {steps} steps: {message}")
+    slave.free()
+
+
+def test_sound_parameters_never_trip_the_divergence_check(envs):
+    """The same drive with the shipped parameters runs through: the bound
+    (1 m) is far from any real state."""
+    slave = envs["FlexureStage"].instantiate("sound")
+    slave.initialize()
+    slave.set_real({"u1": 10.0, "u2": 10.0, "u3": 10.0})
+    for _ in range(2000):
+        assert step_status(slave, 1e-4) == fmi2.fmi2OK, slave.log.dump()
+    slave.free()
+
+
+def test_overflowing_controller_output_is_an_error(envs):
+    """Gains near f64::MAX are within the declared range [0, inf) but make the
+    x and theta feedback +inf and -inf on the same PZT channel: the sum is NaN,
+    which must not reach the plant."""
+    slave = envs["PiezoController"].instantiate("overflow")
+    slave.initialize(start_values={"translation.kp": 1e308, "rotation.kp": 1e308})
+    # x error +5 um; theta error of the opposite sign on s3's channel.
+    slave.set_real({"x_ref": 5.0, "s1": 0.0, "s2": 0.0, "s3": 3.0})
+    status = step_status(slave, 1e-4)
+    assert status == fmi2.fmi2Error, slave.log.dump()
+    text = " ".join(r.text for r in slave.log.matching("not finite", status=fmi2.fmi2Error))
+    assert "t = 0" in text and "output u" in text, slave.log.dump()
+    slave.free()
