@@ -83,14 +83,21 @@ rust-test: system-deps
 	$(CARGO) build --workspace --release --locked
 	$(CARGO) test --workspace --release --locked
 
-python-test: fmus venv
+# The closed loop packaged for other tools, generated from the FMUs'
+# descriptions, dist/presets and demo/cosim.py's wiring: an SSP 1.0 package
+# (OMSimulator, libcosim, fmpy.ssp) and the loop as one container FMU.
+.PHONY: systems
+systems: fmus venv
+	$(PY) -m demo.systems --dist $(DIST)
+
+python-test: fmus venv systems
 	$(PY) -m pytest tests -q -rP
 
 test: lint rust-test python-test
 
 # The main job: seed 000's experiments in closed loop (CSV, PNG, report.md in
 # out/demo), then the plant's fingerprints beside the paper (out/plant).
-demo: fmus venv
+demo: fmus venv systems
 	$(PY) -m demo --out out/demo
 	$(PY) tests/fingerprint_report.py --fmu $(DIST)/FlexureStage.fmu --out out/plant
 	@echo "report: out/demo/report.md (plant: out/plant/index.html)"

@@ -31,8 +31,22 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
 
+#: The closed loop's wiring, the one table every master that builds the loop
+#: reads: this module's fmpy master, the SSP package and the container FMU that
+#: demo.systems generates, and the libcosim tests. (source, destination) pairs:
+#: the controller's commands drive the plant's amplifier channels, the plant's
+#: laser sensors feed the controller. demo.systems checks every name against
+#: both modelDescription.xml files (causality and type) when it generates.
+COMMANDS = (("u1", "u1"), ("u2", "u2"), ("u3", "u3"))  # PiezoController -> FlexureStage
+SENSORS = (("s1", "s1"), ("s2", "s2"), ("s3", "s3"))  # FlexureStage -> PiezoController
+#: PiezoController inputs driven by the trajectory (x [um], y [um], theta [rad]).
+REFERENCES = ("x_ref", "y_ref", "theta_ref")
+#: Instance names of the two FMUs in every master (and SSP component names).
+PLANT_INSTANCE = "plant"
+CONTROLLER_INSTANCE = "controller"
+
 PLANT_OUTPUTS = ("s1", "s2", "s3", "x", "y", "theta_z")
-CONTROLLER_INPUTS = ("x_ref", "y_ref", "theta_ref", "s1", "s2", "s3")
+CONTROLLER_INPUTS = REFERENCES + tuple(sensor for _, sensor in SENSORS)
 CONTROLLER_OUTPUTS = (
     "u1", "u2", "u3", "u1_ff", "u2_ff", "u3_ff", "u1_fb", "u2_fb", "u3_fb",
     "e_x", "e_y", "e_theta", "x_r2", "x_r3", "y_rx", "y_rtheta",
@@ -181,40 +195,56 @@ def simulate(
     controller_parameters: dict | None = None,
     preview: int = 2,
     progress=None,
+    communication_points=None,
 ) -> Run:
     """Runs the closed loop for `duration` s. `reference(t)` takes an array of
     times and returns an (n, 3) array of x_ref [um], y_ref [um], theta_ref
-    [rad]; `progress(steps_done)` is called every 1000 steps."""
+    [rad]; `progress(steps_done)` is called every 1000 steps.
+
+    `communication_points` (optional) are the times t_0..t_n to step through,
+    each step being t_k+1 - t_k; by default t_k = k·step. An importer that
+    keeps time in integer nanoseconds (libcosim) hands the FMUs its own
+    double time points and steps; passing those reproduces its run exactly."""
     steps = round(duration / step)
-    t = np.arange(steps + 1) * step
+    if communication_points is None:
+        t = np.arange(steps + 1) * step
+        step_sizes = np.full(steps, step)
+    else:
+        t = np.asarray(communication_points, dtype=float)
+        if t.shape != (steps + 1,):
+            raise ValueError(f"{steps + 1} communication points expected, got {t.shape}")
+        step_sizes = np.diff(t)
     references = np.asarray(reference(t), dtype=float)
     ahead = np.asarray(reference(t + preview * step), dtype=float)
-    p = plant.instance("plant", plant_parameters)
+    p = plant.instance(PLANT_INSTANCE, plant_parameters)
     try:
-        c = controller.instance("controller", controller_parameters)
+        c = controller.instance(CONTROLLER_INSTANCE, controller_parameters)
     except BaseException:
         p.free()
         raise
     try:
-        plant_in = p.real_port(("u1", "u2", "u3"))
+        plant_in = p.real_port(tuple(command for _, command in COMMANDS))
         plant_out = p.real_port(PLANT_OUTPUTS)
         ctrl_in = c.real_port(CONTROLLER_INPUTS)
         ctrl_out = c.real_port(CONTROLLER_OUTPUTS)
         plant_log = np.empty((steps + 1, len(PLANT_OUTPUTS)))
         ctrl_log = np.empty((steps + 1, len(CONTROLLER_OUTPUTS)))
         controller_inputs = np.empty(len(CONTROLLER_INPUTS))
+        commands = [CONTROLLER_OUTPUTS.index(source) for source, _ in COMMANDS]
+        sensors = [PLANT_OUTPUTS.index(source) for source, _ in SENSORS]
+        n_references = len(REFERENCES)
         for k in range(steps + 1):
             plant_log[k] = plant_out.get()
             ctrl_log[k] = ctrl_out.get()
             if k == steps:
                 break
             # Jacobi: both FMUs see the other's outputs at t_k.
-            plant_in.set(ctrl_log[k, :3])
-            controller_inputs[:3] = ahead[k]
-            controller_inputs[3:] = plant_log[k, :3]
+            plant_in.set(ctrl_log[k, commands])
+            controller_inputs[:n_references] = ahead[k]
+            controller_inputs[n_references:] = plant_log[k, sensors]
             ctrl_in.set(controller_inputs)
-            p.do_step(t[k], step)
-            c.do_step(t[k], step)
+            p.do_step(t[k], step_sizes[k])
+            c.do_step(t[k], step_sizes[k])
             if progress is not None and k % 1000 == 999:
                 progress(1000)
         if progress is not None:
