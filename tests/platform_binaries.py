@@ -23,6 +23,9 @@ from tests.conftest import REPO_ROOT
 DIST = REPO_ROOT / "dist"
 MODELS = ("FlexureStage", "PiezoController")
 C_IMPORTER = REPO_ROOT / "tests" / "c_importer"
+#: importer.c's runs: the input set, its value, the output read after 100
+#: steps of 1e-4 s.
+C_IMPORTER_CASES = [("FlexureStage", "u1", 5.0, "s1"), ("PiezoController", "y_ref", 6.0, "u1")]
 #: The flags every C importer is built with, on every platform.
 C_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
 

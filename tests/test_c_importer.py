@@ -20,10 +20,9 @@ from fmpy import read_model_description
 
 from demo.cosim import Fmu
 from tests.conftest import REPO_ROOT
-from tests.platform_binaries import C_FLAGS, C_IMPORTER, fmi_headers
+from tests.platform_binaries import C_FLAGS, C_IMPORTER, C_IMPORTER_CASES, fmi_headers
 
 SOURCE = C_IMPORTER / "importer.c"
-CASES = [("FlexureStage", "u1", 5.0, "s1"), ("PiezoController", "y_ref", 6.0, "u1")]
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +36,7 @@ def importer(tmp_path_factory) -> Path:
     return out
 
 
-@pytest.mark.parametrize("model, input_name, value, output_name", CASES)
+@pytest.mark.parametrize("model, input_name, value, output_name", C_IMPORTER_CASES)
 def test_a_c_importer_runs_the_fmu_and_agrees_with_fmpy(importer, tmp_path, model, input_name,
                                                         value, output_name):
     fmu_path = REPO_ROOT / "dist" / f"{model}.fmu"
