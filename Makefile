@@ -3,7 +3,10 @@
 #   make test   builds the FMUs and runs every test (Rust and Python/fmpy)
 # They install what they need: libclang (Debian package, for fmi-sys's bindgen)
 # when it is missing, and a .venv with the pinned Python packages of
-# tests/requirements.txt. Rust crates come from Cargo.lock.
+# tests/requirements.txt. Rust crates come from Cargo.lock. The FMUs'
+# linux64 (glibc 2.17) and win64 binaries need zig and mingw-w64, which
+# packaging/platform-binaries.sh installs (build/tools, apt-get); the win64
+# tests need wine (apt-get).
 
 SHELL := /bin/bash
 .SHELLFLAGS := -eu -o pipefail -c
@@ -15,12 +18,15 @@ DIST := dist
 BUILD := build
 RELEASE := target/release
 
-# identifier:cargo-package:describe-binary:library
-PLANT := FlexureStage:fmu-plant:flexure-stage-describe:libfmu_plant.so
-CONTROLLER := PiezoController:fmu-controller:piezo-controller-describe:libfmu_controller.so
+# identifier:cargo-package:describe-binary
+PLANT := FlexureStage:fmu-plant:flexure-stage-describe
+CONTROLLER := PiezoController:fmu-controller:piezo-controller-describe
 FMU_SPECS := $(PLANT) $(CONTROLLER)
+# The FMUs' platform binaries, built by packaging/platform-binaries.sh:
+# binaries/<platform>/<library> for linux64 (glibc 2.17) and win64.
+PLATFORM_BINARIES := $(BUILD)/binaries
 
-.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset xy200s-preset xy200s-controller-preset identify system-deps venv clean
+.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset xy200s-preset xy200s-controller-preset identify system-deps wine venv clean
 
 all: fmus
 
@@ -35,6 +41,18 @@ system-deps:
 	  fi; \
 	fi
 
+# tests/test_windows_binaries.py runs the win64 binaries under wine. Not fatal
+# here: without wine that test fails and says why.
+wine:
+	@if ! command -v wine64 >/dev/null && [ ! -x /usr/lib/wine/wine64 ] && ! command -v wine >/dev/null; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing wine64 (runs the win64 binaries in the tests)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq wine64 >/dev/null; \
+	  else \
+	    echo "wine is missing: install it (Debian/Ubuntu: apt-get install wine64); tests/test_windows_binaries.py will fail" >&2; \
+	  fi; \
+	fi
+
 $(VENV)/.installed: tests/requirements.txt
 	$(PYTHON3) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -r tests/requirements.txt
@@ -42,16 +60,28 @@ $(VENV)/.installed: tests/requirements.txt
 
 venv: $(VENV)/.installed
 
-# Builds the release binaries, writes each FMU's description from its variable
-# table and packs dist/<identifier>.fmu.
+# Builds the host binaries (describe and preset tools, the packer, the
+# libraries `cargo test` loads), the platform binaries (linux64 against glibc
+# 2.17, win64), writes each FMU's description from its variable table and
+# packs dist/<identifier>.fmu with every platform binary that could be built;
+# a platform whose toolchain is missing is reported loudly, here and again
+# at the end.
 fmus: system-deps
 	$(CARGO) build --release --locked -p fmu-plant -p fmu-controller -p packaging
+	CARGO=$(CARGO) PYTHON3=$(PYTHON3) packaging/platform-binaries.sh $(PLATFORM_BINARIES) \
+	  $(foreach spec,$(FMU_SPECS),$(word 2,$(subst :, ,$(spec))))
 	@for spec in $(FMU_SPECS); do \
-	  IFS=: read -r id pkg describe lib <<< "$$spec"; \
+	  IFS=: read -r id pkg describe <<< "$$spec"; \
+	  crate=$${pkg//-/_}; \
+	  binaries=(); \
+	  for platform_file in linux64=lib$$crate.so win64=$$crate.dll; do \
+	    platform=$${platform_file%%=*}; \
+	    file=$(PLATFORM_BINARIES)/$$platform/$${platform_file#*=}; \
+	    if [ -f "$$file" ]; then binaries+=(--binary "$$platform=$$file"); fi; \
+	  done; \
 	  rm -rf $(BUILD)/$$id; \
 	  $(RELEASE)/$$describe $(BUILD)/$$id; \
-	  $(RELEASE)/fmu-pack --description $(BUILD)/$$id --binary $(RELEASE)/$$lib \
-	    --platform linux64 --out $(DIST)/$$id.fmu; \
+	  $(RELEASE)/fmu-pack --description $(BUILD)/$$id "$${binaries[@]}" --out $(DIST)/$$id.fmu; \
 	done
 	@# Parameter sets by FMI name, to load a preset into an FMU before
 	@# initialization (fmpy start_values, a Simulink mask, an SSP .ssv).
@@ -62,13 +92,14 @@ fmus: system-deps
 	$(RELEASE)/piezo-controller-parameters paper $(DIST)/presets/PiezoController.paper.json
 	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_xy200s.json \
 	  $(DIST)/presets/PiezoController.xy200s.json
+	@if [ -s $(PLATFORM_BINARIES)/WARNINGS ]; then cat $(PLATFORM_BINARIES)/WARNINGS >&2; fi
 
 # Rewrites the committed modelDescription/*.xml after an interface change
 # (a test fails while they differ from a fresh generation).
 model-descriptions: system-deps
 	$(CARGO) build --release --locked -p fmu-plant -p fmu-controller
 	@for spec in $(FMU_SPECS); do \
-	  IFS=: read -r id pkg describe lib <<< "$$spec"; \
+	  IFS=: read -r id pkg describe <<< "$$spec"; \
 	  $(RELEASE)/$$describe $(BUILD)/describe-$$id; \
 	  cp $(BUILD)/describe-$$id/modelDescription.xml modelDescription/$$id.xml; \
 	  echo "modelDescription/$$id.xml"; \
@@ -90,7 +121,7 @@ rust-test: system-deps
 systems: fmus venv
 	$(PY) -m demo.systems --dist $(DIST)
 
-python-test: fmus venv systems
+python-test: fmus venv systems wine
 	$(PY) -m pytest tests -q -rP
 
 test: lint rust-test python-test

@@ -10,8 +10,6 @@ the same the Rust side is generated from."""
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
 import subprocess
 import zipfile
@@ -22,19 +20,9 @@ from fmpy import read_model_description
 
 from demo.cosim import Fmu
 from tests.conftest import REPO_ROOT
+from tests.platform_binaries import C_FLAGS, C_IMPORTER, C_IMPORTER_CASES, fmi_headers
 
-SOURCE = REPO_ROOT / "tests" / "c_importer" / "importer.c"
-CASES = [("FlexureStage", "u1", 5.0, "s1"), ("PiezoController", "y_ref", 6.0, "u1")]
-
-
-def fmi_headers() -> Path:
-    metadata = json.loads(subprocess.run(
-        [os.environ.get("CARGO", "cargo"), "metadata", "--format-version", "1", "--locked"],
-        cwd=REPO_ROOT, check=True, capture_output=True, text=True).stdout)
-    package = next(p for p in metadata["packages"] if p["name"] == "fmi-sys")
-    headers = Path(package["manifest_path"]).parent / "fmi-standard2" / "headers"
-    assert (headers / "fmi2FunctionTypes.h").is_file(), headers
-    return headers
+SOURCE = C_IMPORTER / "importer.c"
 
 
 @pytest.fixture(scope="module")
@@ -43,13 +31,12 @@ def importer(tmp_path_factory) -> Path:
         pytest.fail("gcc is needed to build the C importer", pytrace=False)
     out = tmp_path_factory.mktemp("c_importer") / "importer"
     subprocess.run(
-        ["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{fmi_headers()}",
-         str(SOURCE), "-o", str(out), "-ldl"],
+        ["gcc", *C_FLAGS, f"-I{fmi_headers()}", str(SOURCE), "-o", str(out), "-ldl"],
         check=True, capture_output=True, text=True)
     return out
 
 
-@pytest.mark.parametrize("model, input_name, value, output_name", CASES)
+@pytest.mark.parametrize("model, input_name, value, output_name", C_IMPORTER_CASES)
 def test_a_c_importer_runs_the_fmu_and_agrees_with_fmpy(importer, tmp_path, model, input_name,
                                                         value, output_name):
     fmu_path = REPO_ROOT / "dist" / f"{model}.fmu"

@@ -2,12 +2,14 @@
 //!
 //! ```text
 //! fmu-pack --description build/FlexureStage \
-//!          --binary target/release/libfmu_plant.so --platform linux64 \
+//!          --binary linux64=build/binaries/linux64/libfmu_plant.so \
+//!          --binary win64=build/binaries/win64/fmu_plant.dll \
 //!          --out dist/FlexureStage.fmu
 //! ```
 //!
 //! The description folder holds `modelDescription.xml` and `documentation/`
-//! (written by the model's describe binary). The binary is stored as
+//! (written by the model's describe binary): one description for every
+//! platform. Each binary is stored as
 //! `binaries/<platform>/<modelIdentifier>.<ext>`, with the identifier read from
 //! the description, so the file name and `modelIdentifier` cannot disagree.
 
@@ -27,13 +29,11 @@ struct Args {
     /// Folder with modelDescription.xml and documentation/.
     #[arg(long)]
     description: PathBuf,
-    /// Platform binary, added as binaries/<platform>/<modelIdentifier>.<ext>
-    /// (repeat --binary/--platform for several platforms).
-    #[arg(long, required = true)]
-    binary: Vec<PathBuf>,
-    /// FMI platform folder of each binary: linux64, win64, darwin64.
-    #[arg(long, required = true)]
-    platform: Vec<String>,
+    /// A platform binary as `<platform>=<path>` (platform: linux64, win64,
+    /// darwin64), added as binaries/<platform>/<modelIdentifier>.<ext>;
+    /// repeat for each platform.
+    #[arg(long = "binary", required = true, value_parser = parse_binary)]
+    binaries: Vec<PlatformBinary>,
     /// Output .fmu file.
     #[arg(long)]
     out: PathBuf,
@@ -72,6 +72,26 @@ fn model_identifier(xml: &str, path: &Path) -> Result<String, String> {
             _ => {}
         }
     }
+}
+
+#[derive(Clone, Debug)]
+struct PlatformBinary {
+    platform: String,
+    path: PathBuf,
+}
+
+fn parse_binary(argument: &str) -> Result<PlatformBinary, String> {
+    let (platform, path) = argument
+        .split_once('=')
+        .ok_or_else(|| format!("{argument:?}: expected <platform>=<path>"))?;
+    extension(platform)?;
+    if path.is_empty() {
+        return Err(format!("{argument:?}: no path after '='"));
+    }
+    Ok(PlatformBinary {
+        platform: platform.to_owned(),
+        path: PathBuf::from(path),
+    })
 }
 
 fn extension(platform: &str) -> Result<&'static str, String> {
@@ -121,8 +141,13 @@ fn add_tree(
 }
 
 fn pack(args: &Args) -> Result<(), String> {
-    if args.binary.len() != args.platform.len() {
-        return Err("give one --platform per --binary".into());
+    for (i, binary) in args.binaries.iter().enumerate() {
+        if args.binaries[..i]
+            .iter()
+            .any(|b| b.platform == binary.platform)
+        {
+            return Err(format!("two binaries for {}", binary.platform));
+        }
     }
     let description = args.description.join("modelDescription.xml");
     let xml =
@@ -146,9 +171,18 @@ fn pack(args: &Args) -> Result<(), String> {
     if resources.is_dir() {
         add_tree(&mut zip, &resources, "resources/", options)?;
     }
-    for (binary, platform) in args.binary.iter().zip(&args.platform) {
-        let name = format!("binaries/{platform}/{identifier}.{}", extension(platform)?);
-        add_file(&mut zip, &name, binary, options.unix_permissions(0o755))?;
+    for binary in &args.binaries {
+        let name = format!(
+            "binaries/{}/{identifier}.{}",
+            binary.platform,
+            extension(&binary.platform)?
+        );
+        add_file(
+            &mut zip,
+            &name,
+            &binary.path,
+            options.unix_permissions(0o755),
+        )?;
     }
     zip.finish().map_err(|e| e.to_string())?;
     Ok(())
@@ -165,5 +199,91 @@ fn main() -> ExitCode {
             eprintln!("fmu-pack: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DESCRIPTION: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="M" guid="{0}">
+  <CoSimulation modelIdentifier="Model"/>
+</fmiModelDescription>
+"#;
+
+    /// A fresh folder below the system's temporary one, per test.
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("fmu-pack-{name}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(dir.join("description")).unwrap();
+        fs::write(dir.join("description/modelDescription.xml"), DESCRIPTION).unwrap();
+        dir
+    }
+
+    fn binary(argument: &str) -> PlatformBinary {
+        parse_binary(argument).unwrap()
+    }
+
+    #[test]
+    fn binaries_are_given_as_platform_equals_path() {
+        let b = binary("win64=target/x.dll");
+        assert_eq!(
+            (b.platform.as_str(), b.path.as_path()),
+            ("win64", Path::new("target/x.dll"))
+        );
+        assert!(
+            parse_binary("target/x.dll")
+                .unwrap_err()
+                .contains("<platform>=<path>")
+        );
+        assert!(
+            parse_binary("win65=x.dll")
+                .unwrap_err()
+                .contains("unknown FMI platform")
+        );
+        assert!(parse_binary("linux64=").unwrap_err().contains("no path"));
+    }
+
+    #[test]
+    fn every_platform_binary_is_stored_under_the_model_identifier() {
+        let dir = scratch("platforms");
+        fs::write(dir.join("a.so"), b"linux").unwrap();
+        fs::write(dir.join("a.dll"), b"windows").unwrap();
+        let args = Args {
+            description: dir.join("description"),
+            binaries: vec![
+                binary(&format!("linux64={}", dir.join("a.so").display())),
+                binary(&format!("win64={}", dir.join("a.dll").display())),
+            ],
+            out: dir.join("Model.fmu"),
+        };
+        pack(&args).unwrap();
+        let mut archive = zip::ZipArchive::new(File::open(&args.out).unwrap()).unwrap();
+        for (name, content) in [
+            ("binaries/linux64/Model.so", "linux"),
+            ("binaries/win64/Model.dll", "windows"),
+        ] {
+            let mut text = String::new();
+            io::Read::read_to_string(&mut archive.by_name(name).unwrap(), &mut text).unwrap();
+            assert_eq!(text, content, "{name}");
+        }
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn two_binaries_for_one_platform_are_refused() {
+        let dir = scratch("duplicate");
+        let args = Args {
+            description: dir.join("description"),
+            binaries: vec![binary("linux64=a.so"), binary("linux64=b.so")],
+            out: dir.join("Model.fmu"),
+        };
+        assert_eq!(pack(&args).unwrap_err(), "two binaries for linux64");
+        assert!(
+            !args.out.exists(),
+            "nothing is written for a refused command"
+        );
+        fs::remove_dir_all(&dir).unwrap();
     }
 }

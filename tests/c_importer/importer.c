@@ -1,21 +1,23 @@
 /* A minimal FMI 2.0 co-simulation importer in C, as tools written in C load
- * an FMU binary: dlopen, every function resolved through the official
- * typedefs of fmi2FunctionTypes.h, then instantiate, initialize, step, save
- * and restore the FMU state (in memory and serialized), terminate, free.
- * Built with -Wall -Wextra -Werror -pedantic by tests/test_c_importer.py.
+ * an FMU binary: dlopen (LoadLibrary on Windows), every function resolved
+ * through the official typedefs of fmi2FunctionTypes.h, then instantiate,
+ * initialize, step, save and restore the FMU state (in memory and
+ * serialized), terminate, free. Built with -Wall -Wextra -Werror -pedantic
+ * by tests/test_c_importer.py (gcc) and tests/test_windows_binaries.py
+ * (x86_64-w64-mingw32-gcc, run under wine).
  *
  * usage: importer <library> <guid> <input vr> <input value> <output vr>
  * prints the output after 100 steps of 1e-4 s; exits non-zero on any
  * status other than fmi2OK, a missing symbol, or a state that does not
  * restore bit for bit. */
 
-#include <dlfcn.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "fmi2FunctionTypes.h"
+#include "fmu_library.h"
 
 #define STEPS 100
 #define SAVE_AT 50
@@ -33,12 +35,9 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
     fputc('\n', stderr);
 }
 
-/* Resolves `name` into a pointer of the official type name##TYPE. The
- * object-pointer detour is POSIX's blessed way past ISO C's ban on casting
- * void * to a function pointer. */
+/* Resolves `name` into a pointer of the official type name##TYPE. */
 #define RESOLVE(name)                                                   \
-    name##TYPE *name = NULL;                                           \
-    *(void **)(&name) = dlsym(library, #name);                          \
+    name##TYPE *name = (name##TYPE *)fmu_library_symbol(library, #name); \
     if (name == NULL) {                                                 \
         fprintf(stderr, "missing symbol %s\n", #name);                  \
         return 2;                                                       \
@@ -54,7 +53,7 @@ static void logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2Status
     } while (0)
 
 int main(int argc, char **argv) {
-    void *library;
+    fmu_library library;
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
     fmi2Component c;
     fmi2ValueReference input, output;
@@ -69,9 +68,8 @@ int main(int argc, char **argv) {
                 argv[0]);
         return 1;
     }
-    library = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    library = fmu_library_open(argv[1]);
     if (library == NULL) {
-        fprintf(stderr, "dlopen: %s\n", dlerror());
         return 2;
     }
     input = (fmi2ValueReference)strtoul(argv[3], NULL, 10);
@@ -178,6 +176,6 @@ int main(int argc, char **argv) {
         fmi2FreeInstance(c);
         printf("%.17g\n", first[STEPS - 1]);
     }
-    dlclose(library);
+    fmu_library_close(library);
     return 0;
 }
