@@ -443,9 +443,16 @@ def container_configuration(members: list[Member]):
     )
 
 
-#: The container runtime ships for these FMI 2.0 platforms; the inner FMUs
-#: only for linux64, so the container keeps only linux64.
-CONTAINER_PLATFORM = "linux64"
+def shared_platforms(names: list[str]) -> set[str]:
+    """The FMI 2.0 platforms for which every inner FMU (extracted under
+    resources/<FMU>/) carries a binary: fmpy's runtime ships for linux64,
+    win64 and darwin64, ours for linux64 and win64, so a container binary for a
+    platform without its inner binaries would load and then fail."""
+    parts = [name.split("/") for name in names if name.startswith("resources/")]
+    inner = {p[1] for p in parts if len(p) >= 3}
+    carried = {(p[1], p[3]) for p in parts if len(p) >= 5 and p[2] == "binaries"}
+    return {platform for platform in ("linux64", "win64", "darwin64")
+            if all((fmu, platform) in carried for fmu in inner)}
 
 
 def write_container(members: list[Member], out: Path) -> Path:
@@ -459,13 +466,14 @@ def write_container(members: list[Member], out: Path) -> Path:
         create_container_fmu(configuration, work / "unzipped", raw)
         entries = []
         with zipfile.ZipFile(raw) as archive:
+            platforms = shared_platforms(archive.namelist())
+            if "linux64" not in platforms:
+                raise SystemMismatch("the inner FMUs carry no common linux64 binary")
             for name in sorted(archive.namelist()):
                 # fmpy zips its work folder while writing the zip into it: drop that.
                 if name.endswith("/") or name == "Container.zip":
                     continue
-                if name.startswith("binaries/") and not name.startswith(
-                    f"binaries/{CONTAINER_PLATFORM}/"
-                ):
+                if name.startswith("binaries/") and name.split("/")[1] not in platforms:
                     continue
                 entries.append((name, archive.read(name)))
         _write_zip(out, entries)
