@@ -218,7 +218,7 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         );
         return ptr::null_mut();
     }
-    let guid = match model_description::guid::<M>() {
+    let guid = match model_description::cached_guid::<M>() {
         Ok(guid) => guid,
         Err(e) => {
             logger.error(

@@ -174,3 +174,15 @@ fn another_models_fmu_state_is_refused_and_left_untouched() {
         abi::free_instance::<Left>(left);
     }
 }
+
+/// fmi2Instantiate checks the GUID from a per-process cache: each model gets
+/// its own, equal to a fresh computation.
+#[test]
+fn cached_guids_are_per_model() {
+    use fmi2_cosim::model_description::{cached_guid, guid};
+    for _ in 0..2 {
+        assert_eq!(cached_guid::<Left>().unwrap(), guid::<Left>().unwrap());
+        assert_eq!(cached_guid::<Right>().unwrap(), guid::<Right>().unwrap());
+    }
+    assert_ne!(guid::<Left>().unwrap(), guid::<Right>().unwrap());
+}
