@@ -504,6 +504,17 @@ impl<M: CoSimModel> Instance<M> {
                 format_args!("currentCommunicationPoint must be finite (got {current_time})"),
             );
         }
+        // The FMU's time after the step is the next communication point, which
+        // must be finite too, or no step could follow.
+        if !(current_time + step_size).is_finite() {
+            return self.error(
+                function,
+                format_args!(
+                    "the step from {current_time} by {step_size} ends beyond the largest \
+                     representable time"
+                ),
+            );
+        }
         // Importers that keep time in integer nanoseconds (libcosim) or sum steps
         // in floating point land a rounding error away from the FMU's time.
         let tolerance = (1e-9 * current_time.abs().max(1.0)).min(0.5 * step_size);

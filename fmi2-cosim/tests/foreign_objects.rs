@@ -2,6 +2,8 @@
 //! importer: an instance or FMU state of one, passed to the other's entry
 //! points by mistake, is refused and left untouched. Both models have the same
 //! memory layout, so only the model-specific magic number tells them apart.
+//! The same integrator model, which survives any step size, also shows the
+//! layer's own refusal of a step that ends beyond the largest time.
 
 use std::ffi::CString;
 use std::ptr;
@@ -185,4 +187,41 @@ fn cached_guids_are_per_model() {
         assert_eq!(cached_guid::<Right>().unwrap(), guid::<Right>().unwrap());
     }
     assert_ne!(guid::<Left>().unwrap(), guid::<Right>().unwrap());
+}
+
+/// A step whose end time overflows is refused: the FMU's time would become
+/// infinite and no communication point could follow it.
+#[test]
+fn a_step_ending_beyond_the_largest_time_is_refused() {
+    let callbacks = sys::fmi2CallbackFunctions {
+        logger: None,
+        allocateMemory: None,
+        freeMemory: None,
+        stepFinished: None,
+        componentEnvironment: ptr::null_mut(),
+    };
+    let guid = CString::new(fmi2_cosim::model_description::guid::<Left>().unwrap()).unwrap();
+    unsafe {
+        let c = abi::instantiate::<Left>(
+            c"late".as_ptr(),
+            sys::fmi2Type_fmi2CoSimulation,
+            guid.as_ptr(),
+            ptr::null(),
+            &callbacks,
+            0,
+            0,
+        );
+        assert_eq!(abi::setup_experiment::<Left>(c, 0, 0.0, 1e300, 0, 0.0), OK);
+        assert_eq!(abi::enter_initialization_mode::<Left>(c), OK);
+        assert_eq!(abi::exit_initialization_mode::<Left>(c), OK);
+        assert_eq!(abi::do_step::<Left>(c, 1e300, f64::MAX, 1), ERROR);
+        let mut time = f64::NAN;
+        assert_eq!(
+            abi::get_real_status::<Left>(c, sys::fmi2StatusKind_fmi2LastSuccessfulTime, &mut time),
+            ERROR,
+            "the instance is in its error state"
+        );
+        assert_eq!(abi::reset::<Left>(c), OK);
+        abi::free_instance::<Left>(c);
+    }
 }
