@@ -246,6 +246,7 @@ def test_overflowing_controller_output_is_an_error(envs):
     slave.set_real({"x_ref": 5.0, "s1": 0.0, "s2": 0.0, "s3": 3.0})
     status = step_status(slave, 1e-4)
     assert status == fmi2.fmi2Error, slave.log.dump()
-    text = " ".join(r.text for r in slave.log.matching("not finite", status=fmi2.fmi2Error))
-    assert "t = 0" in text and "output u" in text, slave.log.dump()
+    text = " ".join(r.text for r in slave.log.matching("became", status=fmi2.fmi2Error))
+    # The first non-finite output by its FMI name, and the time.
+    assert re.search(r"t = 0: \w+ became (NaN|inf|-inf)", text), slave.log.dump()
     slave.free()

@@ -25,6 +25,7 @@ use fmi_sys::fmi2 as sys;
 use fmi_sys::fmi2::Fmi2Binding;
 
 pub mod checks;
+pub mod fuzz;
 pub mod table;
 
 pub const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
@@ -102,6 +103,9 @@ pub struct VariableInfo {
     pub variability: Option<Variability>,
     pub kind: &'static str,
     pub start: Option<f64>,
+    /// The declared range (`min`, `max` of the Real or Integer element).
+    pub min: Option<f64>,
+    pub max: Option<f64>,
 }
 
 /// A loaded FMU binary and its modelDescription.
@@ -126,11 +130,21 @@ impl Fmu {
             .map_err(|e| format!("cannot load {}: {e}", library.display()))?;
         let description = Fmi2ModelDescription::deserialize(model_description)
             .map_err(|e| format!("modelDescription does not parse with fmi-schema: {e}"))?;
+        // fmi-schema does not parse min/max; they are read here, in document order.
+        let ranges = declared_ranges(model_description)?;
+        if ranges.len() != description.model_variables.variables.len() {
+            return Err(format!(
+                "{} ScalarVariables parsed but {} type elements with a range read",
+                description.model_variables.variables.len(),
+                ranges.len()
+            ));
+        }
         let variables = description
             .model_variables
             .variables
             .iter()
-            .map(|v| {
+            .zip(ranges)
+            .map(|(v, (min, max))| {
                 let (kind, start) = match &v.elem {
                     ScalarVariableElement::Real(r) => ("Real", r.start),
                     ScalarVariableElement::Integer(i) => ("Integer", i.start.map(f64::from)),
@@ -147,6 +161,8 @@ impl Fmu {
                     variability: v.variability,
                     kind,
                     start,
+                    min,
+                    max,
                 }
             })
             .collect();
@@ -238,6 +254,54 @@ impl Fmu {
             time: 0.0,
         })
     }
+}
+
+/// A declared `(min, max)`.
+type Range = (Option<f64>, Option<f64>);
+
+/// The `min` and `max` attributes of the type element (Real, Integer, ...) of
+/// every ScalarVariable, in document order.
+fn declared_ranges(model_description: &str) -> Result<Vec<Range>, String> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_str(model_description);
+    let mut ranges = Vec::new();
+    let mut in_variable = false;
+    loop {
+        let event = reader
+            .read_event()
+            .map_err(|e| format!("modelDescription is not XML: {e}"))?;
+        match event {
+            Event::Start(e) if e.name().as_ref() == "ScalarVariable" => in_variable = true,
+            Event::End(e) if e.name().as_ref() == "ScalarVariable" => in_variable = false,
+            Event::Start(e) | Event::Empty(e)
+                if in_variable
+                    && matches!(
+                        e.name().as_ref(),
+                        "Real" | "Integer" | "Boolean" | "String" | "Enumeration"
+                    ) =>
+            {
+                let mut range = (None, None);
+                for attribute in e.attributes() {
+                    let attribute =
+                        attribute.map_err(|e| format!("bad attribute in modelDescription: {e}"))?;
+                    let slot = match attribute.key.as_ref() {
+                        "min" => &mut range.0,
+                        "max" => &mut range.1,
+                        _ => continue,
+                    };
+                    let text = attribute.value.as_ref();
+                    *slot = Some(
+                        text.parse::<f64>()
+                            .map_err(|e| format!("range attribute {text:?}: {e}"))?,
+                    );
+                }
+                ranges.push(range);
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    Ok(ranges)
 }
 
 /// Callbacks whose logger writes into `sink`.

@@ -13,8 +13,8 @@ use std::ptr;
 
 use fmi_sys::fmi2 as sys;
 
-use crate::fmu_state::{self, SNAPSHOT_MAGIC, Snapshot};
-use crate::instance::{FmiValue, INSTANCE_MAGIC, Instance};
+use crate::fmu_state::{self, Snapshot};
+use crate::instance::{FmiValue, Instance, Magic};
 use crate::logging::{LogCategory, Logger};
 use crate::model::CoSimModel;
 use crate::model_description;
@@ -36,9 +36,11 @@ fn panic_message(payload: &(dyn std::any::Any + Send)) -> &str {
 /// The instance behind `c`, if it is one of ours.
 ///
 /// # Safety
-/// `c` must be NULL or a pointer returned by `fmi2Instantiate` of model `M`
-/// that was not freed. A NULL pointer and a pointer to another object of this
-/// layer (such as an FMU state) are recognised and refused.
+/// `c` must be NULL or point to at least eight readable bytes; a pointer
+/// returned by `fmi2Instantiate` that was freed is not allowed. A NULL pointer,
+/// a pointer to another object of this layer (such as an FMU state), and an
+/// instance or state of another model built with this layer (another FMU in
+/// the same process) are recognised by their magic number and refused.
 unsafe fn instance<'a, M: CoSimModel>(c: sys::fmi2Component) -> Option<&'a mut Instance<M>> {
     if c.is_null() {
         return None;
@@ -47,7 +49,7 @@ unsafe fn instance<'a, M: CoSimModel>(c: sys::fmi2Component) -> Option<&'a mut I
     // repr(C) with a u64 magic number first, so reading the first eight bytes
     // stays inside the allocation whichever of them `c` is.
     let magic = unsafe { ptr::read(c as *const u64) };
-    if magic != INSTANCE_MAGIC {
+    if magic != Magic::<M>::INSTANCE {
         return None;
     }
     Some(unsafe { &mut *(c as *mut Instance<M>) })
@@ -216,7 +218,7 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         );
         return ptr::null_mut();
     }
-    let guid = match model_description::guid::<M>() {
+    let guid = match model_description::cached_guid::<M>() {
         Ok(guid) => guid,
         Err(e) => {
             logger.error(
@@ -568,15 +570,16 @@ pub unsafe fn set_string<M: CoSimModel>(
 /// The snapshot behind an `fmi2FMUstate`, if it is one of ours.
 ///
 /// # Safety
-/// `state` must be NULL or a pointer returned by this layer's
-/// `fmi2GetFMUstate`/`fmi2DeSerializeFMUstate` for model `M`, not yet freed.
-unsafe fn snapshot<'a, M>(state: sys::fmi2FMUstate) -> Option<&'a mut Snapshot<M>> {
+/// `state` must be NULL or point to at least eight readable bytes; a state
+/// that was freed is not allowed. Instances, and states of another model built
+/// with this layer, are recognised by their magic number and refused.
+unsafe fn snapshot<'a, M: CoSimModel>(state: sys::fmi2FMUstate) -> Option<&'a mut Snapshot<M>> {
     if state.is_null() {
         return None;
     }
     // SAFETY: as in `instance`: the magic number is the first field.
     let magic = unsafe { ptr::read(state as *const u64) };
-    if magic != SNAPSHOT_MAGIC {
+    if magic != Magic::<M>::SNAPSHOT {
         return None;
     }
     Some(unsafe { &mut *(state as *mut Snapshot<M>) })

@@ -14,9 +14,6 @@
 
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
-/// Marks a live snapshot allocated by this layer (checked before use).
-pub(crate) const SNAPSHOT_MAGIC: u64 = 0x5453_5332_494d_4646;
-
 const FILE_MAGIC: &[u8; 8] = b"FMI2RSST";
 const FORMAT_VERSION: u32 = 1;
 const GUID_LEN: usize = 38;
@@ -33,7 +30,7 @@ pub struct SnapshotData<M> {
 }
 
 /// What `fmi2FMUstate` points to; `repr(C)` with the magic number first (see
-/// `Instance`).
+/// `Instance`; the number is model `M`'s, `instance::Magic`).
 #[repr(C)]
 pub(crate) struct Snapshot<M> {
     pub(crate) magic: u64,
@@ -43,10 +40,10 @@ pub(crate) struct Snapshot<M> {
     pub(crate) encoded: Option<Vec<u8>>,
 }
 
-impl<M> Snapshot<M> {
+impl<M: crate::CoSimModel> Snapshot<M> {
     pub(crate) fn new(data: SnapshotData<M>) -> Snapshot<M> {
         Snapshot {
-            magic: SNAPSHOT_MAGIC,
+            magic: crate::instance::Magic::<M>::SNAPSHOT,
             data,
             encoded: None,
         }

@@ -11,8 +11,48 @@ use crate::model::{CoSimModel, Context};
 use crate::status::{FmiFunction, FmiState, Status};
 use crate::variables::{Causality, Value, Variability, Variable};
 
-/// Marks a live instance allocated by this layer (checked before use).
-pub(crate) const INSTANCE_MAGIC: u64 = 0x5453_4e49_3249_4d46;
+/// Marks a live instance allocated by this layer (checked before use), before
+/// it is made model-specific by [`Magic`].
+const INSTANCE_MAGIC: u64 = 0x5453_4e49_3249_4d46;
+/// The same for FMU states (`fmu_state::Snapshot`).
+const SNAPSHOT_MAGIC: u64 = 0x5453_5332_494d_4646;
+
+/// FNV-1a of `bytes`, continuing from `hash`.
+const fn fnv1a(mut hash: u64, bytes: &[u8]) -> u64 {
+    let mut i = 0;
+    while i < bytes.len() {
+        hash ^= bytes[i] as u64;
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+        i += 1;
+    }
+    hash
+}
+
+/// The magic numbers of model `M`'s instances and FMU states. They differ
+/// between models (identifier, version and memory layout are hashed in) so
+/// that an importer that passes another FMU's instance or state to this
+/// binary, both built with this layer, is refused instead of having its
+/// object read and written as one of `M`'s.
+pub(crate) struct Magic<M>(std::marker::PhantomData<M>);
+
+impl<M: CoSimModel> Magic<M> {
+    const TAG: u64 = {
+        let info = M::INFO;
+        let mut hash = fnv1a(0xcbf2_9ce4_8422_2325, info.model_identifier.as_bytes());
+        hash = fnv1a(hash, info.version.as_bytes());
+        hash = fnv1a(hash, &(std::mem::size_of::<M>() as u64).to_le_bytes());
+        fnv1a(hash, &(std::mem::align_of::<M>() as u64).to_le_bytes())
+    };
+    /// Never 0, the value a freed object is poisoned with.
+    pub(crate) const INSTANCE: u64 = match INSTANCE_MAGIC ^ Self::TAG {
+        0 => INSTANCE_MAGIC,
+        magic => magic,
+    };
+    pub(crate) const SNAPSHOT: u64 = match SNAPSHOT_MAGIC ^ Self::TAG {
+        0 => SNAPSHOT_MAGIC,
+        magic => magic,
+    };
+}
 
 /// `repr(C)` with the magic number first, so that a pointer can be recognised
 /// by reading its first eight bytes before it is used as an instance.
@@ -109,7 +149,7 @@ impl FmiValue for bool {
 impl<M: CoSimModel> Instance<M> {
     pub(crate) fn new(logger: Logger, resource_dir: Option<PathBuf>, guid: String) -> Self {
         Instance {
-            magic: INSTANCE_MAGIC,
+            magic: Magic::<M>::INSTANCE,
             logger,
             state: FmiState::Instantiated,
             time: 0.0,
@@ -462,6 +502,17 @@ impl<M: CoSimModel> Instance<M> {
             return self.error(
                 function,
                 format_args!("currentCommunicationPoint must be finite (got {current_time})"),
+            );
+        }
+        // The FMU's time after the step is the next communication point, which
+        // must be finite too, or no step could follow.
+        if !(current_time + step_size).is_finite() {
+            return self.error(
+                function,
+                format_args!(
+                    "the step from {current_time} by {step_size} ends beyond the largest \
+                     representable time"
+                ),
             );
         }
         // Importers that keep time in integer nanoseconds (libcosim) or sum steps

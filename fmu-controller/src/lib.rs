@@ -12,8 +12,9 @@
 //! delay, as on a DSP that writes its outputs at the next sample. The outputs
 //! are 0 V until the first step, so the stage starts de-energized.
 
+use fmi2_cosim::variables::Value;
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    BaseUnit, Causality, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
     UnitDefinition, Variability, Variable, units,
 };
 use piezo_models::{
@@ -581,6 +582,42 @@ static VARIABLES: [Variable<PiezoControllerFmu>; 144] = fmi2_cosim::variables::c
     &SEED_001,
 ]);
 
+/// Whether every output of a controller sample is finite (the fast check of
+/// each step; [`PiezoControllerFmu::non_finite_output`] names the culprit).
+fn sample_is_finite(out: &ControllerOutput) -> bool {
+    let d = &out.decoupled;
+    out.u
+        .iter()
+        .chain(&out.feedforward)
+        .chain(&out.feedback)
+        .chain([
+            &out.e_x,
+            &out.e_y,
+            &out.e_theta,
+            &d.x_r2,
+            &d.x_r3,
+            &d.y_rx,
+            &d.y_rtheta,
+        ])
+        .all(|v| v.is_finite())
+}
+
+impl PiezoControllerFmu {
+    /// The first Real output that is not finite, by its FMI name.
+    fn non_finite_output(&self) -> Option<(&'static str, f64)> {
+        VARIABLES
+            .iter()
+            .filter(|v| v.causality == Causality::Output)
+            .find_map(|v| match &v.value {
+                Value::Real(r) => {
+                    let value = (r.get)(self);
+                    (!value.is_finite()).then_some((v.name, value))
+                }
+                _ => None,
+            })
+    }
+}
+
 /// The FMI name of the parameter the model calls `path` (its serde path).
 fn fmi_name(path: &str) -> Option<&'static str> {
     VARIABLES
@@ -682,16 +719,14 @@ impl CoSimModel for PiezoControllerFmu {
         let out = self
             .controller
             .step(x_ref, y_ref, theta_ref, self.sensors, step_size);
-        if let Some(channel) = out.u.iter().position(|u| !u.is_finite()) {
-            // Finite inputs and validated parameters can still overflow (e.g.
-            // gains near f64::MAX); a NaN command must not reach the plant.
+        // Finite inputs do not make every step computable: a huge step
+        // overflows the PI integrators. Such a step fails instead of handing
+        // NaN or infinite commands to the stage.
+        if !sample_is_finite(&out) {
+            let (name, value) = self.non_finite_output().unwrap_or(("an output", f64::NAN));
             return Err(ModelError(format!(
-                "t = {current_time}: output u{} = {} is not finite (feedforward {} V, feedback \
-                 {} V); check the gains and model parameters",
-                channel + 1,
-                out.u[channel],
-                out.feedforward[channel],
-                out.feedback[channel]
+                "t = {current_time}: {name} became {value} in a step of {step_size} s: the \
+                 control law cannot be computed over this step (restore an FMU state or reset)"
             )));
         }
         // Limiting is part of normal operation (a demand of 0 µm asks for a

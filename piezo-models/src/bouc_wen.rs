@@ -108,6 +108,14 @@ impl BoucWenParams {
 /// tens of volts).
 pub const SIMULATE_MAX_DU: f64 = 0.01;
 
+/// Most RK4 substeps one [`AsymmetricBoucWen::advance_to`] takes. A path this
+/// long in `max_du` substeps (1,000 V at [`SIMULATE_MAX_DU`], ten times any
+/// actuator's range) only comes from inputs no actuator sees, such as the
+/// trial voltages of an inverse model asked for an unreachable output; beyond
+/// it the substeps grow, bounding the time of a call (about 10 ms) instead of
+/// its accuracy.
+pub const MAX_SUBSTEPS: usize = 100_000;
+
 /// The rate-independent asymmetric Bouc-Wen model (seed 001 eq. (3)-(4)); see the
 /// module documentation for the reading of the asymmetry term.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -167,7 +175,9 @@ impl AsymmetricBoucWen {
     ///
     /// A non-positive or non-finite `max_du` means a single substep. A non-finite
     /// `u_new` makes the state non-finite (nothing is rejected here; the caller
-    /// checks finiteness where it matters).
+    /// checks finiteness where it matters). At most [`MAX_SUBSTEPS`] substeps
+    /// are taken: a longer path gets longer substeps, so that no input, however
+    /// absurd, makes one call run for minutes.
     pub fn advance_to(&mut self, u_new: f64, max_du: f64) {
         let du_total = u_new - self.u;
         if du_total == 0.0 {
@@ -177,7 +187,7 @@ impl AsymmetricBoucWen {
         // `ratio` is NaN or infinite only for a degenerate max_du or input; one
         // substep then (and never an unbounded loop).
         let substeps = if ratio.is_finite() {
-            ratio.ceil().max(1.0) as usize
+            ratio.ceil().clamp(1.0, MAX_SUBSTEPS as f64) as usize
         } else {
             1
         };
@@ -268,6 +278,23 @@ pub fn hysteretic_states_into(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two input paths of 1e7 V in 0.01 V substeps would take 2e9 RK4 steps
+    /// (8e9 evaluations of |h|^(n-1), minutes); the cap bounds them to 2e5.
+    /// The bound asserted, 2 s, is some 100 times what the capped calls take,
+    /// so a slow machine passes and an uncapped loop does not.
+    #[test]
+    fn an_absurd_input_path_takes_bounded_time() {
+        let mut model = AsymmetricBoucWen::new(params(1.7, 0.001));
+        let started = std::time::Instant::now();
+        model.advance_to(1e7, SIMULATE_MAX_DU);
+        model.advance_to(-1e7, SIMULATE_MAX_DU);
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(2),
+            "{:?}",
+            started.elapsed()
+        );
+    }
 
     fn params(n: f64, delta: f64) -> BoucWenParams {
         BoucWenParams {

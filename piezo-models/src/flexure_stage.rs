@@ -112,6 +112,13 @@ impl Default for FlexureStageParams {
 /// upper one the single RK4 step per piece and the chord stop being accurate.
 const MAX_VOLTAGE_STEP_RANGE: (f64, f64) = (1e-4, 10.0);
 
+/// Most integration pieces one step takes. An actuator range of 200 V at the
+/// finest solver step (1e-4 V) needs 2e6; more only comes from parameters no
+/// stage has (a range of 1e10 V), for which the pieces then grow past
+/// `max_voltage_step`: the step's time (about a second) stays bounded,
+/// not its accuracy.
+const MAX_PIECES: f64 = 2_097_152.0;
+
 /// A parameter outside its allowed range.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParamError {
@@ -480,13 +487,23 @@ impl FlexureStage {
         let pieces =
             (distance * whole.amplifier_travel / self.params.solver.max_voltage_step).ceil();
         // For any state the stage produced, D ≤ v_max − v_min; the cap only keeps a
-        // corrupted (e.g. deserialised) state from looping for ages.
-        let cap = ((self.params.amplifier.v_max - self.params.amplifier.v_min)
+        // corrupted (e.g. deserialised) state from looping for ages. MAX_PIECES
+        // bounds it where the parameters themselves ask for ages (a range of
+        // 1e10 V in 1e-4 V pieces).
+        let cap = (((self.params.amplifier.v_max - self.params.amplifier.v_min)
             / self.params.solver.max_voltage_step)
             .ceil()
-            + 1.0;
+            + 1.0)
+            .min(MAX_PIECES);
         if pieces.is_finite() && pieces > 1.0 {
             let count = pieces.min(cap) as usize;
+            // Capped pieces are longer than max_voltage_step: one RK4 substep
+            // each, or the hysteresis would split them again.
+            let max_du = if pieces > cap {
+                f64::INFINITY
+            } else {
+                self.max_du
+            };
             let increment = whole.amplifier_travel / count as f64;
             let mut elapsed = 0.0;
             for k in 1..count {
@@ -494,14 +511,16 @@ impl FlexureStage {
                 // dt = τ·ln(E_{k−1}/E_k) = τ·ln(1 + ΔE/E_k).
                 let e_k = 1.0 - k as f64 * increment;
                 let dt = self.tau * (increment / e_k).ln_1p();
-                self.advance_piece(&targets, dt);
+                self.advance_piece(&targets, dt, max_du);
                 elapsed += dt;
             }
             // The last piece ends exactly at h (it may be very long when the
             // voltages settle early in a long step).
-            self.advance_piece(&targets, (h - elapsed).max(0.0));
+            self.advance_piece(&targets, (h - elapsed).max(0.0), max_du);
         } else {
-            self.advance_piece(&targets, h);
+            // One piece: no voltage motion beyond max_voltage_step, or a path
+            // too long to count (advance_to bounds its substeps then).
+            self.advance_piece(&targets, h, self.max_du);
         }
         self.noise.draw();
         StepReport {
@@ -510,12 +529,12 @@ impl FlexureStage {
         }
     }
 
-    /// One piece of length `dt` with the amplifier relaxing towards `targets`.
-    fn advance_piece(&mut self, targets: &[f64; 3], dt: f64) {
+    /// One piece of length `dt` with the amplifier relaxing towards `targets`,
+    /// the hysteresis integrated in voltage substeps of at most `max_du`.
+    fn advance_piece(&mut self, targets: &[f64; 3], dt: f64, max_du: f64) {
         let piece = self.piece_decays(dt);
         let relax = piece.decays[0];
         let tau = self.tau;
-        let max_du = self.max_du;
         let v_a = self.amplifier.voltages();
         let mut v_b = [0.0; 3];
         for i in 0..3 {
@@ -747,6 +766,29 @@ mod tests {
             "hysteretic state h of the coupling y from PZT3 (coupling.y_from_pzt3)"
         );
         assert!(fault.value.is_nan() || fault.value.abs() > DIVERGED_DISPLACEMENT_UM);
+    }
+
+    /// Parameters that validate but ask for 2e14 pieces of 1e-4 V per step
+    /// (a 2e10 V actuator range): without a bound a step runs for days. The
+    /// bounded step takes about a second in release; 10 s (300 s unoptimized,
+    /// some 30 times slower) leaves room for a slow machine and none for an
+    /// unbounded loop.
+    #[test]
+    fn absurd_voltage_ranges_keep_a_step_bounded() {
+        let mut params = FlexureStageParams::default();
+        params.amplifier.v_min = -1e10;
+        params.amplifier.v_max = 1e10;
+        params.amplifier.gain = 1e9;
+        params.solver.max_voltage_step = 1e-4;
+        let mut stage = FlexureStage::new(params).unwrap();
+        let started = std::time::Instant::now();
+        stage.step([10.0, -10.0, 5.0], 1.0);
+        let limit = if cfg!(debug_assertions) { 300 } else { 10 };
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(limit),
+            "{:?}",
+            started.elapsed()
+        );
     }
 
     #[test]
