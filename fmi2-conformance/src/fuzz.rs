@@ -1053,13 +1053,20 @@ impl<'a> Fuzzer<'a> {
     }
 
     fn free_instance(&mut self, slot: usize) {
-        // A careful importer frees the states it took before the instance
-        // that made them (the standard lets fmi2FreeInstance release them).
+        // The states the instance made are freed with it (FMI 2.0.4 §2.1.5:
+        // fmi2FreeInstance frees all memory the FMU interface allocated), so a
+        // careful importer frees them first or never uses them again; the
+        // fuzzer does either.
         let owned: Vec<usize> = (0..self.handles.len())
             .filter(|i| self.handles[*i].owner == slot)
             .collect();
+        let free_first = self.chance(0.5);
         for index in owned.into_iter().rev() {
-            self.free_handle(slot, index);
+            if free_first {
+                self.free_handle(slot, index);
+            } else {
+                self.handles.swap_remove(index);
+            }
         }
         let live = self.slots[slot].take().expect("a live instance");
         self.begin("fmi2FreeInstance", Some(slot));

@@ -282,6 +282,10 @@ pub unsafe fn free_instance<M: CoSimModel>(c: sys::fmi2Component) {
         return;
     };
     trace(inst, FmiFunction::FreeInstance, format_args!(""));
+    // The FMU states it made that the importer did not free.
+    for state in std::mem::take(&mut inst.fmu_states) {
+        unsafe { free_snapshot::<M>(state) };
+    }
     // Poison the magic so that a second free of the same pointer is refused
     // as long as the memory has not been reused.
     inst.magic = 0;
@@ -585,20 +589,35 @@ unsafe fn snapshot<'a, M: CoSimModel>(state: sys::fmi2FMUstate) -> Option<&'a mu
     Some(unsafe { &mut *(state as *mut Snapshot<M>) })
 }
 
+/// Frees a snapshot of this layer, poisoning its magic number first.
+///
+/// # Safety
+/// `state` must be a live snapshot of model `M` made by this layer.
+unsafe fn free_snapshot<M: CoSimModel>(state: sys::fmi2FMUstate) {
+    let snapshot = state as *mut Snapshot<M>;
+    unsafe {
+        (*snapshot).magic = 0;
+        drop(Box::from_raw(snapshot));
+    }
+}
+
 /// Stores `data` in `*slot`, reusing the snapshot already there if there is one.
 ///
 /// # Safety
 /// `slot` must be valid for reads and writes; `*slot` as for [`snapshot`].
 unsafe fn store_snapshot<M: CoSimModel>(
-    inst: &Instance<M>,
+    inst: &mut Instance<M>,
     function: FmiFunction,
     slot: *mut sys::fmi2FMUstate,
     data: fmu_state::SnapshotData<M>,
 ) -> Status {
     let current = unsafe { *slot };
     if current.is_null() {
-        let boxed = Box::new(Snapshot::new(data));
-        unsafe { *slot = Box::into_raw(boxed).cast() };
+        let owner: *mut Instance<M> = inst;
+        let boxed = Box::new(Snapshot::new(data, owner.cast()));
+        let state: sys::fmi2FMUstate = Box::into_raw(boxed).cast();
+        inst.fmu_states.push(state);
+        unsafe { *slot = state };
         return Status::Ok;
     }
     match unsafe { snapshot::<M>(current) } {
@@ -626,7 +645,8 @@ pub unsafe fn get_fmu_state<M: CoSimModel>(
             if state.is_null() {
                 return inst.error(function, format_args!("FMUstate is NULL"));
             }
-            store_snapshot(inst, function, state, inst.snapshot())
+            let data = inst.snapshot();
+            store_snapshot(inst, function, state, data)
         })
     }
 }
@@ -672,8 +692,16 @@ pub unsafe fn free_fmu_state<M: CoSimModel>(
             }
             match snapshot::<M>(current) {
                 Some(snapshot) => {
-                    snapshot.magic = 0;
-                    drop(Box::from_raw(current as *mut Snapshot<M>));
+                    // The instance that made it (maybe another one than this:
+                    // states of one instance may be used with another) no
+                    // longer has to free it.
+                    let owner = snapshot.owner as *mut Instance<M>;
+                    if ptr::eq(owner, &*inst) {
+                        inst.fmu_states.retain(|s| *s != current);
+                    } else if let Some(owner) = instance::<M>(owner.cast()) {
+                        owner.fmu_states.retain(|s| *s != current);
+                    }
+                    free_snapshot::<M>(current);
                     *state = ptr::null_mut();
                     Status::Ok
                 }

@@ -38,14 +38,18 @@ pub(crate) struct Snapshot<M> {
     /// Bytes computed by `fmi2SerializedFMUstateSize`, reused by
     /// `fmi2SerializeFMUstate` so the state is encoded once.
     pub(crate) encoded: Option<Vec<u8>>,
+    /// The instance that made it (`Instance<M>`), which frees it in
+    /// `fmi2FreeInstance` unless the importer freed it before.
+    pub(crate) owner: *mut std::ffi::c_void,
 }
 
 impl<M: crate::CoSimModel> Snapshot<M> {
-    pub(crate) fn new(data: SnapshotData<M>) -> Snapshot<M> {
+    pub(crate) fn new(data: SnapshotData<M>, owner: *mut std::ffi::c_void) -> Snapshot<M> {
         Snapshot {
             magic: crate::instance::Magic::<M>::SNAPSHOT,
             data,
             encoded: None,
+            owner,
         }
     }
 }

@@ -67,6 +67,10 @@ pub struct Instance<M: CoSimModel> {
     pub(crate) model: M,
     pub(crate) resource_dir: Option<PathBuf>,
     pub(crate) guid: String,
+    /// FMU states this instance made and the importer has not freed:
+    /// `fmi2FreeInstance` frees them (FMI 2.0.4 §2.1.5: it frees all memory
+    /// the FMU interface allocated for the instance).
+    pub(crate) fmu_states: Vec<*mut std::ffi::c_void>,
 }
 
 /// What a setter does with one value after validation.
@@ -158,6 +162,7 @@ impl<M: CoSimModel> Instance<M> {
             model: M::new(),
             resource_dir,
             guid,
+            fmu_states: Vec::new(),
         }
     }
 

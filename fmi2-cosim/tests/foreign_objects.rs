@@ -3,8 +3,11 @@
 //! points by mistake, is refused and left untouched. Both models have the same
 //! memory layout, so only the model-specific magic number tells them apart.
 //! The same integrator model, which survives any step size, also shows the
-//! layer's own refusal of a step that ends beyond the largest time.
+//! layer's own refusal of a step that ends beyond the largest time, and that
+//! fmi2FreeInstance frees the FMU states the importer left to it.
 
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::ffi::CString;
 use std::ptr;
 
@@ -15,6 +18,32 @@ use fmi2_cosim::{
     UnitDefinition, Variable,
 };
 use serde::{Deserialize, Serialize};
+
+/// Counts the heap bytes each thread holds, so that a test can see what a
+/// sequence of calls leaves allocated (tests run in parallel threads).
+struct CountingAllocator;
+
+thread_local! {
+    static LIVE_BYTES: Cell<isize> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            let _ = LIVE_BYTES.try_with(|n| n.set(n.get() + layout.size() as isize));
+        }
+        p
+    }
+
+    unsafe fn dealloc(&self, p: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(p, layout) };
+        let _ = LIVE_BYTES.try_with(|n| n.set(n.get() - layout.size() as isize));
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
 const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
@@ -224,4 +253,42 @@ fn a_step_ending_beyond_the_largest_time_is_refused() {
         assert_eq!(abi::reset::<Left>(c), OK);
         abi::free_instance::<Left>(c);
     }
+}
+
+/// FMU states the importer did not free are freed with the instance that made
+/// them (FMI 2.0.4 §2.1.5), also when another instance freed some of them or
+/// restored them; none is freed twice.
+#[test]
+fn free_instance_frees_the_fmu_states_left_to_it() {
+    let live = || LIVE_BYTES.with(Cell::get);
+    // The first instantiation fills the process-wide GUID table.
+    unsafe { abi::free_instance::<Left>(instance::<Left>(1.0)) };
+    let before = live();
+    unsafe {
+        let first = instance::<Left>(1.0);
+        let second = instance::<Left>(2.0);
+        let mut states = [ptr::null_mut(); 4];
+        for state in &mut states {
+            assert_eq!(abi::get_fmu_state::<Left>(first, state), OK);
+        }
+        let mut size = 0;
+        assert_eq!(
+            abi::serialized_fmu_state_size::<Left>(first, states[1], &mut size),
+            OK
+        );
+        // One freed by its maker, one by the other instance, one restored
+        // into the other instance; two left to fmi2FreeInstance.
+        assert_eq!(abi::free_fmu_state::<Left>(first, &mut states[0]), OK);
+        assert_eq!(abi::free_fmu_state::<Left>(second, &mut states[2]), OK);
+        assert_eq!(abi::set_fmu_state::<Left>(second, states[3]), OK);
+        let mut own = ptr::null_mut();
+        assert_eq!(abi::get_fmu_state::<Left>(second, &mut own), OK);
+        abi::free_instance::<Left>(first);
+        abi::free_instance::<Left>(second);
+    }
+    assert_eq!(
+        live(),
+        before,
+        "heap bytes left after freeing both instances"
+    );
 }

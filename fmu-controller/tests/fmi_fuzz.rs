@@ -9,7 +9,7 @@ use fmi2_conformance::Fmu;
 use fmi2_conformance::fuzz::{self, FuzzConfig};
 use fmu_controller::PiezoControllerFmu;
 
-/// Calls in the normal suite: about 5 s in release on the 2-core build
+/// Calls in the normal suite: about 7 s in release on the 2-core build
 /// machine, enough for every function in every state many times over (the
 /// report's per-state and per-function counts show it).
 const CALLS: u64 = 1_000_000;

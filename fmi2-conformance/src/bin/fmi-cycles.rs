@@ -10,7 +10,8 @@
 //! initialization, an input set, five fmi2DoStep, fmi2GetFMUstate,
 //! fmi2SerializedFMUstateSize, fmi2SerializeFMUstate, fmi2DeSerializeFMUstate,
 //! fmi2SetFMUstate, fmi2FreeFMUstate of both states, a step after the restore,
-//! fmi2Terminate, fmi2FreeInstance; every status is checked. After each
+//! a third fmi2GetFMUstate left for fmi2FreeInstance to free, fmi2Terminate,
+//! fmi2FreeInstance; every status is checked. After each
 //! checkpoint (a cycle count) it prints `cycles N VmRSS R kB VmHWM H kB` from
 //! /proc/self/status.
 
@@ -96,6 +97,10 @@ fn one_lifetime(fmu: &Fmu, input: u32, cycle: u64) -> Result<(), String> {
     expect("fmi2DoStep", instance.do_step(1e-4))?;
     expect("fmi2FreeFMUstate", instance.free_state(&mut restored))?;
     expect("fmi2FreeFMUstate", instance.free_state(&mut state))?;
+    // A state the importer leaves to fmi2FreeInstance (which frees all the
+    // instance's memory, FMI 2.0.4 §2.1.5).
+    let (status, _left) = instance.get_state();
+    expect("fmi2GetFMUstate", status)?;
     expect("fmi2Terminate", instance.terminate())?;
     let log = instance.take_log();
     if log.iter().any(|r| r.status != OK) {
