@@ -40,6 +40,15 @@ system-deps:
 	    echo "libclang is missing: install it (Debian/Ubuntu: apt-get install libclang-dev)" >&2; exit 1; \
 	  fi; \
 	fi
+	@# fmi2-conformance's memory test runs 10,000 FMU lifetimes under valgrind.
+	@if ! command -v valgrind >/dev/null; then \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    echo "installing valgrind (memory test of the FMUs)"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq valgrind >/dev/null; \
+	  else \
+	    echo "valgrind is missing: install it (Debian/Ubuntu: apt-get install valgrind); the memory test will fail" >&2; \
+	  fi; \
+	fi
 
 # tests/test_windows_binaries.py runs the win64 binaries under wine. Not fatal
 # here: without wine that test fails and says why.
