@@ -182,6 +182,24 @@ impl fmt::Display for FuzzReport {
     }
 }
 
+/// The fuzz test of an FMU crate: [`run`] with the budget of [`FuzzConfig::from_env`],
+/// the report printed, and the coverage a generator that stopped reaching a
+/// state or a function would lose asserted.
+pub fn assert_rules_hold(fmu: &Fmu, foreign: &Fmu, default_calls: u64, default_seed: u64) {
+    let config = FuzzConfig::from_env(default_calls, default_seed);
+    let report = run(fmu, Some(foreign), config);
+    println!("{report}");
+    assert!(report.calls >= config.calls, "{report}");
+    // Every state was visited and every status-returning function called: a
+    // generator that stopped reaching a state would pass without testing it.
+    assert!(report.calls_in_state.iter().all(|n| *n > 0), "{report}");
+    assert_eq!(report.by_function.len(), 30, "{report}");
+    assert!(
+        report.steps_completed > 0 && report.states_restored > 0,
+        "{report}"
+    );
+}
+
 /// Runs `config.calls` calls on `fmu`; `foreign`, another FMU built with the
 /// same layer, provides instances and states to pass by mistake. Panics with
 /// the seed, the call number and the last calls when the oracle objects.
