@@ -413,19 +413,19 @@ const PORTS: [Variable<PiezoControllerFmu>; 22] = [
     ),
     output!(
         "u1",
-        "Command of the PZT1 amplifier channel (y), 0..10 V (wire to FlexureStage.u1)",
+        "Command of the PZT1 amplifier channel (y), within command_min..command_max (wire to FlexureStage.u1)",
         "V",
         u[0]
     ),
     output!(
         "u2",
-        "Command of the PZT2 amplifier channel (x pair), 0..10 V (wire to FlexureStage.u2)",
+        "Command of the PZT2 amplifier channel (x pair), within command_min..command_max (wire to FlexureStage.u2)",
         "V",
         u[1]
     ),
     output!(
         "u3",
-        "Command of the PZT3 amplifier channel (x pair), 0..10 V (wire to FlexureStage.u3)",
+        "Command of the PZT3 amplifier channel (x pair), within command_min..command_max (wire to FlexureStage.u3)",
         "V",
         u[2]
     ),
@@ -543,10 +543,10 @@ const SETTINGS: [Variable<PiezoControllerFmu>; 12] = [
         "Distance between the x sensors s2 and s3 (and PZT2, PZT3): theta_z = (s2 − s3)/L",
         "mm", [Some(0.0), None], sensor_spacing_mm),
     parameter!(fixed "command_min",
-        "Lowest command of every channel (0 V: the actuators cannot retract)",
+        "Lowest command of every channel (PI's recommended E-505 input: -2 V, -20 V at the stack)",
         "V", [None, None], command_min),
     parameter!(fixed "command_max",
-        "Highest command of every channel (10 V: 100 V after the amplifier)",
+        "Highest command of every channel (PI's recommended E-505 input: 12 V, 120 V at the stack)",
         "V", [None, None], command_max),
 ];
 
@@ -572,14 +572,29 @@ const DECOUPLING: [Variable<PiezoControllerFmu>; 16] = fmi2_cosim::variables::co
         "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
 ]);
 
+/// The rest the models start from, added after the first release: appended
+/// so that the value references of everything above stay as they were.
+const RESTS: [Variable<PiezoControllerFmu>; 3] = [
+    parameter!(fixed "x.rest_cycle",
+        "Inverse P-I model of the x pair: its memories start where a demand 0 → rest_cycle → 0 leaves them, the loop an operated actuator rests on (0: eq. 1's zero memories)",
+        "um", [Some(0.0), None], x_model.rest_cycle),
+    parameter!(fixed "y.rest_cycle",
+        "Inverse P-I model of y: its memories start where a demand 0 → rest_cycle → 0 leaves them (0: eq. 1's zero memories)",
+        "um", [Some(0.0), None], y_model.rest_cycle),
+    parameter!(fixed "bouc_wen.rest_cycle",
+        "Seed 001's Bouc-Wen models start at the 0 V end of their loop between 0 and this command, where an operated actuator rests (0: h = 0)",
+        "V", [Some(0.0), None], bouc_wen.rest_cycle),
+];
+
 /// Every variable, in value-reference order.
-static VARIABLES: [Variable<PiezoControllerFmu>; 144] = fmi2_cosim::variables::concat(&[
+static VARIABLES: [Variable<PiezoControllerFmu>; 147] = fmi2_cosim::variables::concat(&[
     &PORTS,
     &SETTINGS,
     &X_MODEL,
     &Y_MODEL,
     &DECOUPLING,
     &SEED_001,
+    &RESTS,
 ]);
 
 /// Whether every output of a controller sample is finite (the fast check of

@@ -131,21 +131,21 @@ macro_rules! bouc_wen_parameters {
 const PORTS: [Variable<FlexureStageFmu>; 12] = [
     Variable::real_input(
         "u1",
-        "Command voltage of the PZT1 amplifier channel (drives y), nominal 0..10 V",
+        "Command voltage of the PZT1 amplifier channel (drives y), 0..10 V for 0..100 V (-3..13 V accepted)",
         "V",
         |m| m.commands[0],
         |m, v| m.commands[0] = v,
     ),
     Variable::real_input(
         "u2",
-        "Command voltage of the PZT2 amplifier channel (x pair), nominal 0..10 V",
+        "Command voltage of the PZT2 amplifier channel (x pair), 0..10 V for 0..100 V (-3..13 V accepted)",
         "V",
         |m| m.commands[1],
         |m, v| m.commands[1] = v,
     ),
     Variable::real_input(
         "u3",
-        "Command voltage of the PZT3 amplifier channel (x pair), nominal 0..10 V",
+        "Command voltage of the PZT3 amplifier channel (x pair), 0..10 V for 0..100 V (-3..13 V accepted)",
         "V",
         |m| m.commands[2],
         |m, v| m.commands[2] = v,
@@ -209,14 +209,14 @@ const AMPLIFIER: [Variable<FlexureStageFmu>; 4] = [
     ),
     parameter!(
         "amplifier.v_min",
-        "Lowest actuator voltage (the PZTs cannot retract)",
+        "Lowest amplifier output voltage (PI E-505: -30 V)",
         "V",
         [None, None],
         amplifier.v_min
     ),
     parameter!(
         "amplifier.v_max",
-        "Highest actuator voltage",
+        "Highest amplifier output voltage (PI E-505: 130 V)",
         "V",
         [None, None],
         amplifier.v_max
@@ -367,7 +367,7 @@ const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
     .model_path("noise.enabled"),
     parameter!(
         "noise.rms",
-        "Sensor noise RMS (Keyence LK-H050 class laser sensor)",
+        "Sensor noise RMS per reading (Keyence LK-H050: repeatability 0.025 um as a 99 % band)",
         "um",
         [Some(0.0), None],
         noise.rms_um
@@ -390,8 +390,37 @@ const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
     ),
 ];
 
+/// The amplifier's input range and the actuators' rest, added after the
+/// first release: appended so that the value references of everything above
+/// stay as they were.
+const APPENDED: [Variable<FlexureStageFmu>; 3] = [
+    parameter!(
+        "amplifier.input_min",
+        "Lowest control input the amplifier follows (PI E-505: -3 V)",
+        "V",
+        [None, None],
+        amplifier.input_min
+    ),
+    parameter!(
+        "amplifier.input_max",
+        "Highest control input the amplifier follows (PI E-505: 13 V)",
+        "V",
+        [None, None],
+        amplifier.input_max
+    ),
+    parameter!(
+        "rest_cycle_voltage",
+        "Working loop of the stacks that sets the rest the stage starts from: each hysteresis \
+         model starts at the 0 V end of its loop to this voltage, readings zeroed there (0: virgin \
+         state)",
+        "V",
+        [Some(0.0), None],
+        rest_cycle_voltage
+    ),
+];
+
 /// Every variable, in value-reference order.
-static VARIABLES: [Variable<FlexureStageFmu>; 82] = fmi2_cosim::variables::concat(&[
+static VARIABLES: [Variable<FlexureStageFmu>; 85] = fmi2_cosim::variables::concat(&[
     &PORTS,
     &AMPLIFIER,
     &PZT1_HYSTERESIS,
@@ -405,6 +434,7 @@ static VARIABLES: [Variable<FlexureStageFmu>; 82] = fmi2_cosim::variables::conca
     &COUPLING_Y_FROM_PZT2_HYSTERESIS,
     &COUPLING_Y_FROM_PZT3_HYSTERESIS,
     &STRUCTURE_SENSORS_SOLVER,
+    &APPENDED,
 ]);
 
 /// The FMI name of the parameter the model calls `path` (its serde path, as in
@@ -491,12 +521,14 @@ impl CoSimModel for FlexureStageFmu {
                 let amp = &self.params.amplifier;
                 ctx.warning(format_args!(
                     "t = {current_time}: PZT{} command u{} = {} V asks the amplifier for {} V, \
-                     outside the actuator range {}..{} V; the output is clipped (reported once \
-                     per channel)",
+                     outside its input range {}..{} V or output range {}..{} V; the output is \
+                     clipped (reported once per channel)",
                     channel + 1,
                     channel + 1,
                     self.commands[channel],
                     amp.gain * self.commands[channel],
+                    amp.input_min,
+                    amp.input_max,
                     amp.v_min,
                     amp.v_max
                 ));

@@ -247,6 +247,7 @@ pub fn fit_modified_inverse_pi_with_progress(
         ws: std::array::from_fn::<f64, DEAD_ZONE_OPERATORS, _>(|j| fit.ws[j]),
         c: fit.c,
         u1max: fit.u1max,
+        rest_cycle: 0.0,
     };
     let quality = score(
         &mut piezo_models::ModifiedInversePi::new(params),

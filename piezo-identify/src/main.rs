@@ -177,9 +177,19 @@ struct StageArgs {
     plant_parameters: Option<PathBuf>,
     #[command(flatten)]
     search: SearchArgs,
-    /// Home of the single-axis runs, "X,Y" in um (seed 000's stage: 8,7).
-    #[arg(long, default_value = "8,7")]
-    home: String,
+    /// Scale of the single-axis runs relative to seed 000's (10 um sines,
+    /// x at half of a 12.74 um stroke for the rotation run, 10 um for an
+    /// unused cutoff): the stage's strokes over seed 000's.
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
+    /// The stage does not rotate (its x actuators move together): no
+    /// rotation run, D4 stays zero.
+    #[arg(long)]
+    no_rotation: bool,
+    /// Command range of the controller, "MIN,MAX" in V (seed 000's E-505:
+    /// -2,12).
+    #[arg(long, default_value = "-2,12", allow_hyphen_values = true)]
+    command_range: String,
     /// Factor on the §3.2 PI gains for the single-axis runs (1 for seed
     /// 000's stage; the inverse of the stage's um per volt relative to it).
     #[arg(long, default_value_t = 1.0)]
@@ -659,22 +669,27 @@ fn stage(args: &StageArgs) -> Result<(), String> {
         }
     };
     let tick = |_: usize| bar.inc(1);
-    let home: Vec<f64> = args
-        .home
+    let range: Vec<f64> = args
+        .command_range
         .split(',')
         .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
         .collect::<Option<Vec<f64>>>()
-        .filter(|v| v.len() == 2)
-        .ok_or_else(|| format!("--home {}: give X,Y in um, e.g. 8,7", args.home))?;
-    if !(args.gain_scale.is_finite() && args.gain_scale > 0.0) {
-        return Err(format!(
-            "--gain-scale {}: give a positive factor",
-            args.gain_scale
-        ));
+        .filter(|v| v.len() == 2 && v[0] < v[1])
+        .ok_or_else(|| {
+            format!(
+                "--command-range {}: give MIN,MAX in V with MIN < MAX, e.g. -2,12",
+                args.command_range
+            )
+        })?;
+    for (name, value) in [("--gain-scale", args.gain_scale), ("--scale", args.scale)] {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(format!("{name} {value}: give a positive factor"));
+        }
     }
     let conditions = StageConditions {
-        home: [home[0], home[1], 0.0],
         gain_scale: args.gain_scale,
+        command_range: (range[0], range[1]),
+        ..StageConditions::scaled(args.scale, !args.no_rotation)
     };
     let identified = identify_stage(&plant, &options, args.rounds, &conditions, &step, &tick)
         .map_err(|e| format!("{}: {e}", args.plant.display()))?;

@@ -281,6 +281,7 @@ mod tests {
             c: 1.1,
             u1max: 12.0,
             a: [1e-4, -0.01, 0.3, 0.2],
+            rest_cycle: 0.0,
         };
         let y = sine(500);
         let direct = inverse_pi_trajectory(&params, &y, 1e-3);
