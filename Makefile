@@ -151,15 +151,19 @@ stage-preset: fmus
 	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
 
-# PiezoController identified on the XY200S preset of FlexureStage, by the same
-# procedure as the stage preset, about a home at the same fraction of the
-# strokes (90, 85 um) and with the PI gains scaled by the inverse of the
-# XY200S's um per volt relative to seed 000's stage (x 12 %, y 11 %: 0.085).
+# PiezoController identified on the XY200S preset of FlexureStage by the same
+# procedure as the stage preset, rescaled to its strokes (144.37 / 12.74 =
+# 11.33: 113 um sines, cutoffs at +-113 um), with the PI gains scaled by the
+# inverse of the XY200S's um per volt relative to seed 000's stage (0.085),
+# its 0..10 V command range (0..150 V, seed 001 §5.2) and therefore the held
+# axis at half stroke (72, 75 um), the home seed 000 §3.2 gives an axis whose
+# actuators cannot go below 0 V. It does not rotate (one x actuator).
 xy200s-controller-preset: fmus
 	$(CARGO) build --release --locked -p piezo-identify
 	mkdir -p out/stage
 	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu \
-	  --plant-parameters $(DIST)/presets/FlexureStage.xy200s.json --home 90,85 --gain-scale 0.085 \
+	  --plant-parameters $(DIST)/presets/FlexureStage.xy200s.json --scale 11.3320 --no-rotation \
+	  --held 72.19,74.64 --command-range 0,10 --gain-scale 0.085 \
 	  --rounds 3 --out piezo-models/presets/piezo_controller_xy200s.json \
 	  --report out/stage/xy200s_identification.json
 	$(MAKE) fmus

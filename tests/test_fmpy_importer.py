@@ -870,17 +870,18 @@ def test_sensor_noise_rms_parameter_is_used(env):
 
 
 # --------------------------------------------------------------------------
-# amplifier clipping (spec: 0..100 V, one warning per channel)
+# amplifier clipping (E-505: input -3..13 V, output -30..130 V; one warning
+# per channel)
 # --------------------------------------------------------------------------
 
 
 def test_amplifier_clipping_warns_once_per_channel(env):
     s = env.instantiate("clip").initialize()
-    s.set_real({"u1": 15.0, "u2": -3.0, "u3": 5.0})
+    s.set_real({"u1": 15.0, "u2": -4.0, "u3": 5.0})
     s.step_n(500)  # 50 ms: the 3 kHz amplifiers have settled
     v = s.get("amplifier.voltage[1]", "amplifier.voltage[2]", "amplifier.voltage[3]")
-    assert v[0] == pytest.approx(100.0) and v[1] == pytest.approx(0.0) and v[2] == pytest.approx(50.0), (
-        f"amplifier voltages {v}: expected 150 V clipped to 100 V, -30 V clipped to 0 V, 50 V"
+    assert v[0] == pytest.approx(130.0) and v[1] == pytest.approx(-30.0) and v[2] == pytest.approx(50.0), (
+        f"amplifier voltages {v}: expected 15 V clipped to 13 V (130 V), -4 V to -3 V (-30 V), 50 V"
     )
     warnings = s.log.matching("clipped", status=fmi2.fmi2Warning)
     per_channel = sorted(re.search(r"PZT(\d)", w.text).group(1) for w in warnings)

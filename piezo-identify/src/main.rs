@@ -20,7 +20,9 @@ use piezo_identify::compare::{
 use piezo_identify::decoupling::fit_compensation;
 use piezo_identify::fit::{FitQuality, score};
 use piezo_identify::gapso::{Bounds, GaPsoOptions};
-use piezo_identify::plant::{PlantFmu, RecordAxis, read_parameter_set, sine_records};
+use piezo_identify::plant::{
+    ParameterValue, PlantFmu, RecordAxis, read_parameter_set, sine_records,
+};
 use piezo_identify::stage::{StageConditions, identify_stage};
 use piezo_identify::validation::{
     ErrorReport, ScaleReference, centred_moving_average, displacement_offset, shifted,
@@ -186,6 +188,11 @@ struct StageArgs {
     /// rotation run, D4 stays zero.
     #[arg(long)]
     no_rotation: bool,
+    /// Demands of the held translations, "X,Y" in um: x during the y run, y
+    /// during the x run (seed 000 §5: 0,0). A stage whose commands cannot go
+    /// below 0 V cancels a coupling only from a held axis above its rest.
+    #[arg(long, default_value = "0,0", allow_hyphen_values = true)]
+    held: String,
     /// Command range of the controller, "MIN,MAX" in V (seed 000's E-505:
     /// -2,12).
     #[arg(long, default_value = "-2,12", allow_hyphen_values = true)]
@@ -681,6 +688,13 @@ fn stage(args: &StageArgs) -> Result<(), String> {
                 args.command_range
             )
         })?;
+    let held: Vec<f64> = args
+        .held
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .filter(|v| v.len() == 2)
+        .ok_or_else(|| format!("--held {}: give X,Y in um, e.g. 0,0", args.held))?;
     for (name, value) in [("--gain-scale", args.gain_scale), ("--scale", args.scale)] {
         if !(value.is_finite() && value > 0.0) {
             return Err(format!("{name} {value}: give a positive factor"));
@@ -689,6 +703,7 @@ fn stage(args: &StageArgs) -> Result<(), String> {
     let conditions = StageConditions {
         gain_scale: args.gain_scale,
         command_range: (range[0], range[1]),
+        held_um: [held[0], held[1]],
         ..StageConditions::scaled(args.scale, !args.no_rotation)
     };
     let identified = identify_stage(&plant, &options, args.rounds, &conditions, &step, &tick)
@@ -799,7 +814,14 @@ fn parse_shape_bounds(text: &str, bounds: &mut Bounds) -> Result<(), String> {
 /// the record, its name and the default (decimation, warm-up seconds).
 fn bouc_wen_record(args: &BoucWenArgs) -> Result<(Record, String, usize, f64), String> {
     if let Some(path) = &args.plant {
-        let plant = open_plant(path, args.plant_parameters.as_deref())?;
+        // The run starts from a stage never cycled (FlexureStage's
+        // `rest_cycle_voltage` = 0): every hysteretic state at h = 0, the
+        // state the fitted model starts from. A stage resting after a cycle
+        // sits on that cycle's loop, which a model started from h = 0 reaches
+        // only after several periods (Bouc-Wen minor loops do not close).
+        let plant = open_plant(path, args.plant_parameters.as_deref())?
+            .with_parameters(&[("rest_cycle_voltage".to_owned(), ParameterValue::Number(0.0))])
+            .map_err(|e| e.to_string())?;
         let axis = if args.drive == "x" {
             RecordAxis::X
         } else {

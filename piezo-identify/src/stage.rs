@@ -103,6 +103,12 @@ pub enum DrivenAxis {
 pub struct StageConditions {
     /// Peak-to-peak of the x and y sines, from 0 [µm].
     pub translation_span_um: f64,
+    /// Demand of the held translation while the other one is driven [µm]:
+    /// x during the y run, y during the x run (seed 000: 0, 0). A stage
+    /// whose actuators cannot go below 0 V can only cancel a coupling that
+    /// lifts the held axis from a home above it (seed 000 §3.2's reason
+    /// for x's home at half stroke).
+    pub held_um: [f64; 2],
     /// x demand of the θ run [µm] (half the x stroke).
     pub rotation_x_um: f64,
     /// Amplitude of the θ sine [deg]; `None`: the stage has no rotation to
@@ -121,6 +127,7 @@ impl Default for StageConditions {
     fn default() -> Self {
         StageConditions {
             translation_span_um: TRANSLATION_SPAN_UM,
+            held_um: [0.0, 0.0],
             rotation_x_um: ROTATION_X_UM,
             rotation_amplitude_deg: Some(ROTATION_AMPLITUDE_DEG),
             gain_scale: 1.0,
@@ -153,8 +160,8 @@ pub fn single_axis_reference(axis: DrivenAxis, conditions: &StageConditions, t: 
         let phase = 2.0 * PI * SINE_HZ * tau;
         let half = 0.5 * conditions.translation_span_um;
         match axis {
-            DrivenAxis::Y => [0.0, half - half * phase.cos(), 0.0],
-            DrivenAxis::X => [half - half * phase.cos(), 0.0, 0.0],
+            DrivenAxis::Y => [conditions.held_um[0], half - half * phase.cos(), 0.0],
+            DrivenAxis::X => [half - half * phase.cos(), conditions.held_um[1], 0.0],
             DrivenAxis::Theta => [
                 conditions.rotation_x_um,
                 0.0,
@@ -261,7 +268,11 @@ fn fit_bouc_wen_models(
                 // The first period runs the model from h = 0 onto the loop
                 // the stage rests on; the fit starts after it.
                 warm_up_samples: (SAMPLE_PERIOD.recip() / BOUC_WEN_HZ).round() as usize,
-                fit_offset: false,
+                // The readings are zeroed at the stage's rest, the model's
+                // output after its first cycle is not: the offset between
+                // them is fitted and dropped, since the controller's models
+                // start at their own rest, zeroed there (`rest_cycle`).
+                fit_offset: true,
                 monotone,
                 ..BoucWenFitOptions::default()
             };
@@ -376,10 +387,7 @@ pub fn identify_stage(
         // The stage rests on the loop the exercise cycle ran: the model's
         // memories start where that cycle left them (eq. 1's "initial energy
         // condition").
-        fit.params.rest_cycle = record.output[..warm_up]
-            .iter()
-            .copied()
-            .fold(0.0, f64::max);
+        fit.params.rest_cycle = record.output[..warm_up].iter().copied().fold(0.0, f64::max);
         fits.push(fit);
     }
     let (x_fit, y_fit) = (fits.remove(0), fits.remove(0));

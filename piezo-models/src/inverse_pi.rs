@@ -177,7 +177,7 @@ impl BacklashMemories {
         thresholds: &[f64; BACKLASH_OPERATORS],
     ) -> BacklashMemories {
         let mut memories = BacklashMemories::default();
-        if !(top > 0.0) {
+        if top.is_nan() || top <= 0.0 {
             return memories;
         }
         // The thresholds ascend (eq. 5), so this is the path up, then down.
@@ -189,7 +189,11 @@ impl BacklashMemories {
         visit(0.0);
         breaks.iter().filter(|d| inside(d)).for_each(|d| visit(*d));
         visit(top);
-        breaks.iter().rev().filter(|d| inside(d)).for_each(|d| visit(*d));
+        breaks
+            .iter()
+            .rev()
+            .filter(|d| inside(d))
+            .for_each(|d| visit(*d));
         visit(0.0);
         memories
     }
