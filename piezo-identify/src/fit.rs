@@ -118,10 +118,16 @@ pub struct FitOptions {
 /// nearly always those that end best (the basins of F in c are set early),
 /// and most of a start's iterations are spent creeping along a valley it
 /// will not leave: screening spends them only where they can matter.
+///
+/// The continued runs stop when the spread of the simplex's costs falls
+/// below `relative_tolerance` times the cost it continues from (or the
+/// absolute floor of an unscreened run, whichever is larger): digits of F
+/// beyond the data's own do not change the model.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Screening {
     pub iterations: u64,
     pub kept: usize,
+    pub relative_tolerance: f64,
 }
 
 impl Default for FitOptions {
@@ -538,7 +544,13 @@ fn run_starts(
             .into_par_iter()
             .map(|start| {
                 let initial = search.initial_point(start, options.starts, options.seed);
-                let result = search.run(start, &initial, SIMPLEX_STEP, options.max_iterations);
+                let result = search.run(
+                    start,
+                    &initial,
+                    SIMPLEX_STEP,
+                    options.max_iterations,
+                    SIMPLEX_COST_TOLERANCE,
+                );
                 if let Ok(result) = &result {
                     progress(result);
                 }
@@ -551,7 +563,13 @@ fn run_starts(
         .into_par_iter()
         .map(|start| {
             let initial = search.initial_point(start, options.starts, options.seed);
-            let mut result = search.run(start, &initial, SIMPLEX_STEP, screening_iterations)?;
+            let mut result = search.run(
+                start,
+                &initial,
+                SIMPLEX_STEP,
+                screening_iterations,
+                SIMPLEX_COST_TOLERANCE,
+            )?;
             result.polished = false;
             Ok(result)
         })
@@ -576,8 +594,10 @@ fn run_starts(
             let screened = &starts[start];
             let mut point = vec![screened.c.ln()];
             point.extend(to_hyperspherical(&screened.ws));
+            let tolerance = (screening.relative_tolerance * screened.objective / search.reference)
+                .max(SIMPLEX_COST_TOLERANCE);
             let mut result = if remaining > 0 {
-                search.run(start, &point, POLISH_SIMPLEX_STEP, remaining)?
+                search.run(start, &point, POLISH_SIMPLEX_STEP, remaining, tolerance)?
             } else {
                 screened.clone()
             };
@@ -749,8 +769,8 @@ impl<'a> SeparableProblem<'a> {
     }
 
     /// F for (c, w_s) by the normal equations and a direct sum of the
-    /// residuals (`least_squares::NormalEquations`), falling back to QR when
-    /// they are singular: the search's cost, many times cheaper than QR.
+    /// residuals (`least_squares::NormalEquations`): the search's cost,
+    /// several times cheaper than QR.
     fn objective(&self, c: f64, ws: &[f64]) -> Option<f64> {
         let u1max = self.thresholds(c, ws)?;
         let mut normal = NormalEquations::new(self.layout.linear_columns(), self.rows);
@@ -764,10 +784,8 @@ impl<'a> SeparableProblem<'a> {
             self.fitted,
             |n, x| normal.add_row(x, self.u[n]),
         );
-        let residual_sum_of_squares = match normal.solve() {
-            Some(theta) => normal.residual_sum_of_squares(&theta),
-            None => self.solve(c, ws)?.1.residual_sum_of_squares,
-        };
+        let theta = normal.solve()?;
+        let residual_sum_of_squares = normal.residual_sum_of_squares(&theta);
         residual_sum_of_squares
             .is_finite()
             .then_some(residual_sum_of_squares)
@@ -800,13 +818,15 @@ impl<'a> SeparableProblem<'a> {
     }
 
     /// Nelder-Mead from `initial` with simplex edge `step`, at most
-    /// `max_iterations` iterations.
+    /// `max_iterations` iterations, until the spread of the simplex's
+    /// normalised costs is below `tolerance`.
     fn run(
         &self,
         start: usize,
         initial: &[f64],
         step: f64,
         max_iterations: u64,
+        tolerance: f64,
     ) -> Result<StartResult, FitError> {
         let mut simplex = vec![initial.to_vec()];
         for i in 0..initial.len() {
@@ -815,7 +835,7 @@ impl<'a> SeparableProblem<'a> {
             simplex.push(vertex);
         }
         let solver = NelderMead::new(simplex)
-            .with_sd_tolerance(SIMPLEX_COST_TOLERANCE)
+            .with_sd_tolerance(tolerance)
             .map_err(|e| FitError::Optimizer(e.to_string()))?;
         let result = Executor::new(*self, solver)
             .configure(|state| state.max_iters(max_iterations))

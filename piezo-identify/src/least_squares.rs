@@ -86,6 +86,10 @@ pub fn solve_least_squares(mut x: DMatrix<f64>, u: &[f64]) -> LinearSolution {
     }
 }
 
+/// Eigenvalues of the scaled XᵀX below this fraction of the largest are
+/// dropped when Cholesky fails ([`NormalEquations::solve`]).
+pub const GRAM_EIGENVALUE_FLOOR: f64 = 1e-12;
+
 /// Rows [`NormalEquations`] gathers before adding them to XᵀX in one
 /// matrix product.
 const NORMAL_EQUATION_BLOCK: usize = 256;
@@ -102,9 +106,9 @@ const NORMAL_EQUATION_BLOCK: usize = 256;
 /// residual, are off by about ε·κ(X)·‖u‖ (κ(X) ≤ 10⁸ for the column-scaled
 /// regressors here: a relative error of 10⁻¹⁶ in F at worst). The residual is
 /// therefore not read from the normal equations (u·u − θ·Xᵀu cancels) but
-/// summed directly by the caller. When the scaled XᵀX is not numerically
-/// positive definite (κ(X)² beyond 10¹⁶), [`NormalEquations::solve`] says so
-/// and the caller falls back to [`solve_least_squares`].
+/// summed directly ([`NormalEquations::residual_sum_of_squares`]). When the
+/// scaled XᵀX is not numerically positive definite (κ(X)² beyond 10¹⁶),
+/// [`NormalEquations::solve`] truncates its eigendecomposition instead.
 #[derive(Clone, Debug)]
 pub struct NormalEquations {
     columns: usize,
@@ -175,8 +179,13 @@ impl NormalEquations {
     }
 
     /// θ minimising ‖Xθ − u‖², by Cholesky of the column-scaled XᵀX; a column
-    /// that is zero throughout gets 0. None when the scaled matrix is not
-    /// numerically positive definite (the type's comment says what then).
+    /// that is zero throughout gets 0. When the scaled XᵀX is not positive
+    /// definite in floating point (κ(X)² beyond 10¹⁶: columns nearly
+    /// collinear), by its eigendecomposition with eigenvalues below
+    /// [`GRAM_EIGENVALUE_FLOOR`] of the largest dropped, the minimum-norm
+    /// solution on the rest (a truncated SVD of X at 10⁻⁶·σ_max, coarser than
+    /// [`solve_least_squares`]'s 10⁻¹², which is why the search's final
+    /// solve is by QR). None when θ is not finite.
     pub fn solve(&mut self) -> Option<Vec<f64>> {
         self.flush();
         let used: Vec<usize> = (0..self.columns)
@@ -188,7 +197,22 @@ impl NormalEquations {
             self.gram[(used[a], used[b])] / (scales[a] * scales[b])
         });
         let rhs = DVector::from_fn(k, |a, _| self.rhs[used[a]] / scales[a]);
-        let theta = scaled.cholesky()?.solve(&rhs);
+        let theta = match scaled.clone().cholesky() {
+            Some(cholesky) => cholesky.solve(&rhs),
+            None => {
+                let eigen = scaled.symmetric_eigen();
+                let largest = eigen.eigenvalues.max();
+                let floor = largest * GRAM_EIGENVALUE_FLOOR;
+                let mut theta = DVector::zeros(k);
+                for (j, &lambda) in eigen.eigenvalues.iter().enumerate() {
+                    if lambda > floor {
+                        let v = eigen.eigenvectors.column(j);
+                        theta += v * (v.dot(&rhs) / lambda);
+                    }
+                }
+                theta
+            }
+        };
         if theta.iter().any(|t| !t.is_finite()) {
             return None;
         }
@@ -288,12 +312,15 @@ mod tests {
     }
 
     #[test]
-    fn normal_equations_report_a_singular_system() {
+    fn normal_equations_give_the_minimum_norm_solution_of_a_singular_system() {
+        // Two identical columns: Cholesky fails, the weight is shared evenly.
         let mut normal = NormalEquations::new(2, 10);
         for i in 0..10 {
             let v = i as f64 + 1.0;
-            normal.add_row(&[v, v], v);
+            normal.add_row(&[v, v], 2.0 * v);
         }
-        assert!(normal.solve().is_none());
+        let theta = normal.solve().unwrap();
+        assert!((theta[0] - 1.0).abs() < 1e-12 && (theta[1] - 1.0).abs() < 1e-12, "{theta:?}");
+        assert!(normal.residual_sum_of_squares(&theta) < 1e-20);
     }
 }

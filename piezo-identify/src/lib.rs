@@ -48,6 +48,7 @@ pub mod gapso;
 pub mod lab_records;
 pub mod least_squares;
 pub mod models;
+pub mod protocol;
 pub mod plant;
 pub mod regressors;
 pub mod segments;

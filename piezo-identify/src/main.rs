@@ -276,6 +276,7 @@ impl SearchArgs {
             decimation: self.decimation.unwrap_or(default_decimation),
             warm_up_samples: (self.warm_up / sample_period).round() as usize,
             rate_dependent: !self.rate_independent,
+            ..FitOptions::default()
         }
     }
 }
@@ -872,9 +873,12 @@ fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
         bounds,
         decimation: args.decimation.unwrap_or(default_decimation),
         warm_up_samples,
+        excluded: Vec::new(),
         fit_offset: !args.no_offset,
         monotone: args.monotone,
         refine: !args.no_refine,
+        refine_within_bounds: true,
+        ..BoucWenFitOptions::default()
     };
     let y = centred_moving_average(&record.output, args.smooth);
     println!("{}", describe(&record, &name));
