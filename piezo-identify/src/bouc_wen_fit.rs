@@ -491,7 +491,11 @@ pub fn identify_bouc_wen(
     }
     let fitted = options.fitted_samples(input.len());
     let needed = 20;
-    let scored = fitted.iter().step_by(options.decimation).filter(|f| **f).count();
+    let scored = fitted
+        .iter()
+        .step_by(options.decimation)
+        .filter(|f| **f)
+        .count();
     if scored < needed {
         return Err(BoucWenFitError::TooShort { scored, needed });
     }
@@ -687,9 +691,7 @@ impl ProjectedResidual<'_> {
             Some(b) => point
                 .iter()
                 .enumerate()
-                .map(|(i, phi)| {
-                    b.lower[i] + (b.upper[i] - b.lower[i]) * 0.5 * (1.0 + phi.sin())
-                })
+                .map(|(i, phi)| b.lower[i] + (b.upper[i] - b.lower[i]) * 0.5 * (1.0 + phi.sin()))
                 .collect(),
         }
     }

@@ -59,14 +59,18 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::ops::Range;
 
-use crate::least_squares::{LinearSolution, NormalEquations, solve_least_squares};
+use crate::least_squares::{
+    LinearSolution, NormalEquations, solve_least_squares_regularized,
+    solve_least_squares_with_intercept_regularized,
+};
 use crate::models::{
     ClassicalPi, ClassicalPiParams, InverseHysteresis, TraditionalInversePi,
     TraditionalInversePiParams, predict, u1max_for,
 };
 use crate::regressors::{
     PROPOSED, RateDependentLayout, TRADITIONAL_SIX, TRADITIONAL_TEN, for_each_rate_dependent_row,
-    masked_classical_regressors, masked_rate_dependent_regressors,
+    masked_classical_regressors, masked_rate_dependent_regressors, reversing_classical_operators,
+    reversing_operators,
 };
 
 /// Nelder-Mead stops when the standard deviation of the simplex's normalised
@@ -110,6 +114,14 @@ pub struct FitOptions {
     /// Successive halving of the starts (None: every start runs to
     /// convergence, seed 000's best of N).
     pub screening: Option<Screening>,
+    /// The final linear solve is regularised, allowing F to grow by this
+    /// fraction (`least_squares::solve_least_squares_regularized`; 0: plain
+    /// least squares).
+    pub rss_increase: f64,
+    /// Backlash operators that do not reverse over the fitted samples get no
+    /// weight (`regressors::reversing_operators` says why), in the search
+    /// and in the final solve.
+    pub reversing_operators_only: bool,
 }
 
 /// Every start first runs `iterations` Nelder-Mead iterations; only the
@@ -141,6 +153,8 @@ impl Default for FitOptions {
             excluded: Vec::new(),
             rate_dependent: true,
             screening: None,
+            rss_increase: 0.0,
+            reversing_operators_only: false,
         }
     }
 }
@@ -319,6 +333,59 @@ pub fn fit_modified_inverse_pi_with_progress(
     })
 }
 
+/// Seed 000's proposed model for given (c, w_s): only its linear part
+/// (a, k, b) fitted, on the samples and with the settings of `options`
+/// (the search settings are not used).
+pub fn modified_inverse_pi_for(
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+    c: f64,
+    ws: &[f64],
+) -> Result<Fit<InversePiParams>, FitError> {
+    let layout = PROPOSED.with_rate_dependence(options.rate_dependent);
+    check_signals(y, u, sample_period, options, layout.parameter_count())?;
+    if ws.len() != DEAD_ZONE_OPERATORS {
+        return Err(FitError::InvalidOption("six dead-zone weights are needed"));
+    }
+    let fitted = options.fitted_samples(y.len());
+    let (_, y_max) = range_of(y, &fitted);
+    if y_max <= 0.0 {
+        return Err(FitError::NoPositiveDisplacement(y_max));
+    }
+    let mut problem = SeparableProblem::new(layout, y, u, &fitted, sample_period, y_max);
+    problem.reversing_only = options.reversing_operators_only;
+    let (u1max, solution) =
+        problem
+            .solve(c, ws, options.rss_increase)
+            .ok_or(FitError::Optimizer(format!(
+                "c = {c} and w_s = {ws:?} are unusable"
+            )))?;
+    let (a, k, b) = split_coefficients(layout, &solution.coefficients);
+    let params = InversePiParams {
+        a: std::array::from_fn(|i| a[i]),
+        k,
+        b,
+        ws: std::array::from_fn(|j| ws[j]),
+        c,
+        u1max,
+    };
+    let quality = score_samples(
+        &mut piezo_models::ModifiedInversePi::new(params),
+        y,
+        u,
+        sample_period,
+        &fitted,
+    );
+    Ok(Fit {
+        params,
+        quality,
+        starts: Vec::new(),
+        best_start: None,
+    })
+}
+
 /// Fits a traditional inverse P-I model with `D` dead-zone operators (6 or 10,
 /// see [`crate::models`]).
 pub fn fit_traditional_inverse_pi<const D: usize>(
@@ -388,9 +455,18 @@ pub fn fit_classical_pi(
     let (low, high) = range_of(y, &fitted);
     let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
     let targets: Vec<f64> = selected(u, &fitted);
-    let solution = solve_least_squares(
-        masked_classical_regressors(&thresholds, y, &fitted),
+    let mut x = masked_classical_regressors(&thresholds, y, &fitted);
+    if options.reversing_operators_only {
+        let reversing = reversing_classical_operators(&thresholds, y, &fitted);
+        for (column, _) in reversing.iter().enumerate().filter(|(_, r)| !**r) {
+            x.column_mut(column).fill(0.0);
+        }
+    }
+    let solution = solve_least_squares_with_intercept_regularized(
+        x,
         &targets,
+        crate::models::CLASSICAL_OPERATORS,
+        options.rss_increase,
     );
     let params = ClassicalPiParams {
         weights: std::array::from_fn(|i| solution.coefficients[i]),
@@ -498,7 +574,7 @@ fn fit_rate_dependent(
     let y_search: Vec<f64> = y.iter().step_by(m).copied().collect();
     let u_search: Vec<f64> = u.iter().step_by(m).copied().collect();
     let fitted_search: Vec<bool> = fitted.iter().step_by(m).copied().collect();
-    let search = SeparableProblem::new(
+    let mut search = SeparableProblem::new(
         layout,
         &y_search,
         &u_search,
@@ -506,6 +582,7 @@ fn fit_rate_dependent(
         sample_period * m as f64,
         y_max,
     );
+    search.reversing_only = options.reversing_operators_only;
 
     let starts = run_starts(&search, options, progress)?;
     // Lowest F, ties to the lowest start index (`min_by` keeps the first).
@@ -518,10 +595,13 @@ fn fit_rate_dependent(
     // The linear part on all samples for the chosen (c, w_s).
     let c = starts[best].c;
     let ws = starts[best].ws.clone();
-    let full = SeparableProblem::new(layout, y, u, &fitted, sample_period, y_max);
-    let (u1max, solution) = full.solve(c, &ws).ok_or(FitError::Optimizer(format!(
-        "the best start (c = {c}) is unusable"
-    )))?;
+    let mut full = SeparableProblem::new(layout, y, u, &fitted, sample_period, y_max);
+    full.reversing_only = options.reversing_operators_only;
+    let (u1max, solution) = full
+        .solve(c, &ws, options.rss_increase)
+        .ok_or(FitError::Optimizer(format!(
+            "the best start (c = {c}) is unusable"
+        )))?;
     Ok(RateDependentFit {
         c,
         ws,
@@ -699,6 +779,8 @@ struct SeparableProblem<'a> {
     reference: f64,
     /// Number of fitted samples.
     rows: usize,
+    /// Only operators that reverse get a weight.
+    reversing_only: bool,
 }
 
 impl<'a> SeparableProblem<'a> {
@@ -724,6 +806,7 @@ impl<'a> SeparableProblem<'a> {
             // keeps the minimiser.
             reference: if spread > 0.0 { spread } else { 1.0 },
             rows: targets.len(),
+            reversing_only: false,
         }
     }
 
@@ -749,10 +832,11 @@ impl<'a> SeparableProblem<'a> {
     }
 
     /// u1max (eq. 5) and the linear least-squares solution for (c, w_s) by
-    /// QR (the final, accurate solve); None when they are unusable.
-    fn solve(&self, c: f64, ws: &[f64]) -> Option<(f64, LinearSolution)> {
+    /// QR (the final, accurate solve), regularised by `rss_increase`; None
+    /// when they are unusable.
+    fn solve(&self, c: f64, ws: &[f64], rss_increase: f64) -> Option<(f64, LinearSolution)> {
         let u1max = self.thresholds(c, ws)?;
-        let x: DMatrix<f64> = masked_rate_dependent_regressors(
+        let mut x: DMatrix<f64> = masked_rate_dependent_regressors(
             self.layout,
             c,
             ws,
@@ -761,7 +845,16 @@ impl<'a> SeparableProblem<'a> {
             self.sample_period,
             self.fitted,
         );
-        let solution = solve_least_squares(x, &selected(self.u, self.fitted));
+        for column in self.inactive_columns(c, ws, u1max) {
+            x.column_mut(column).fill(0.0);
+        }
+        let targets = selected(self.u, self.fitted);
+        let solution = match self.layout.intercept_column() {
+            Some(intercept) => {
+                solve_least_squares_with_intercept_regularized(x, &targets, intercept, rss_increase)
+            }
+            None => solve_least_squares_regularized(x, &targets, rss_increase),
+        };
         solution
             .residual_sum_of_squares
             .is_finite()
@@ -784,11 +877,28 @@ impl<'a> SeparableProblem<'a> {
             self.fitted,
             |n, x| normal.add_row(x, self.u[n]),
         );
-        let theta = normal.solve()?;
+        let mut active = vec![true; self.layout.linear_columns()];
+        for column in self.inactive_columns(c, ws, u1max) {
+            active[column] = false;
+        }
+        let theta = normal.solve_with(&active)?;
         let residual_sum_of_squares = normal.residual_sum_of_squares(&theta);
         residual_sum_of_squares
             .is_finite()
             .then_some(residual_sum_of_squares)
+    }
+
+    /// The columns of the operators that get no weight (none unless
+    /// `reversing_only`).
+    fn inactive_columns(&self, c: f64, ws: &[f64], u1max: f64) -> Vec<usize> {
+        if !self.reversing_only {
+            return Vec::new();
+        }
+        let reversing = reversing_operators(self.layout, c, ws, u1max, self.y, self.fitted);
+        (0..BACKLASH_OPERATORS)
+            .filter(|&i| !reversing[i])
+            .flat_map(|i| self.layout.operator_columns(i))
+            .collect()
     }
 
     fn normalised_cost(&self, theta: &[f64]) -> f64 {

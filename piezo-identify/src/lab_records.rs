@@ -128,7 +128,9 @@ pub enum LabRecordError {
     Parameters(#[from] ParamError),
     #[error("{0} must be positive and finite")]
     Setting(&'static str),
-    #[error("the amplifier clipped the command {command} V at {time} s: the record would not be the drive it claims")]
+    #[error(
+        "the amplifier clipped the command {command} V at {time} s: the record would not be the drive it claims"
+    )]
     Clipped { command: f64, time: f64 },
 }
 
@@ -201,7 +203,10 @@ mod tests {
         assert!(record.input[..400].iter().all(|u| *u == 0.0));
         assert_eq!(record.input[400], 3.0);
         let low = record.input.iter().copied().fold(f64::INFINITY, f64::min);
-        assert!((low + 2.0).abs() < 1e-3, "bipolar drive reaches -2 V: {low}");
+        assert!(
+            (low + 2.0).abs() < 1e-3,
+            "bipolar drive reaches -2 V: {low}"
+        );
         // At rest the sensor reads its offset and noise.
         let rest = &record.output[100..400];
         let mean = rest.iter().sum::<f64>() / rest.len() as f64;

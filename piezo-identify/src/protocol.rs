@@ -53,11 +53,17 @@ use crate::fit::{
     fit_modified_inverse_pi_with_progress, range_of, selected,
 };
 use crate::gapso::{Bounds, GaPsoOptions};
-use crate::least_squares::solve_least_squares;
-use crate::models::{ClassicalPi, ClassicalPiParams, SIX_DEAD_ZONE_PATTERN, predict, u1max_for};
-use crate::regressors::{PROPOSED, masked_classical_regressors, masked_rate_dependent_regressors};
+use crate::least_squares::{solve_least_squares, solve_least_squares_with_intercept_regularized};
+use crate::models::{
+    CLASSICAL_OPERATORS, ClassicalPi, ClassicalPiParams, SIX_DEAD_ZONE_PATTERN, predict, u1max_for,
+};
+use crate::regressors::{
+    PROPOSED, masked_classical_regressors, masked_rate_dependent_regressors,
+    reversing_classical_operators, reversing_operators,
+};
 use crate::segments::{
-    SegmentOptions, SegmentThresholds, Segments, detect_segments, fastest_cycle, merge, thresholds,
+    SegmentOptions, SegmentThresholds, Segments, detect_segments, fastest_cycle, first_loading_end,
+    merge, thresholds,
 };
 use crate::validation::smoothed_between_steps;
 
@@ -73,6 +79,11 @@ pub const SMOOTHING_CYCLE_FRACTIONS: [f64; 3] = [1.0 / 160.0, 1.0 / 80.0, 1.0 / 
 pub const SEARCH_SAMPLES_PER_CYCLE: f64 = 100.0;
 /// ... and otherwise decimates to about this many samples.
 pub const SEARCH_SAMPLES: usize = 3000;
+
+/// The linear parts are regularised, allowing their residual sum of squares
+/// to grow by this fraction (RMS by 0.05 %):
+/// `least_squares::solve_least_squares_regularized` says why.
+pub const LINEAR_RSS_INCREASE: f64 = 1e-3;
 
 /// RK4 substeps per scaled input unit in GA-PSO's evaluations
 /// (`BoucWenFitOptions::search_substeps` says why 100 is enough).
@@ -136,7 +147,7 @@ pub struct Plan {
     pub fit_excluded: Vec<Range<usize>>,
     /// Samples of the scored part that are not scored.
     pub scored_excluded: Vec<Range<usize>>,
-    /// Fastest cycle of the input over the fitted samples [samples].
+    /// Fastest cycle of the input over the fit part, rests aside [samples].
     pub fastest_cycle: Option<f64>,
 }
 
@@ -159,14 +170,32 @@ impl Plan {
         } else {
             Segments::default()
         };
-        let warm_up_samples = options
-            .warm_up_seconds
-            .map_or(thresholds.settle_samples, |s| {
-                (s / sample_period).round() as usize
-            });
+        // The start of the record and every step: settling, then the first
+        // loading (segments::first_loading_end), unless a warm-up is given
+        // for the start.
+        let mut starts: Vec<usize> = segments.steps.clone();
+        let warm_up_samples = match options.warm_up_seconds {
+            Some(seconds) => (seconds / sample_period).round() as usize,
+            None => {
+                starts.insert(0, 0);
+                0
+            }
+        };
         let excluded = {
             let mut all = segments.excluded(thresholds.settle_samples, u.len());
             all.push(0..warm_up_samples.min(u.len()));
+            for (i, &start) in starts.iter().enumerate() {
+                let next = starts.get(i + 1).copied().unwrap_or(u.len());
+                let settled = start + thresholds.settle_samples;
+                let end = first_loading_end(u, settled, next, thresholds.span)
+                    .unwrap_or(settled)
+                    .max(settled);
+                // Only the fit part: a step in the scored part is scored once
+                // settled (its state is the one the model computed).
+                if start < fit_end {
+                    all.push(start..end.min(fit_end));
+                }
+            }
             merge(&mut all);
             all
         };
@@ -206,7 +235,10 @@ impl Plan {
                 samples: u.len() - fit_end,
             });
         }
-        plan.fastest_cycle = fastest_cycle(&u[..fit_end], &fitted, thresholds.span);
+        // The excitation's cycle, over the whole fit part but its rests (the
+        // first loading is excluded from the fit, not from the excitation).
+        let moving = flags(fit_end, 0, &plan.segments.rests);
+        plan.fastest_cycle = fastest_cycle(&u[..fit_end], &moving, thresholds.span);
         Ok(plan)
     }
 
@@ -226,13 +258,15 @@ impl Plan {
     }
 
     /// The scored samples of a separate record of the same experiment, run
-    /// from rest at its first sample: all but its first `warm_up_samples`
-    /// and, with `detect`, its rests and settling after steps (found with
-    /// this plan's thresholds).
+    /// from rest at its first sample: all but its warm-up (`warm_up_samples`,
+    /// or by default the settling time and the first loading, as at the
+    /// start of the fit part: its state before the record is assumed) and,
+    /// with `detect`, its rests and settling after steps (found with this
+    /// plan's thresholds).
     pub fn validation_scored(
         &self,
         u: &[f64],
-        warm_up_samples: usize,
+        warm_up_samples: Option<usize>,
         detect: bool,
     ) -> (Segments, Vec<bool>) {
         let segments = if detect {
@@ -240,8 +274,15 @@ impl Plan {
         } else {
             Segments::default()
         };
+        let warm_up = warm_up_samples.unwrap_or_else(|| {
+            let settled = self.thresholds.settle_samples;
+            let next = segments.steps.first().copied().unwrap_or(u.len());
+            first_loading_end(u, settled, next, self.thresholds.span)
+                .unwrap_or(settled)
+                .max(settled)
+        });
         let mut excluded = segments.excluded(self.thresholds.settle_samples, u.len());
-        excluded.push(0..warm_up_samples.min(u.len()));
+        excluded.push(0..warm_up.min(u.len()));
         merge(&mut excluded);
         (segments, flags(u.len(), 0, &excluded))
     }
@@ -249,9 +290,9 @@ impl Plan {
     /// Search decimation for `fitted` samples (module comment).
     pub fn search_decimation(&self, fitted: usize) -> usize {
         let by_samples = fitted.div_ceil(SEARCH_SAMPLES).max(1);
-        let by_cycle = self
-            .fastest_cycle
-            .map_or(1, |c| ((c / SEARCH_SAMPLES_PER_CYCLE).floor() as usize).max(1));
+        let by_cycle = self.fastest_cycle.map_or(by_samples, |c| {
+            ((c / SEARCH_SAMPLES_PER_CYCLE).floor() as usize).max(1)
+        });
         by_samples.min(by_cycle)
     }
 
@@ -501,18 +542,27 @@ fn inner_split(fitted: &[bool], fraction: f64) -> usize {
     fitted.len()
 }
 
-/// Least squares of `targets` on the given columns of the rows `train`,
-/// RMS of the prediction on the rows `validation`.
+/// Least squares of `targets` on the given columns of the rows `train`
+/// (`intercept` the position of the constant among them), RMS of the
+/// prediction on the rows `validation`.
 fn validation_rms(
     x: &DMatrix<f64>,
     targets: &[f64],
     columns: &[usize],
+    intercept: usize,
     train: &[usize],
     validation: &[usize],
 ) -> f64 {
-    let sub = |rows: &[usize]| DMatrix::from_fn(rows.len(), columns.len(), |i, j| x[(rows[i], columns[j])]);
+    let sub = |rows: &[usize]| {
+        DMatrix::from_fn(rows.len(), columns.len(), |i, j| x[(rows[i], columns[j])])
+    };
     let train_targets: Vec<f64> = train.iter().map(|&r| targets[r]).collect();
-    let solution = solve_least_squares(sub(train), &train_targets);
+    let solution = solve_least_squares_with_intercept_regularized(
+        sub(train),
+        &train_targets,
+        intercept,
+        LINEAR_RSS_INCREASE,
+    );
     let predicted = sub(validation) * nalgebra::DVector::from_vec(solution.coefficients);
     let sum: f64 = validation
         .iter()
@@ -564,121 +614,139 @@ pub fn identify_inverse_pi(
         excluded: unset_ranges(flags),
         rate_dependent,
         screening: settings.screening,
+        rss_increase: LINEAR_RSS_INCREASE,
+        reversing_operators_only: true,
     };
     let tick = |s: &StartResult| progress(ProgressEvent::Step { best: s.objective });
 
     // Forward validation inside the fit part.
-    let (smoothing, rate_dependent, classical_smoothing, cross_validation) =
-        if smoothings.len() == 1 && layouts.len() == 1 {
-            (smoothings[0], layouts[0], smoothings[0], None)
-        } else {
-            let train_end = inner_split(&fitted, INNER_TRAIN_FRACTION);
-            let train_flags: Vec<bool> = fitted[..train_end].to_vec();
-            let heaviest = *smoothings.iter().max().expect("at least one candidate");
-            let prepared = |half_width: usize| -> (Vec<f64>, f64) {
-                let y = smooth(half_width);
-                let offset = settings
-                    .offset
-                    .unwrap_or_else(|| range_of(&y[..train_end], &train_flags).0);
-                (y.iter().map(|v| v - offset).collect(), offset)
-            };
-            let (y_search, _) = prepared(heaviest);
-            let options = search_options(settings.starts, &train_flags, layouts == [true]);
-            progress(ProgressEvent::Phase {
-                name: "validation search",
-                steps: options.starts,
-            });
-            let inner = fit_modified_inverse_pi_with_progress(
-                &y_search[..train_end],
-                &u_fit[..train_end],
-                dt,
-                &options,
-                &tick,
-            )?;
-            let (c, ws) = (inner.params.c, inner.params.ws);
-            let rows: Vec<usize> = (0..fit_end).filter(|&n| fitted[n]).collect();
-            let targets: Vec<f64> = rows.iter().map(|&n| u_fit[n]).collect();
-            let train: Vec<usize> = (0..rows.len()).filter(|&i| rows[i] < train_end).collect();
-            let validation: Vec<usize> =
-                (0..rows.len()).filter(|&i| rows[i] >= train_end).collect();
-            let mut proposed = Vec::new();
-            let mut classical = Vec::new();
-            for &half_width in &smoothings {
-                let (y, _) = prepared(half_width);
-                let y_max = range_of(&y[..train_end], &train_flags).1;
-                let thresholds = SIX_DEAD_ZONE_PATTERN.map(|p| p * c);
-                let u1max = u1max_for(&ws, &thresholds, y_max);
-                let x = masked_rate_dependent_regressors(PROPOSED, c, &ws, u1max, &y, dt, &fitted);
-                for &rate_dependent in &layouts {
-                    let columns: Vec<usize> = if rate_dependent {
-                        (0..PROPOSED.linear_columns()).collect()
-                    } else {
-                        (0..4).chain(14..24).collect()
-                    };
-                    proposed.push(Candidate {
-                        smoothing: half_width,
-                        rate_dependent,
-                        validation_rms: validation_rms(&x, &targets, &columns, &train, &validation),
-                    });
+    let (smoothing, rate_dependent, classical_smoothing, cross_validation) = if smoothings.len()
+        == 1
+        && layouts.len() == 1
+    {
+        (smoothings[0], layouts[0], smoothings[0], None)
+    } else {
+        let train_end = inner_split(&fitted, INNER_TRAIN_FRACTION);
+        let train_flags: Vec<bool> = fitted[..train_end].to_vec();
+        let heaviest = *smoothings.iter().max().expect("at least one candidate");
+        let prepared = |half_width: usize| -> (Vec<f64>, f64) {
+            let y = smooth(half_width);
+            let offset = settings
+                .offset
+                .unwrap_or_else(|| range_of(&y[..train_end], &train_flags).0);
+            (y.iter().map(|v| v - offset).collect(), offset)
+        };
+        let (y_search, _) = prepared(heaviest);
+        let options = search_options(settings.starts, &train_flags, layouts == [true]);
+        progress(ProgressEvent::Phase {
+            name: "validation search",
+            steps: options.starts,
+        });
+        let inner = fit_modified_inverse_pi_with_progress(
+            &y_search[..train_end],
+            &u_fit[..train_end],
+            dt,
+            &options,
+            &tick,
+        )?;
+        let (c, ws) = (inner.params.c, inner.params.ws);
+        let rows: Vec<usize> = (0..fit_end).filter(|&n| fitted[n]).collect();
+        let targets: Vec<f64> = rows.iter().map(|&n| u_fit[n]).collect();
+        let train: Vec<usize> = (0..rows.len()).filter(|&i| rows[i] < train_end).collect();
+        // The train samples over the whole fit part, for the operators'
+        // reversals (judged where the linear part is fitted).
+        let train_mask: Vec<bool> = (0..fit_end).map(|n| fitted[n] && n < train_end).collect();
+        let validation: Vec<usize> = (0..rows.len()).filter(|&i| rows[i] >= train_end).collect();
+        let mut proposed = Vec::new();
+        let mut classical = Vec::new();
+        for &half_width in &smoothings {
+            let (y, _) = prepared(half_width);
+            let y_max = range_of(&y[..train_end], &train_flags).1;
+            let thresholds = SIX_DEAD_ZONE_PATTERN.map(|p| p * c);
+            let u1max = u1max_for(&ws, &thresholds, y_max);
+            let mut x = masked_rate_dependent_regressors(PROPOSED, c, &ws, u1max, &y, dt, &fitted);
+            let reversing = reversing_operators(PROPOSED, c, &ws, u1max, &y, &train_mask);
+            for operator in (0..reversing.len()).filter(|&i| !reversing[i]) {
+                for column in PROPOSED.operator_columns(operator) {
+                    x.column_mut(column).fill(0.0);
                 }
-                let (low, high) = range_of(&y[..train_end], &train_flags);
-                let x = masked_classical_regressors(
-                    &ClassicalPiParams::evenly_spaced_thresholds(high - low),
-                    &y,
-                    &fitted,
-                );
-                let columns: Vec<usize> = (0..x.ncols()).collect();
-                classical.push(Candidate {
+            }
+            for &rate_dependent in &layouts {
+                let columns: Vec<usize> = if rate_dependent {
+                    (0..PROPOSED.linear_columns()).collect()
+                } else {
+                    (0..4).chain(14..24).collect()
+                };
+                proposed.push(Candidate {
                     smoothing: half_width,
-                    rate_dependent: false,
-                    validation_rms: validation_rms(&x, &targets, &columns, &train, &validation),
+                    rate_dependent,
+                    validation_rms: validation_rms(&x, &targets, &columns, 3, &train, &validation),
                 });
             }
-            let best = |rate: bool| {
-                proposed
-                    .iter()
-                    .filter(|c| c.rate_dependent == rate)
-                    .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
-                    .copied()
-            };
-            let chosen = match (best(false), best(true)) {
-                (Some(constant), Some(rated)) => {
-                    if rated.validation_rms < (1.0 - RATE_DEPENDENCE_MARGIN) * constant.validation_rms {
-                        rated
-                    } else {
-                        constant
-                    }
-                }
-                (Some(only), None) | (None, Some(only)) => only,
-                (None, None) => unreachable!("at least one layout"),
-            };
-            let classical_best = classical
+            let (low, high) = range_of(&y[..train_end], &train_flags);
+            let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
+            let mut x = masked_classical_regressors(&thresholds, &y, &fitted);
+            let reversing = reversing_classical_operators(&thresholds, &y, &train_mask);
+            for column in (0..reversing.len()).filter(|&i| !reversing[i]) {
+                x.column_mut(column).fill(0.0);
+            }
+            let columns: Vec<usize> = (0..x.ncols()).collect();
+            classical.push(Candidate {
+                smoothing: half_width,
+                rate_dependent: false,
+                validation_rms: validation_rms(
+                    &x,
+                    &targets,
+                    &columns,
+                    CLASSICAL_OPERATORS,
+                    &train,
+                    &validation,
+                ),
+            });
+        }
+        let best = |rate: bool| {
+            proposed
                 .iter()
+                .filter(|c| c.rate_dependent == rate)
                 .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
-                .expect("at least one candidate")
-                .smoothing;
-            (
-                chosen.smoothing,
-                chosen.rate_dependent,
-                classical_best,
-                Some(CrossValidation {
-                    train_end,
-                    train_samples: train.len(),
-                    validation_samples: validation.len(),
-                    c,
-                    ws: ws.to_vec(),
-                    proposed,
-                    classical,
-                }),
-            )
+                .copied()
         };
+        let chosen = match (best(false), best(true)) {
+            (Some(constant), Some(rated)) => {
+                if rated.validation_rms < (1.0 - RATE_DEPENDENCE_MARGIN) * constant.validation_rms {
+                    rated
+                } else {
+                    constant
+                }
+            }
+            (Some(only), None) | (None, Some(only)) => only,
+            (None, None) => unreachable!("at least one layout"),
+        };
+        let classical_best = classical
+            .iter()
+            .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
+            .expect("at least one candidate")
+            .smoothing;
+        (
+            chosen.smoothing,
+            chosen.rate_dependent,
+            classical_best,
+            Some(CrossValidation {
+                train_end,
+                train_samples: train.len(),
+                validation_samples: validation.len(),
+                c,
+                ws: ws.to_vec(),
+                proposed,
+                classical,
+            }),
+        )
+    };
 
     // The final fit on every fitted sample of the fit part.
     let shift = |half_width: usize| -> (Vec<f64>, f64) {
         let y = smooth(half_width);
-        let offset = settings
-            .offset
-            .unwrap_or_else(|| range_of(&y, &fitted).0);
+        let offset = settings.offset.unwrap_or_else(|| range_of(&y, &fitted).0);
         (y.iter().map(|v| v - offset).collect(), offset)
     };
     let (y, offset) = shift(smoothing);
@@ -797,7 +865,13 @@ pub struct BoucWenProtocolFit {
 impl BoucWenProtocolFit {
     /// The models' errors on a record (input `u`, measured output `y`) run
     /// from rest at its first sample, on the samples `scored`.
-    pub fn errors_on(&self, u: &[f64], y: &[f64], sample_period: f64, scored: &[bool]) -> ForwardErrors {
+    pub fn errors_on(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        sample_period: f64,
+        scored: &[bool],
+    ) -> ForwardErrors {
         let best = self.identification.best();
         let gapso = &self.identification.gapso;
         let classical = predict(&mut ClassicalPi::new(self.classical), u, sample_period);
@@ -811,8 +885,18 @@ impl BoucWenProtocolFit {
         let best_line: Vec<f64> = u.iter().map(|v| best_line[0] * v + best_line[1]).collect();
         let span = self.stroke;
         ForwardErrors {
-            bouc_wen: ErrorFigures::of(&predict_bouc_wen(best.params, best.offset, u), y, scored, span),
-            gapso: ErrorFigures::of(&predict_bouc_wen(gapso.params, gapso.offset, u), y, scored, span),
+            bouc_wen: ErrorFigures::of(
+                &predict_bouc_wen(best.params, best.offset, u),
+                y,
+                scored,
+                span,
+            ),
+            gapso: ErrorFigures::of(
+                &predict_bouc_wen(gapso.params, gapso.offset, u),
+                y,
+                scored,
+                span,
+            ),
             classical: ErrorFigures::of(&classical, y, scored, span),
             line: ErrorFigures::of(&line, y, scored, span),
             best_line: ErrorFigures::of(&best_line, y, scored, span),
@@ -867,6 +951,8 @@ pub fn identify_bouc_wen_protocol(
     })?;
     let fit_options = FitOptions {
         excluded: options.excluded.clone(),
+        rss_increase: LINEAR_RSS_INCREASE,
+        reversing_operators_only: true,
         ..FitOptions::default()
     };
     let classical = fit_classical_pi(u_fit, &target, dt, &fit_options)?;
@@ -929,9 +1015,11 @@ mod tests {
         let plan = Plan::new(&u, 0.005, 600, &PlanOptions::default()).unwrap();
         assert_eq!(plan.segments.rests, vec![0..200]);
         assert_eq!(plan.segments.steps, vec![200]);
-        assert_eq!(plan.fit_excluded, vec![0..220]);
+        // Rest, settling (to 220), first loading: the sine's first maximum
+        // at 250 and first minimum at 350.
+        assert_eq!(plan.fit_excluded, vec![0..350]);
         assert!(plan.scored_excluded.is_empty());
-        assert_eq!(plan.fitted().iter().filter(|f| **f).count(), 380);
+        assert_eq!(plan.fitted().iter().filter(|f| **f).count(), 250);
         assert_eq!(plan.scored().iter().filter(|f| **f).count(), 400);
         let cycle = plan.fastest_cycle.unwrap();
         assert!((cycle - 200.0).abs() <= 2.0, "{cycle}");

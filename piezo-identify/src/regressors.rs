@@ -67,6 +67,11 @@ impl RateDependentLayout {
         self.cubic_columns() + self.rate_columns() + BACKLASH_OPERATORS
     }
 
+    /// The constant column (a4 of the cubic), when there is one.
+    pub fn intercept_column(&self) -> Option<usize> {
+        self.cubic.then_some(3)
+    }
+
     /// 4 with the cubic, else 0.
     pub fn cubic_columns(&self) -> usize {
         if self.cubic { 4 } else { 0 }
@@ -121,21 +126,12 @@ pub fn masked_rate_dependent_regressors(
     let mut matrix = DMatrix::zeros(rows, columns);
     let data = matrix.as_mut_slice();
     let mut row = 0;
-    for_each_rate_dependent_row(
-        layout,
-        c,
-        ws,
-        u1max,
-        y,
-        sample_period,
-        fitted,
-        |_, x| {
-            for (j, value) in x.iter().enumerate() {
-                data[j * rows + row] = *value;
-            }
-            row += 1;
-        },
-    );
+    for_each_rate_dependent_row(layout, c, ws, u1max, y, sample_period, fitted, |_, x| {
+        for (j, value) in x.iter().enumerate() {
+            data[j * rows + row] = *value;
+        }
+        row += 1;
+    });
     matrix
 }
 
@@ -199,6 +195,83 @@ pub fn for_each_rate_dependent_row(
             x[constant_column + i] = *h;
         }
         row(n, x);
+    }
+}
+
+/// Which backlash operators of a model of the eq. (3)-(5) family reverse
+/// over the fitted samples: their output both rises and falls between
+/// consecutive samples of which the later is fitted. An operator whose
+/// play is wider than the loops it sees moves only when the input sets a
+/// new extreme: on a first loading, or a hair at a time as noise and drift
+/// push the extremes out. Its output is then a slowly creeping offset, and
+/// the weight least squares gives it describes drift, not hysteresis; when
+/// the loops grow later it moves and that weight bends the model
+/// (`protocol` drops such operators).
+#[allow(clippy::too_many_arguments)]
+pub fn reversing_operators(
+    layout: RateDependentLayout,
+    c: f64,
+    ws: &[f64],
+    u1max: f64,
+    y: &[f64],
+    fitted: &[bool],
+) -> [bool; BACKLASH_OPERATORS] {
+    let mut dead_zone_thresholds = [0.0; TEN_DEAD_ZONE_PATTERN.len()];
+    for (d, p) in dead_zone_thresholds
+        .iter_mut()
+        .zip(layout.dead_zone_pattern)
+    {
+        *d = c * p;
+    }
+    let dead_zone_thresholds = &dead_zone_thresholds[..ws.len()];
+    let thresholds = backlash_thresholds(u1max);
+    let mut memories = [0.0; BACKLASH_OPERATORS];
+    let mut rose = [false; BACKLASH_OPERATORS];
+    let mut fell = [false; BACKLASH_OPERATORS];
+    for (&yn, &fit) in y.iter().zip(fitted) {
+        let z = crate::models::dead_zone_sum(yn, ws, dead_zone_thresholds);
+        for (i, (memory, r)) in memories.iter_mut().zip(&thresholds).enumerate() {
+            let next = backlash(z, *r, *memory);
+            if fit {
+                rose[i] |= next > *memory;
+                fell[i] |= next < *memory;
+            }
+            *memory = next;
+        }
+    }
+    std::array::from_fn(|i| rose[i] && fell[i])
+}
+
+/// [`reversing_operators`] for the classical P-I model's operators on y.
+pub fn reversing_classical_operators(
+    thresholds: &[f64; CLASSICAL_OPERATORS],
+    y: &[f64],
+    fitted: &[bool],
+) -> [bool; CLASSICAL_OPERATORS] {
+    let mut memories = [0.0; CLASSICAL_OPERATORS];
+    let mut rose = [false; CLASSICAL_OPERATORS];
+    let mut fell = [false; CLASSICAL_OPERATORS];
+    for (&yn, &fit) in y.iter().zip(fitted) {
+        for (i, (memory, r)) in memories.iter_mut().zip(thresholds).enumerate() {
+            let next = backlash(yn, *r, *memory);
+            if fit {
+                rose[i] |= next > *memory;
+                fell[i] |= next < *memory;
+            }
+            *memory = next;
+        }
+    }
+    std::array::from_fn(|i| rose[i] && fell[i])
+}
+
+impl RateDependentLayout {
+    /// The columns of operator i (its k and b columns).
+    pub fn operator_columns(&self, operator: usize) -> impl Iterator<Item = usize> {
+        let rate = self
+            .rate_dependent
+            .then_some(self.cubic_columns() + operator);
+        let constant = self.cubic_columns() + self.rate_columns() + operator;
+        rate.into_iter().chain(std::iter::once(constant))
     }
 }
 

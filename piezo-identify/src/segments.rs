@@ -35,6 +35,10 @@
 //!   50 ms). The start of a record is treated as a step: the state before it
 //!   is unknown, and a record usually starts with the drive switched on.
 //!
+//! After the start and each step, the fit also waits for the end of the
+//! first loading ([`first_loading_end`]): the input's second turning point,
+//! from which on the state no longer depends on what was assumed before.
+//!
 //! The fastest cycle is estimated from the input's reversals (turning points
 //! of at least 1 % of the span): twice the 10th percentile of the time
 //! between consecutive reversals. Smoothing windows and the search's
@@ -132,7 +136,11 @@ pub fn merge(ranges: &mut Vec<Range<usize>>) {
 
 /// Thresholds from the input `u` of the fit part (module comment). None when
 /// the input never changes.
-pub fn thresholds(u: &[f64], sample_period: f64, options: &SegmentOptions) -> Option<SegmentThresholds> {
+pub fn thresholds(
+    u: &[f64],
+    sample_period: f64,
+    options: &SegmentOptions,
+) -> Option<SegmentThresholds> {
     let (low, high) = u
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
@@ -152,7 +160,10 @@ pub fn thresholds(u: &[f64], sample_period: f64, options: &SegmentOptions) -> Op
         while rest.peek().is_some_and(|r| r.end <= n) {
             rest.next();
         }
-        if rest.peek().is_some_and(|r| r.contains(&n) && r.contains(&(n - 1))) {
+        if rest
+            .peek()
+            .is_some_and(|r| r.contains(&n) && r.contains(&(n - 1)))
+        {
             continue;
         }
         changes.push((u[n] - u[n - 1]).abs());
@@ -214,10 +225,9 @@ pub fn percentile(values: &mut [f64], q: f64) -> Option<f64> {
     Some(*value)
 }
 
-/// Length of the fastest cycle of the input over the samples where `flags`
-/// is set [samples] (module comment); None with fewer than three reversals.
-pub fn fastest_cycle(u: &[f64], flags: &[bool], span: f64) -> Option<f64> {
-    let threshold = REVERSAL_SPAN_FRACTION * span;
+/// Turning points of `u` over the samples where `flags` is set: indices of
+/// the extremes after which the input moved back by more than `threshold`.
+pub fn reversals(u: &[f64], flags: &[bool], threshold: f64) -> Vec<usize> {
     let mut reversals: Vec<usize> = Vec::new();
     // Direction of the current run (0: not known yet) and its extreme.
     let mut direction = 0.0;
@@ -241,6 +251,32 @@ pub fn fastest_cycle(u: &[f64], flags: &[bool], span: f64) -> Option<f64> {
             extreme = Some((n, v));
         }
     }
+    reversals
+}
+
+/// The end of the first loading of `u` from sample `from` (before `to`):
+/// the second turning point of at least 1 % of `span`. Until the input has
+/// turned at both ends of a cycle, a hysteresis model's state still depends
+/// on the state assumed before `from` (the wiping-out property of Preisach
+/// and Prandtl-Ishlinskii models: each turning point erases the memory of
+/// smaller earlier ones), and operators that only move on that first
+/// loading are fitted to a transient. None with fewer than two turning
+/// points.
+pub fn first_loading_end(u: &[f64], from: usize, to: usize, span: f64) -> Option<usize> {
+    let to = to.min(u.len());
+    if from >= to {
+        return None;
+    }
+    let flags = vec![true; to - from];
+    reversals(&u[from..to], &flags, REVERSAL_SPAN_FRACTION * span)
+        .get(1)
+        .map(|r| from + r)
+}
+
+/// Length of the fastest cycle of the input over the samples where `flags`
+/// is set [samples] (module comment); None with fewer than three reversals.
+pub fn fastest_cycle(u: &[f64], flags: &[bool], span: f64) -> Option<f64> {
+    let reversals = reversals(u, flags, REVERSAL_SPAN_FRACTION * span);
     if reversals.len() < 3 {
         return None;
     }
@@ -279,6 +315,13 @@ mod tests {
         let all = vec![true; u.len()];
         let cycle = fastest_cycle(&u, &all, thresholds.span).unwrap();
         assert!((cycle - 100.0).abs() <= 2.0, "2 Hz at 200 Hz: {cycle}");
+        // From the step: the sine rises to its first maximum (25 samples
+        // later) and falls to its first minimum (75 samples later).
+        assert_eq!(
+            first_loading_end(&u, 200, u.len(), thresholds.span),
+            Some(275)
+        );
+        assert_eq!(first_loading_end(&u, 200, 260, thresholds.span), None);
     }
 
     #[test]

@@ -61,7 +61,10 @@ pub fn centred_moving_average(y: &[f64], half_width: usize) -> Vec<f64> {
     }
     (0..y.len())
         .map(|n| {
-            let (low, high) = (n.saturating_sub(half_width), (n + half_width + 1).min(y.len()));
+            let (low, high) = (
+                n.saturating_sub(half_width),
+                (n + half_width + 1).min(y.len()),
+            );
             (prefix[high] - prefix[low]) / (high - low) as f64
         })
         .collect()
