@@ -70,12 +70,14 @@ fn the_fit_part_alone_decides_the_model() {
 
 /// A record split mid-cycle is scored with the state the fit part left,
 /// which beats starting the model from rest at the split: the error of
-/// that wrong start shows in the first cycles after it.
+/// that wrong start shows in the first cycle after it (until the input has
+/// turned at both ends, the model's state is still the assumed one).
 #[test]
 fn the_scored_part_is_predicted_with_the_state_carried_over() {
     let record = record();
-    // Mid-cycle: a quarter period past a multiple of the cycle.
-    let fit_end = 400 + 5 * 200 + 50;
+    // On the falling branch at the sine's mean: rest (400 samples), five
+    // cycles (1000), half a cycle (100).
+    let fit_end = 400 + 5 * 200 + 100;
     let plan = split_plan(&record, fit_end);
     let settings = BoucWenSettings {
         gapso: piezo_identify::gapso::GaPsoOptions {
@@ -85,21 +87,37 @@ fn the_scored_part_is_predicted_with_the_state_carried_over() {
         ..BoucWenSettings::default()
     };
     let fit = identify_bouc_wen_protocol(&record, &plan, &settings, &|_| {}).unwrap();
-    let carried = fit.unseen.unwrap().bouc_wen;
-    // The same samples, the model started from rest at the split.
-    let scored: Vec<bool> = vec![true; record.input.len() - fit_end];
-    let from_rest = fit.errors_on(
-        &record.input[fit_end..],
-        &record.output[fit_end..],
-        record.sample_period,
-        &scored,
-    );
+    // The first cycle after the split, with the state carried over ...
+    let mut first_cycle = vec![false; record.input.len()];
+    for flag in &mut first_cycle[fit_end..fit_end + 200] {
+        *flag = true;
+    }
+    let carried = fit
+        .errors_on(
+            &record.input,
+            &record.output,
+            record.sample_period,
+            &first_cycle,
+        )
+        .bouc_wen;
+    // ... and with the model started from rest at the split.
+    let from_rest = fit
+        .errors_on(
+            &record.input[fit_end..],
+            &record.output[fit_end..],
+            record.sample_period,
+            &first_cycle[fit_end..],
+        )
+        .bouc_wen;
     println!(
-        "scored part: state carried over {:.4} um RMS, model from rest at the split {:.4} um",
-        carried.rms, from_rest.bouc_wen.rms
+        "first cycle after the split: state carried over {:.4} um RMS, model from rest at the split {:.4} um",
+        carried.rms, from_rest.rms
     );
-    assert!(carried.samples == scored.len());
-    assert!(carried.rms < 0.5 * from_rest.bouc_wen.rms);
+    assert_eq!(carried.samples, 200);
+    assert!(carried.rms < 0.5 * from_rest.rms);
+    // The protocol's own score is the carried one over the whole scored part.
+    let unseen = fit.unseen.unwrap().bouc_wen;
+    assert_eq!(unseen.samples, record.input.len() - fit_end);
 }
 
 /// The rest at 0 V and the step onto the sine are found, left out of the
