@@ -178,21 +178,15 @@ xy200s-preset: system-deps
 	  --report out/xy200s/conversion.json
 
 # The identification figures: seed 000's model comparison on the plant (F of
-# eq. 7, evaluation time), and the real P-885 stack (unseen test file) fitted
-# by seed 000's modified inverse P-I and by seed 001's Bouc-Wen (GA-PSO + LM).
+# eq. 7, evaluation time), then the default identification of every real
+# record (P-885, split in two and fitted/validated) and of the lab-like
+# records from FlexureStage by seed 000's modified inverse P-I and seed 001's
+# Bouc-Wen, seeds 0-2, beside their baselines (docs/identification.md).
 identify: system-deps
 	$(CARGO) build --release --locked -p piezo-identify
 	mkdir -p out/identify
 	$(RELEASE)/piezo-identify compare --synthetic | tee out/identify/compare.txt
-	$(RELEASE)/piezo-identify inverse-pi piezo-identify/tests/data/piezo-p885/Model_Vi_Do.dat \
-	  --input 0 --output 4 --rate 200 --warm-up 0.1 --smooth 2 --rate-independent --decimation 2 \
-	  --validate piezo-identify/tests/data/piezo-p885/Test_Vi_Do_Di.dat \
-	  --out out/identify/p885_inverse_pi.json | tee out/identify/p885.txt
-	$(RELEASE)/piezo-identify bouc-wen piezo-identify/tests/data/piezo-p885/Model_Vi_Do.dat \
-	  --input 0 --output 4 --rate 200 --warm-up 0.1 --smooth 2 --decimation 2 \
-	  --validate piezo-identify/tests/data/piezo-p885/Test_Vi_Do_Di.dat \
-	  --out out/identify/p885_bouc_wen.json --report out/identify/p885_bouc_wen_report.json \
-	  | tee out/identify/p885_bouc_wen.txt
+	piezo-identify/benches/figures.sh $(RELEASE)/piezo-identify | tee out/identify/figures.md
 
 clean:
 	rm -rf $(BUILD) $(DIST) out
