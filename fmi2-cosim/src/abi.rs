@@ -19,7 +19,9 @@ use crate::logging::{LogCategory, Logger};
 use crate::model::CoSimModel;
 use crate::model_description;
 use crate::resources;
-use crate::status::{FmiFunction, Status};
+use crate::status::{FmiFunction, Interface, Status};
+
+pub mod model_exchange;
 
 const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
 
@@ -75,15 +77,8 @@ where
         return ERROR;
     };
     trace(inst, function, arguments);
-    if !function.allowed_states().contains(inst.state) {
-        inst.logger.error(
-            function.name(),
-            format_args!(
-                "illegal call sequence: not allowed in state {}",
-                inst.state.name()
-            ),
-        );
-        inst.enter_error_state(Status::Error);
+    if !function.allowed(inst.interface, inst.state) {
+        refuse_sequence(inst, function);
         return ERROR;
     }
     let outcome = panic::catch_unwind(AssertUnwindSafe(|| body(&mut *inst)));
@@ -99,6 +94,32 @@ where
     };
     inst.enter_error_state(status);
     status.to_raw()
+}
+
+/// Logs why `function` is not allowed now and moves the instance to its error
+/// state. Kept out of line: the check that leads here is on every call's path.
+#[cold]
+#[inline(never)]
+fn refuse_sequence<M: CoSimModel>(inst: &mut Instance<M>, function: FmiFunction) {
+    match function.interface() {
+        Some(own) if own != inst.interface => inst.logger.error(
+            function.name(),
+            format_args!(
+                "illegal call sequence: a {} function, and this instance was instantiated \
+                 for {}",
+                own.name(),
+                inst.interface.name()
+            ),
+        ),
+        _ => inst.logger.error(
+            function.name(),
+            format_args!(
+                "illegal call sequence: not allowed in state {}",
+                inst.state.name()
+            ),
+        ),
+    }
+    inst.enter_error_state(Status::Error);
 }
 
 /// A C string argument as `&str` (lossy on invalid UTF-8).
@@ -208,16 +229,30 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         logger.error(NAME, format_args!("instanceName is NULL"));
         return ptr::null_mut();
     }
-    if fmu_type != sys::fmi2Type_fmi2CoSimulation {
-        logger.error(
-            NAME,
-            format_args!(
-                "{} implements FMI 2.0 co-simulation only; fmuType {fmu_type} was requested",
-                M::INFO.model_identifier
-            ),
-        );
-        return ptr::null_mut();
-    }
+    let interface = match fmu_type {
+        sys::fmi2Type_fmi2CoSimulation => Interface::CoSimulation,
+        sys::fmi2Type_fmi2ModelExchange if M::MODEL_EXCHANGE.is_some() => Interface::ModelExchange,
+        sys::fmi2Type_fmi2ModelExchange => {
+            logger.error(
+                NAME,
+                format_args!(
+                    "{} implements FMI 2.0 co-simulation only (modelDescription has no \
+                     <ModelExchange>); fmuType fmi2ModelExchange was requested",
+                    M::INFO.model_identifier
+                ),
+            );
+            return ptr::null_mut();
+        }
+        other => {
+            logger.error(
+                NAME,
+                format_args!(
+                    "fmuType {other} is neither fmi2ModelExchange (0) nor fmi2CoSimulation (1)"
+                ),
+            );
+            return ptr::null_mut();
+        }
+    };
     let guid = match model_description::cached_guid::<M>() {
         Ok(guid) => guid,
         Err(e) => {
@@ -253,14 +288,15 @@ unsafe fn instantiate_checked<M: CoSimModel>(
             None
         }
     };
-    let instance = Instance::<M>::new(logger, resource_dir, guid);
+    let instance = Instance::<M>::new(logger, interface, resource_dir, guid);
     if instance.logger.is_enabled(LogCategory::FmiCalls) {
         instance.logger.log_in(
             NAME,
             Status::Ok,
             LogCategory::FmiCalls,
             format_args!(
-                "(instanceName = {:?}, fmuResourceLocation = {:?}, loggingOn = {logging_on})",
+                "(instanceName = {:?}, fmuType = {fmu_type}, fmuResourceLocation = {:?}, \
+                 loggingOn = {logging_on})",
                 name.as_deref().unwrap_or_default(),
                 location.as_deref()
             ),
@@ -270,7 +306,11 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         NAME,
         Status::Ok,
         LogCategory::Events,
-        format_args!("instantiated {}", M::INFO.model_identifier),
+        format_args!(
+            "instantiated {} for {}",
+            M::INFO.model_identifier,
+            interface.name()
+        ),
     );
     Box::into_raw(Box::new(instance)).cast()
 }
