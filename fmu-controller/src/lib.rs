@@ -633,7 +633,8 @@ impl CoSimModel for PiezoControllerFmu {
         description: "Controller of the 3-DOF piezo flexure stage: modified inverse \
                       Prandtl-Ishlinskii (seed 000) or inverse Bouc-Wen (seed 001) \
                       feedforward, PI feedback, piecewise-linear (seed 000) or model-based \
-                      (seed 001) decoupling",
+                      (seed 001) decoupling; Co-Simulation only: a sampled controller has no \
+                      continuous states for an importer's integrator",
         author: "piezo-fmu project",
         version: env!("CARGO_PKG_VERSION"),
         license: "MIT OR Apache-2.0",
