@@ -331,7 +331,7 @@ impl<M: CoSimModel> Instance<M> {
         let mut ctx = Context {
             logger: &self.logger,
             function: function.name(),
-            resource_dir: self.resource_dir.as_deref(),
+            resource_dir: &self.resource_dir,
             interface: self.interface,
         };
         if let Err(e) = self
@@ -532,53 +532,31 @@ impl<M: CoSimModel> Instance<M> {
         status
     }
 
+    #[inline]
     pub(crate) fn do_step(&mut self, current_time: f64, step_size: f64) -> Status {
         let function = FmiFunction::DoStep;
-        if !step_size.is_finite() || step_size <= 0.0 {
-            return self.error(
-                function,
-                format_args!("communicationStepSize must be positive and finite (got {step_size})"),
-            );
-        }
-        if !current_time.is_finite() {
-            return self.error(
-                function,
-                format_args!("currentCommunicationPoint must be finite (got {current_time})"),
-            );
-        }
-        // The FMU's time after the step is the next communication point, which
-        // must be finite too, or no step could follow.
-        if !(current_time + step_size).is_finite() {
-            return self.error(
-                function,
-                format_args!(
-                    "the step from {current_time} by {step_size} ends beyond the largest \
-                     representable time"
-                ),
-            );
-        }
-        // Importers that keep time in integer nanoseconds (libcosim) or sum steps
-        // in floating point land a rounding error away from the FMU's time.
-        let tolerance = (1e-9 * current_time.abs().max(1.0)).min(0.5 * step_size);
-        if (current_time - self.time).abs() > tolerance {
-            return self.error(
-                function,
-                format_args!(
-                    "currentCommunicationPoint {current_time} does not continue from the FMU's time {} \
-                     (tolerance {tolerance:e}); to go back, restore a state with fmi2SetFMUstate",
-                    self.time
-                ),
-            );
+        let end = current_time + step_size;
+        // The step is positive and finite, starts at a finite point and ends
+        // at one (the next communication point: no step could follow an
+        // infinite one), and starts at the FMU's time (most importers pass it
+        // exactly). One test of all of it on the way; the reason is worked out
+        // only when it fails. A NaN fails every compare.
+        let sound = step_size > 0.0
+            && (current_time.abs() < f64::INFINITY)
+                & (end.abs() < f64::INFINITY)
+                & (current_time == self.time);
+        if !sound && let Err(status) = self.check_step(current_time, step_size) {
+            return status;
         }
         let mut ctx = Context {
             logger: &self.logger,
             function: function.name(),
-            resource_dir: self.resource_dir.as_deref(),
+            resource_dir: &self.resource_dir,
             interface: self.interface,
         };
         match self.model.do_step(&mut ctx, current_time, step_size) {
             Ok(status) => {
-                self.time = current_time + step_size;
+                self.time = end;
                 status
             }
             Err(e) => {
@@ -586,6 +564,50 @@ impl<M: CoSimModel> Instance<M> {
                 self.error(function, format_args!("at t = {current_time}: {e}"))
             }
         }
+    }
+
+    /// Why the step of `step_size` from `current_time` cannot be made, if it
+    /// cannot. Importers that keep time in integer nanoseconds (libcosim) or
+    /// sum steps in floating point land a rounding error away from the FMU's
+    /// time: a point within 1e-9 relative (at least 1e-9 absolute, at most
+    /// half the step) of it is accepted, anything further refused.
+    #[cold]
+    #[inline(never)]
+    fn check_step(&self, current_time: f64, step_size: f64) -> Result<(), Status> {
+        let function = FmiFunction::DoStep;
+        if !(step_size > 0.0 && step_size < f64::INFINITY) {
+            return Err(self.error(
+                function,
+                format_args!("communicationStepSize must be positive and finite (got {step_size})"),
+            ));
+        }
+        if !current_time.is_finite() {
+            return Err(self.error(
+                function,
+                format_args!("currentCommunicationPoint must be finite (got {current_time})"),
+            ));
+        }
+        if !(current_time + step_size).is_finite() {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "the step from {current_time} by {step_size} ends beyond the largest \
+                     representable time"
+                ),
+            ));
+        }
+        let tolerance = (1e-9 * current_time.abs().max(1.0)).min(0.5 * step_size);
+        if (current_time - self.time).abs() > tolerance {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "currentCommunicationPoint {current_time} does not continue from the FMU's time {} \
+                     (tolerance {tolerance:e}); to go back, restore a state with fmi2SetFMUstate",
+                    self.time
+                ),
+            ));
+        }
+        Ok(())
     }
 
     pub(crate) fn snapshot(&self) -> SnapshotData<M> {

@@ -148,7 +148,9 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
 pub struct Context<'a> {
     pub(crate) logger: &'a Logger,
     pub(crate) function: &'static str,
-    pub(crate) resource_dir: Option<&'a Path>,
+    /// The instance's own field, dereferenced only when asked for: building a
+    /// context is on every step's path.
+    pub(crate) resource_dir: &'a Option<std::path::PathBuf>,
     pub(crate) interface: Interface,
 }
 
@@ -169,7 +171,7 @@ impl Context<'_> {
 
     /// The FMU's `resources` folder, when the importer gave its location.
     pub fn resource_dir(&self) -> Option<&Path> {
-        self.resource_dir
+        self.resource_dir.as_deref()
     }
 
     /// The interface the instance was instantiated for.

@@ -144,7 +144,7 @@ impl<M: ModelExchange> Instance<M> {
         let mut ctx = Context {
             logger: &self.logger,
             function: function.name(),
-            resource_dir: self.resource_dir.as_deref(),
+            resource_dir: &self.resource_dir,
             interface: self.interface,
         };
         match self.model.update_discrete_states(&mut ctx, time) {
@@ -162,7 +162,7 @@ impl<M: ModelExchange> Instance<M> {
         let mut ctx = Context {
             logger: &self.logger,
             function: function.name(),
-            resource_dir: self.resource_dir.as_deref(),
+            resource_dir: &self.resource_dir,
             interface: self.interface,
         };
         match self.model.completed_integrator_step(&mut ctx, time) {

@@ -89,6 +89,7 @@ pub enum FmiState {
 }
 
 impl FmiState {
+    #[inline(always)]
     const fn bit(self) -> u16 {
         1 << (self as u16)
     }
@@ -125,6 +126,7 @@ impl StateMask {
         StateMask(bits)
     }
 
+    #[inline(always)]
     pub const fn contains(self, state: FmiState) -> bool {
         self.0 & state.bit() != 0
     }
@@ -277,6 +279,7 @@ impl FmiFunction {
 
     /// The interface the function belongs to; `None` for the functions common
     /// to both.
+    #[inline(always)]
     pub const fn interface(self) -> Option<Interface> {
         use FmiFunction::*;
         match self {
@@ -304,8 +307,9 @@ impl FmiFunction {
     }
 
     /// Whether the function may be called on an instance of `interface` in
-    /// `state`.
-    #[inline]
+    /// `state`. Inlined into every entry point, where the function is a
+    /// constant: the check folds to one mask test and one compare.
+    #[inline(always)]
     pub fn allowed(self, interface: Interface, state: FmiState) -> bool {
         self.allowed_states().contains(state)
             && match self.interface() {
@@ -316,6 +320,7 @@ impl FmiFunction {
 
     /// States in which the standard allows the call. `fmi2FreeInstance` is also
     /// accepted in the fatal state: releasing memory never makes things worse.
+    #[inline(always)]
     pub fn allowed_states(self) -> StateMask {
         use FmiFunction::*;
         match self {

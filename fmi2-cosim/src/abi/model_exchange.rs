@@ -45,9 +45,12 @@ fn to_c(b: bool) -> sys::fmi2Boolean {
 /// `c` as for every FMI function.
 pub unsafe fn enter_event_mode<M: ModelExchange>(c: sys::fmi2Component) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, FmiFunction::EnterEventMode, format_args!(""), |inst| {
-            inst.enter_event_mode()
-        })
+        call::<M, _, _>(
+            c,
+            FmiFunction::EnterEventMode,
+            |_| Ok(()),
+            |inst| inst.enter_event_mode(),
+        )
     }
 }
 
@@ -59,10 +62,10 @@ pub unsafe fn new_discrete_states<M: ModelExchange>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::NewDiscreteStates;
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             function,
-            format_args!("fmi2eventInfo = {event_info:?}"),
+            |f| write!(f, "fmi2eventInfo = {event_info:?}"),
             |inst| {
                 if event_info.is_null() {
                     return inst.error(function, format_args!("fmi2eventInfo is NULL"));
@@ -93,10 +96,10 @@ pub unsafe fn enter_continuous_time_mode<M: ModelExchange>(
     c: sys::fmi2Component,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             FmiFunction::EnterContinuousTimeMode,
-            format_args!(""),
+            |_| Ok(()),
             |inst| inst.enter_continuous_time_mode(),
         )
     }
@@ -112,22 +115,27 @@ pub unsafe fn completed_integrator_step<M: ModelExchange>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::CompletedIntegratorStep;
     unsafe {
-        call::<M, _>(c, function, format_args!(""), |inst| {
-            if enter_event_mode.is_null() || terminate_simulation.is_null() {
-                return inst.error(
-                    function,
-                    format_args!("enterEventMode or terminateSimulation is NULL"),
-                );
-            }
-            let status = inst.completed_integrator_step();
-            if status <= Status::Warning {
-                // No step events: the model has nothing to do between steps
-                // that an event would serve.
-                *enter_event_mode = sys::fmi2False as _;
-                *terminate_simulation = sys::fmi2False as _;
-            }
-            status
-        })
+        call::<M, _, _>(
+            c,
+            function,
+            |_| Ok(()),
+            |inst| {
+                if enter_event_mode.is_null() || terminate_simulation.is_null() {
+                    return inst.error(
+                        function,
+                        format_args!("enterEventMode or terminateSimulation is NULL"),
+                    );
+                }
+                let status = inst.completed_integrator_step();
+                if status <= Status::Warning {
+                    // No step events: the model has nothing to do between steps
+                    // that an event would serve.
+                    *enter_event_mode = sys::fmi2False as _;
+                    *terminate_simulation = sys::fmi2False as _;
+                }
+                status
+            },
+        )
     }
 }
 
@@ -138,10 +146,10 @@ pub unsafe fn set_time<M: ModelExchange>(
     time: sys::fmi2Real,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             FmiFunction::SetTime,
-            format_args!("time = {time}"),
+            |f| write!(f, "time = {time}"),
             |inst| inst.set_time(time),
         )
     }
@@ -156,16 +164,15 @@ pub unsafe fn set_continuous_states<M: ModelExchange>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetContinuousStates;
     unsafe {
-        call::<M, _>(c, function, format_args!("nx = {nx}"), |inst| match vector(
-            inst,
+        call::<M, _, _>(
+            c,
             function,
-            x.cast_mut(),
-            nx,
-            "x",
-        ) {
-            Ok(states) => inst.set_continuous_states(states),
-            Err(status) => status,
-        })
+            |f| write!(f, "nx = {nx}"),
+            |inst| match vector(inst, function, x.cast_mut(), nx, "x") {
+                Ok(states) => inst.set_continuous_states(states),
+                Err(status) => status,
+            },
+        )
     }
 }
 
@@ -178,12 +185,15 @@ pub unsafe fn get_continuous_states<M: ModelExchange>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetContinuousStates;
     unsafe {
-        call::<M, _>(c, function, format_args!("nx = {nx}"), |inst| match vector(
-            inst, function, x, nx, "x",
-        ) {
-            Ok(states) => inst.get_continuous_states(states),
-            Err(status) => status,
-        })
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "nx = {nx}"),
+            |inst| match vector(inst, function, x, nx, "x") {
+                Ok(states) => inst.get_continuous_states(states),
+                Err(status) => status,
+            },
+        )
     }
 }
 
@@ -196,16 +206,15 @@ pub unsafe fn get_derivatives<M: ModelExchange>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetDerivatives;
     unsafe {
-        call::<M, _>(c, function, format_args!("nx = {nx}"), |inst| match vector(
-            inst,
+        call::<M, _, _>(
+            c,
             function,
-            derivatives,
-            nx,
-            "derivatives",
-        ) {
-            Ok(out) => inst.get_derivatives(out),
-            Err(status) => status,
-        })
+            |f| write!(f, "nx = {nx}"),
+            |inst| match vector(inst, function, derivatives, nx, "derivatives") {
+                Ok(out) => inst.get_derivatives(out),
+                Err(status) => status,
+            },
+        )
     }
 }
 
@@ -218,16 +227,15 @@ pub unsafe fn get_event_indicators<M: ModelExchange>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetEventIndicators;
     unsafe {
-        call::<M, _>(c, function, format_args!("ni = {ni}"), |inst| match vector(
-            inst,
+        call::<M, _, _>(
+            c,
             function,
-            indicators,
-            ni,
-            "eventIndicators",
-        ) {
-            Ok(out) => inst.get_event_indicators(out),
-            Err(status) => status,
-        })
+            |f| write!(f, "ni = {ni}"),
+            |inst| match vector(inst, function, indicators, ni, "eventIndicators") {
+                Ok(out) => inst.get_event_indicators(out),
+                Err(status) => status,
+            },
+        )
     }
 }
 
@@ -240,15 +248,14 @@ pub unsafe fn get_nominals_of_continuous_states<M: ModelExchange>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetNominalsOfContinuousStates;
     unsafe {
-        call::<M, _>(c, function, format_args!("nx = {nx}"), |inst| match vector(
-            inst,
+        call::<M, _, _>(
+            c,
             function,
-            nominals,
-            nx,
-            "x_nominal",
-        ) {
-            Ok(out) => inst.get_nominals(out),
-            Err(status) => status,
-        })
+            |f| write!(f, "nx = {nx}"),
+            |inst| match vector(inst, function, nominals, nx, "x_nominal") {
+                Ok(out) => inst.get_nominals(out),
+                Err(status) => status,
+            },
+        )
     }
 }
