@@ -2270,7 +2270,11 @@ impl<'a> Fuzzer<'a> {
                 .clone();
             let live = self.live_mut(slot);
             live.state = model.machine;
+            // The interface is the instance's: a forged state may claim the
+            // other one and still be accepted.
+            let interface = live.model.interface;
             live.model = model;
+            live.model.interface = interface;
             if forged {
                 // The machine state a forged state put the instance in is
                 // unknown: a reset brings it back to a known one.
