@@ -122,6 +122,17 @@ impl Fmu {
         self.description.model_structure.derivatives.unknowns.len()
     }
 
+    /// Whether the variable at `index` (0-based, in ModelVariables) is a
+    /// state derivative: listed in ModelStructure/Derivatives.
+    pub fn is_derivative(&self, index: usize) -> bool {
+        self.description
+            .model_structure
+            .derivatives
+            .unknowns
+            .iter()
+            .any(|unknown| unknown.index as usize == index + 1)
+    }
+
     /// `numberOfEventIndicators` of modelDescription.
     pub fn number_of_event_indicators(&self) -> usize {
         self.description.number_of_event_indicators.unwrap_or(0) as usize

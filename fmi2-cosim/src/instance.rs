@@ -372,7 +372,10 @@ impl<M: CoSimModel> Instance<M> {
         Status::Ok
     }
 
-    /// Reads `vrs` and hands the i-th value to `store(i, value)`.
+    /// Reads `vrs` and hands the i-th value to `store(i, value)`. A state
+    /// derivative that is not finite is refused as `fmi2GetDerivatives`
+    /// refuses it: the importer sets the states and parameters of Model
+    /// Exchange, and the rates of some may overflow.
     pub(crate) fn get_values<T: FmiValue>(
         &self,
         function: FmiFunction,
@@ -395,7 +398,22 @@ impl<M: CoSimModel> Instance<M> {
                     ),
                 );
             };
-            store(i, get(&self.model));
+            let value = get(&self.model);
+            // Folds away in a model without Model Exchange (no derivatives).
+            if M::MODEL_EXCHANGE.is_some()
+                && var.derivative_of.is_some()
+                && let Some(reason) = value.invalid()
+            {
+                return self.error(
+                    function,
+                    format_args!(
+                        "at t = {}: {} is {reason}; the states or inputs are outside the \
+                         model's domain",
+                        self.time, var.name
+                    ),
+                );
+            }
+            store(i, value);
         }
         Status::Ok
     }

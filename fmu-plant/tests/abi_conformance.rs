@@ -34,6 +34,7 @@ fmi2_conformance::conformance_tests!(
     fmu_state_restores_every_machine_state,
     model_exchange_vectors_match_the_variables,
     model_exchange_arguments_are_checked,
+    non_finite_derivatives_are_refused,
     derivative_dependencies_hold,
     status_queries,
     reset_restores_start_values,

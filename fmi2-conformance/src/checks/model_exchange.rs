@@ -205,6 +205,55 @@ pub fn model_exchange_arguments_are_checked(fmu: &Fmu) {
     );
 }
 
+/// A state derivative that overflows is never handed out: from finite states
+/// at the edge of the floating-point range (f64::MAX, where any rate that
+/// grows with its state overflows), `fmi2GetDerivatives` and `fmi2GetReal` of
+/// the derivative variables return fmi2Error and say which derivative, and
+/// `fmi2GetReal` of the states still reads them.
+pub fn non_finite_derivatives_are_refused(fmu: &Fmu) {
+    if !fmu.offers_model_exchange() {
+        return;
+    }
+    let n = fmu.number_of_states();
+    let references = state_references(fmu);
+    let derivative_vrs: Vec<u32> = references.iter().map(|(_, d)| *d).collect();
+    let state_vrs: Vec<u32> = references.iter().map(|(s, _)| *s).collect();
+    let at_the_edge = |name: &str| {
+        let inst = moving(fmu, name);
+        assert_eq!(inst.set_continuous_states(&vec![f64::MAX; n]), OK);
+        inst
+    };
+
+    let inst = at_the_edge("overflow-vector");
+    let (status, dx) = inst.get_derivatives(n);
+    assert_eq!(status, ERROR, "fmi2GetDerivatives handed out {dx:?}");
+    assert_logged(
+        &inst.take_log(),
+        "fmi2GetDerivatives",
+        "outside the model's domain",
+    );
+    let (status, x) = inst.get_real(&state_vrs);
+    assert_eq!(status, OK, "the states stay readable in the error state");
+    assert!(x.iter().all(|v| *v == f64::MAX), "{x:?}");
+
+    let inst = at_the_edge("overflow-variables");
+    let (status, dx) = inst.get_real(&derivative_vrs);
+    assert_eq!(
+        status, ERROR,
+        "fmi2GetReal of the derivatives handed out {dx:?}"
+    );
+    assert_logged(
+        &inst.take_log(),
+        "fmi2GetReal",
+        "outside the model's domain",
+    );
+    assert_eq!(
+        inst.set_time(0.0),
+        ERROR,
+        "the instance is in its error state"
+    );
+}
+
 /// The dependencies of ModelStructure/Derivatives and /Outputs hold: from a
 /// moving state, a state or input that a derivative (or output) does not list
 /// does not change it when it changes, bit for bit.

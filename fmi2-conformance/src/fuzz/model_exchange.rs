@@ -146,7 +146,7 @@ impl Fuzzer<'_> {
     /// Whether the instance in `slot` is where every Model Exchange call with
     /// good arguments must succeed: start parameters, modest inputs, states
     /// only ever set by an integrator.
-    fn pristine_model_exchange(&self, slot: usize) -> bool {
+    pub(super) fn pristine_model_exchange(&self, slot: usize) -> bool {
         self.pristine(slot) && !self.live(slot).model.wild_states
     }
 
