@@ -287,9 +287,11 @@ mod tests {
     /// at this step is ~1e-12 µm, the chord's (1e-3 V)²·|y''|/8 ~ 1e-10 µm.
     #[test]
     fn the_ode_and_the_step_describe_the_same_stage() {
-        let mut params = FlexureStageParams::default();
-        params.solver = SolverParams {
-            max_voltage_step: 1e-3,
+        let params = FlexureStageParams {
+            solver: SolverParams {
+                max_voltage_step: 1e-3,
+            },
+            ..FlexureStageParams::default()
         };
         let start = moving(&params);
         let commands = [7.5, 1.0, 11.0]; // the last one clipped
