@@ -817,7 +817,7 @@ fn range_excess(values: &[f64], fitted: &[bool], scored: &[bool]) -> f64 {
     let (fit_low, fit_high) = range(fitted);
     let (low, high) = range(scored);
     let span = fit_high - fit_low;
-    if !(span > 0.0) || !low.is_finite() {
+    if span.is_nan() || span <= 0.0 || !low.is_finite() {
         return 0.0;
     }
     ((fit_low - low).max(high - fit_high) / span).max(0.0)
