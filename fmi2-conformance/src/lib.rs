@@ -7,8 +7,9 @@
 //! order. Each check is a plain function that panics with a reason; an FMU
 //! crate runs them all with [`conformance_tests!`].
 //!
-//! The legality table in [`allowed_in`] is written from the standard (FMI 2.0.4,
-//! section 4.2.4), independently of the layer under test.
+//! The legality tables in [`allowed_in`] and
+//! [`model_exchange::allowed_in_model_exchange`] are written from the standard
+//! (FMI 2.0.4, sections 4.2.4 and 3.2.3), independently of the layer under test.
 
 // The harness hands FMU-state pointers that the FMU gave it back to the FMU, as
 // an importer does; validating them is the FMU's job, and the checks test it.
@@ -26,6 +27,7 @@ use fmi_sys::fmi2::Fmi2Binding;
 
 pub mod checks;
 pub mod fuzz;
+pub mod model_exchange;
 pub mod table;
 
 pub const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
@@ -227,6 +229,24 @@ impl Fmu {
         resource_location: Option<&str>,
         logging_on: bool,
     ) -> Result<Instance<'_>, Vec<LogRecord>> {
+        self.try_instantiate_as(
+            Interface::CoSimulation,
+            name,
+            guid,
+            resource_location,
+            logging_on,
+        )
+    }
+
+    /// [`Fmu::try_instantiate`] for either interface.
+    pub fn try_instantiate_as(
+        &self,
+        interface: Interface,
+        name: &str,
+        guid: &str,
+        resource_location: Option<&str>,
+        logging_on: bool,
+    ) -> Result<Instance<'_>, Vec<LogRecord>> {
         let sink = Box::new(LogSink::default());
         let callbacks = Box::new(callbacks_for(&sink));
         let name_c = CString::new(name).expect("no NUL");
@@ -235,7 +255,7 @@ impl Fmu {
         let c = unsafe {
             self.binding.fmi2Instantiate(
                 name_c.as_ptr(),
-                sys::fmi2Type_fmi2CoSimulation,
+                interface.fmu_type(),
                 guid_c.as_ptr(),
                 location_c.as_ref().map_or(ptr::null(), |l| l.as_ptr()),
                 &*callbacks,
@@ -252,6 +272,7 @@ impl Fmu {
             sink,
             _callbacks: callbacks,
             time: 0.0,
+            interface,
         })
     }
 }
@@ -329,6 +350,32 @@ pub struct Instance<'a> {
     _callbacks: Box<sys::fmi2CallbackFunctions>,
     /// The communication point the harness will pass to the next doStep.
     pub time: f64,
+    /// The interface it was instantiated for.
+    pub interface: Interface,
+}
+
+/// The interface an instance is instantiated for (`fmuType`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interface {
+    ModelExchange,
+    CoSimulation,
+}
+
+impl Interface {
+    pub fn fmu_type(self) -> sys::fmi2Type {
+        match self {
+            Interface::ModelExchange => sys::fmi2Type_fmi2ModelExchange,
+            Interface::CoSimulation => sys::fmi2Type_fmi2CoSimulation,
+        }
+    }
+
+    /// The states of its state machine that the harness drives an instance into.
+    pub fn states(self) -> &'static [State] {
+        match self {
+            Interface::ModelExchange => &State::MODEL_EXCHANGE,
+            Interface::CoSimulation => &State::CO_SIMULATION,
+        }
+    }
 }
 
 /// The states the harness drives an instance into.
@@ -339,13 +386,37 @@ pub enum State {
     StepComplete,
     Terminated,
     Error,
+    /// Model Exchange only.
+    EventMode,
+    /// Model Exchange only.
+    ContinuousTimeMode,
 }
 
 impl State {
-    pub const ALL: [State; 5] = [
+    pub const ALL: [State; 7] = [
         State::Instantiated,
         State::InitializationMode,
         State::StepComplete,
+        State::Terminated,
+        State::Error,
+        State::EventMode,
+        State::ContinuousTimeMode,
+    ];
+    /// The states a co-simulation slave reaches (FMI 2.0.4 §4.2.4, without
+    /// the asynchronous ones).
+    pub const CO_SIMULATION: [State; 5] = [
+        State::Instantiated,
+        State::InitializationMode,
+        State::StepComplete,
+        State::Terminated,
+        State::Error,
+    ];
+    /// The states a model-exchange model reaches (FMI 2.0.4 §3.2.3).
+    pub const MODEL_EXCHANGE: [State; 6] = [
+        State::Instantiated,
+        State::InitializationMode,
+        State::EventMode,
+        State::ContinuousTimeMode,
         State::Terminated,
         State::Error,
     ];
@@ -413,7 +484,22 @@ impl Instance<'_> {
                 assert_eq!(self.setup(0.0), OK);
                 assert_eq!(self.enter_init(), OK);
             }
-            State::StepComplete => self.initialize(),
+            State::StepComplete | State::EventMode => {
+                assert_eq!(
+                    self.interface,
+                    if state == State::EventMode {
+                        Interface::ModelExchange
+                    } else {
+                        Interface::CoSimulation
+                    },
+                    "{state:?} belongs to the other interface"
+                );
+                self.initialize();
+            }
+            State::ContinuousTimeMode => {
+                self.initialize();
+                assert_eq!(self.enter_continuous_time_mode(), OK);
+            }
             State::Terminated => {
                 self.initialize();
                 assert_eq!(self.terminate(), OK);
@@ -559,10 +645,23 @@ impl Drop for Instance<'_> {
     }
 }
 
+/// Whether the standard allows `function` on an instance of `interface` in
+/// `state`.
+pub fn allowed(interface: Interface, function: &str, state: State) -> bool {
+    match interface {
+        Interface::CoSimulation => allowed_in(function, state),
+        Interface::ModelExchange => model_exchange::allowed_in_model_exchange(function, state),
+    }
+}
+
 /// Whether the standard allows `function` in `state` (FMI 2.0.4, co-simulation
 /// state machine). Written from the standard, not from the layer under test.
 pub fn allowed_in(function: &str, state: State) -> bool {
     use State::*;
+    if model_exchange::MODEL_EXCHANGE_FUNCTIONS.contains(&function) {
+        // Not a function of a co-simulation slave in any state.
+        return false;
+    }
     let states: &[State] = match function {
         "fmi2SetDebugLogging"
         | "fmi2Reset"

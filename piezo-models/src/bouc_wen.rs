@@ -225,6 +225,20 @@ impl AsymmetricBoucWen {
         p.p + p.q * p.state_slope(self.u, self.h, direction)
     }
 
+    /// Sets the input and the hysteretic state (a continuous-state
+    /// integrator owns them).
+    pub fn set_point(&mut self, u: f64, h: f64) {
+        self.u = u;
+        self.h = h;
+    }
+
+    /// dh/dt while the input moves at `u_rate` = du/dt: eq. (3) in this
+    /// module's reading, (dh/du)·u̇, with sgn(du) = sgn(u̇). Continuous in u̇
+    /// (every term is proportional to it), so a held input holds h.
+    pub fn state_rate(&self, u_rate: f64) -> f64 {
+        self.params.state_slope(self.u, self.h, u_rate) * u_rate
+    }
+
     /// Back to rest: h = h_rest (0 for a virgin model), u = 0.
     pub fn reset(&mut self) {
         self.h = self.rest.h;

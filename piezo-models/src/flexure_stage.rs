@@ -31,6 +31,11 @@ use crate::sensor_noise::{SensorNoise, SensorNoiseParams};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
+/// The same stage as a system of ordinary differential equations in time, for
+/// integrators other than [`FlexureStage::step`] (FMI Model Exchange).
+#[path = "flexure_stage_ode.rs"]
+pub mod ode;
+
 /// One piezo stack: its hysteresis and its creep.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

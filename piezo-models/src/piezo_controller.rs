@@ -379,6 +379,13 @@ impl PiezoController {
         &self.output
     }
 
+    /// Per channel, whether the last sample's command was limited: 1 at
+    /// `command_max`, −1 at `command_min`, 0 inside (what the anti-windup
+    /// of the next sample acts on).
+    pub fn limited(&self) -> [i8; 3] {
+        self.limited
+    }
+
     /// One sample of period `dt` (> 0): references x_ref, y_ref [µm],
     /// theta_ref [rad]; sensors s1, s2, s3 [µm].
     pub fn step(
