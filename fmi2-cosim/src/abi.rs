@@ -1041,7 +1041,8 @@ pub unsafe fn do_step<M: CoSimModel>(
         call::<M, _, _>(
             c,
             function,
-            |f| {
+            // By value: the arguments stay in registers unless tracing is on.
+            move |f| {
                 write!(
                     f,
                     "currentCommunicationPoint = {current_communication_point}, communicationStepSize = {communication_step_size}"
