@@ -930,6 +930,33 @@ pub fn corrupted_states_are_refused(fmu: &Fmu) {
         assert!(state.is_null(), "{name}: a state was returned");
         assert_logged(&inst.take_log(), "fmi2DeSerializeFMUstate", "refused");
     }
+    // Sound bytes (a valid CRC, so written on purpose) that carry a value
+    // fmi2SetReal refuses: an input set to a value whose bytes occur once in
+    // the state, overwritten with NaN.
+    let marker = 1_234.567_890_123_f64;
+    let mut inst = fmu.instantiate("forged", false);
+    inst.initialize();
+    assert_eq!(inst.set_real(&[fmu.real_input().vr], &[marker]), OK);
+    let (_, mut state) = inst.get_state();
+    let (status, mut forged) = inst.serialize(state);
+    assert_eq!(status, OK);
+    assert_eq!(inst.free_state(&mut state), OK);
+    let needle = marker.to_le_bytes();
+    let places: Vec<usize> = forged
+        .windows(needle.len())
+        .enumerate()
+        .filter(|(_, w)| *w == needle)
+        .map(|(i, _)| i)
+        .collect();
+    assert_eq!(places.len(), 1, "the input's bytes occur once in the state");
+    forged[places[0]..places[0] + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+    let body = forged.len() - 4;
+    let crc = crc32fast::hash(&forged[..body]);
+    forged[body..].copy_from_slice(&crc.to_le_bytes());
+    let (status, restored) = inst.deserialize(&forged);
+    assert_eq!(status, ERROR, "a state holding a NaN input accepted");
+    assert!(restored.is_null());
+    assert_logged(&inst.take_log(), "fmi2DeSerializeFMUstate", "only finite");
     // The wrong buffer size in fmi2SerializeFMUstate is refused.
     let mut inst = fmu.instantiate("corrupt", false);
     inst.initialize();

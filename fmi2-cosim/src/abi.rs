@@ -914,12 +914,42 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
                     std::slice::from_raw_parts(serialized.cast::<u8>(), size)
                 };
                 match fmu_state::decode::<M>(bytes, &inst.guid) {
-                    Ok(data) => store_snapshot(inst, function, state, data),
+                    Ok(data) => match non_finite_value(&data) {
+                        None => store_snapshot(inst, function, state, data),
+                        Some(reason) => inst.error(function, format_args!("refused: {reason}")),
+                    },
                     Err(reason) => inst.error(function, format_args!("refused: {reason}")),
                 }
             },
         )
     }
+}
+
+/// Why sound bytes (a valid CRC, so written on purpose) still cannot be
+/// restored: a time, or the value of a settable Real, that is not finite.
+/// `fmi2SetupExperiment`, `fmi2DoStep` and `fmi2SetReal` never let one in, so
+/// models may take their inputs and parameters as finite at every step
+/// without checking them there; this keeps that true of deserialized states
+/// (states taken in memory come from an instance where it holds).
+fn non_finite_value<M: CoSimModel>(data: &fmu_state::SnapshotData<M>) -> Option<String> {
+    if !(data.time.is_finite() && data.start_time.is_finite()) {
+        return Some(format!(
+            "the state's time {} (start time {}) is not finite",
+            data.time, data.start_time
+        ));
+    }
+    M::variables()
+        .iter()
+        .filter(|v| v.is_settable())
+        .find_map(|v| {
+            let value = f64::getter(&v.value)?(&data.model);
+            (!value.is_finite()).then(|| {
+                format!(
+                    "the state holds {} = {value}, and only finite values can be set",
+                    v.name
+                )
+            })
+        })
 }
 
 /// An optional capability this layer does not offer: `fmi2Error` with the
@@ -1011,7 +1041,8 @@ pub unsafe fn do_step<M: CoSimModel>(
         call::<M, _, _>(
             c,
             function,
-            |f| {
+            // By value: the arguments stay in registers unless tracing is on.
+            move |f| {
                 write!(
                     f,
                     "currentCommunicationPoint = {current_communication_point}, communicationStepSize = {communication_step_size}"

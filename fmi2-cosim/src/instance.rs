@@ -558,11 +558,11 @@ impl<M: CoSimModel> Instance<M> {
         // at one (the next communication point: no step could follow an
         // infinite one), and starts at the FMU's time (most importers pass it
         // exactly). One test of all of it on the way; the reason is worked out
-        // only when it fails. A NaN fails every compare.
-        let sound = step_size > 0.0
-            && (current_time.abs() < f64::INFINITY)
-                & (end.abs() < f64::INFINITY)
-                & (current_time == self.time);
+        // only when it fails. A NaN fails every compare, and a positive step
+        // from an infinite point, or an infinite step from a finite one, ends
+        // at an infinity or NaN: a finite end and a positive step make both
+        // finite.
+        let sound = (step_size > 0.0) & (end.abs() < f64::INFINITY) & (current_time == self.time);
         if !sound && let Err(status) = self.check_step(current_time, step_size) {
             return status;
         }

@@ -597,12 +597,21 @@ static VARIABLES: [Variable<PiezoControllerFmu>; 147] = fmi2_cosim::variables::c
     &RESTS,
 ]);
 
-/// Whether every value is finite. A fold without early exit, so that the
-/// compiler checks them with vector compares and no branch per value: this
-/// runs at every step.
+/// Whether every value is finite: x·0 is ±0 for a finite x and NaN for an
+/// infinite or NaN one, and a sum with a NaN in it is NaN. Summed in two
+/// lanes, which the compiler keeps in one vector register: one multiplication
+/// and one addition per pair of values, no compare or branch per value (this
+/// runs at every step).
 #[inline]
 fn all_finite<const N: usize>(values: [f64; N]) -> bool {
-    values.iter().fold(true, |ok, v| ok & v.is_finite())
+    let mut lanes = [0.0f64; 2];
+    let pairs = values.chunks_exact(2);
+    let odd = pairs.remainder().first().map_or(0.0, |v| v * 0.0);
+    for pair in pairs {
+        lanes[0] += pair[0] * 0.0;
+        lanes[1] += pair[1] * 0.0;
+    }
+    lanes[0] + lanes[1] + odd == 0.0
 }
 
 /// Whether every output of a controller sample is finite (the fast check of
@@ -740,11 +749,8 @@ impl CoSimModel for PiezoControllerFmu {
         current_time: f64,
         step_size: f64,
     ) -> Result<Status, ModelError> {
-        // fmi2SetReal refuses non-finite inputs; this also covers a state
-        // restored from bytes that carry one.
-        if !(all_finite(self.references) & all_finite(self.sensors)) {
-            return Err(self.non_finite_input(current_time));
-        }
+        // The inputs are finite: fmi2SetReal refuses a non-finite value, and
+        // fmi2DeSerializeFMUstate a state that holds one (the FMI layer).
         let [x_ref, y_ref, theta_ref] = self.references;
         let out = self
             .controller
@@ -757,27 +763,16 @@ impl CoSimModel for PiezoControllerFmu {
         }
         // Limiting is part of normal operation (a demand of 0 µm asks for a
         // slightly negative voltage; anti-windup handles it), so it is an
-        // event, logged once per channel, not a warning.
-        let limited = self.controller.limited();
-        let newly_limited: [bool; 3] =
-            std::array::from_fn(|c| (limited[c] != 0) & !self.saturation_reported[c]);
-        if newly_limited.iter().any(|limited| *limited) {
-            self.report_limiting(ctx, current_time, newly_limited);
+        // event, logged once per channel, not a warning. Most samples limit
+        // nothing: one test of the three flags.
+        if self.controller.limited() != [0; 3] {
+            self.report_limiting(ctx, current_time);
         }
         Ok(Status::Ok)
     }
 }
 
 impl PiezoControllerFmu {
-    #[cold]
-    #[inline(never)]
-    fn non_finite_input(&self, current_time: f64) -> ModelError {
-        ModelError(format!(
-            "t = {current_time}: non-finite input (references {:?}, sensors {:?})",
-            self.references, self.sensors
-        ))
-    }
-
     #[cold]
     #[inline(never)]
     fn non_finite_step(&self, current_time: f64, step_size: f64) -> ModelError {
@@ -788,13 +783,17 @@ impl PiezoControllerFmu {
         ))
     }
 
-    /// Logs each channel in `newly_limited` once (out of the step's line).
-    #[cold]
+    /// Logs each limited channel once (out of the step's line; while a
+    /// channel stays limited it runs at every sample and logs nothing).
     #[inline(never)]
-    fn report_limiting(&mut self, ctx: &Context<'_>, current_time: f64, newly_limited: [bool; 3]) {
-        let out = *self.controller.output();
-        for channel in (0..3).filter(|c| newly_limited[*c]) {
+    fn report_limiting(&mut self, ctx: &Context<'_>, current_time: f64) {
+        let limited = self.controller.limited();
+        for (channel, limited) in limited.into_iter().enumerate() {
+            if limited == 0 || self.saturation_reported[channel] {
+                continue;
+            }
             self.saturation_reported[channel] = true;
+            let out = self.controller.output();
             let demanded = out.feedforward[channel] + out.feedback[channel];
             ctx.event(format_args!(
                 "t = {current_time}: u{} demanded {demanded} V, outside {}..{} V; the \
