@@ -809,7 +809,7 @@ impl CoSimModel for FlexureStageFmu {
         model_name: "FlexureStage",
         description: "3-DOF piezo-driven flexure stage (x, y, theta_z; three PZTs with asymmetric \
                       Bouc-Wen hysteresis and coupled hysteresis; first mode 790 Hz in theta_z); \
-                      Co-Simulation and Model Exchange (19 continuous states, no events)",
+                      Co-Simulation and Model Exchange (19 continuous states; 7 event indicators, the hysteretic states)",
         author: "piezo-fmu project",
         version: env!("CARGO_PKG_VERSION"),
         license: "MIT OR Apache-2.0",
@@ -822,10 +822,10 @@ impl CoSimModel for FlexureStageFmu {
     const UNITS: &'static [UnitDefinition] = UNITS;
     const MODEL_EXCHANGE: Option<ModelExchangeInfo> = Some(ModelExchangeInfo {
         number_of_continuous_states: NUMBER_OF_STATES,
-        // No state events: the amplifier clips its target G·u, a function of
-        // the inputs alone, and every rate is continuous in the states
-        // (piezo_models::flexure_stage::ode).
-        number_of_event_indicators: 0,
+        // The hysteretic states, where each Bouc-Wen rate changes branch. No
+        // event for the amplifier's clipping: it clips its target G·u, a
+        // function of the inputs alone (piezo_models::flexure_stage::ode).
+        number_of_event_indicators: ode::NUMBER_OF_SWITCHING_FUNCTIONS,
     });
 
     fn variables() -> &'static [Variable<Self>] {
@@ -930,6 +930,10 @@ impl ModelExchange for FlexureStageFmu {
 
     fn nominals(&self, nominals: &mut [f64]) {
         nominals.copy_from_slice(&ode::state_nominals(&self.params));
+    }
+
+    fn event_indicators(&self, _time: f64, indicators: &mut [f64]) {
+        indicators.copy_from_slice(&self.stage.switching_functions());
     }
 
     fn update_discrete_states(

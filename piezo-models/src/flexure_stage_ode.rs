@@ -21,9 +21,22 @@
 //! - **The hysteresis is rate independent**: every term of ḣ is proportional
 //!   to V̇, so sgn V̇ switches the slope only where the product is 0. The rate
 //!   is continuous (Lipschitz) across a voltage reversal; only its derivative
-//!   jumps there, which a variable-step solver meets with a smaller step, not
-//!   with an event. With inputs held between samples, V approaches its target
-//!   exponentially and never reverses within a sample.
+//!   jumps there, and by little, since V̇ itself is 0 at the reversal. A
+//!   variable-step solver meets it with a smaller step. With inputs held
+//!   between samples, V approaches its target exponentially and never
+//!   reverses within a sample.
+//! - **ḣ is not smooth where h crosses 0**: |h|ⁿ and |h|ⁿ⁻¹·h switch branch
+//!   there. For n = 1 (seed 000's actuators) the slope of ḣ in h jumps by
+//!   2γ·V̇, in the middle of a slew where V̇ is large; for n > 1 a higher
+//!   derivative jumps. The
+//!   stage starts at its exercised rest (h < 0), so every step of the
+//!   voltage from rest drives each h through 0. A BDF solver at tight
+//!   tolerance spends hundreds of steps on such a kink (CVode at relative
+//!   tolerance 1e-11 exceeded its 500 steps per output interval on the
+//!   three actuator kinks of one 0→50/30/70 V step). So the 7 hysteretic
+//!   states are the [`switching_functions`](FlexureStage::switching_functions):
+//!   a solver with root finding stops at h = 0 and restarts there. Nothing
+//!   changes at the event; the model has no discrete state.
 //!
 //! Sensor noise is a sample drawn per communication step, which a
 //! continuous-time model does not have; the sensors here read the pose.
@@ -63,6 +76,10 @@ pub const STATES: [&str; NUMBER_OF_STATES] = [
     MODE_VELOCITIES[1],
     MODE_VELOCITIES[2],
 ];
+
+/// Number of switching functions (the hysteretic states, module comment):
+/// 3 actuators and 4 couplings.
+pub const NUMBER_OF_SWITCHING_FUNCTIONS: usize = 7;
 
 /// Index of the first amplifier voltage, hysteretic state, creep, position and
 /// velocity in the state vector.
@@ -150,6 +167,20 @@ impl FlexureStage {
             dx[VELOCITIES + m] = rate.velocity;
         }
         dx
+    }
+
+    /// The switching functions (module comment): the hysteretic states of
+    /// PZT1..PZT3 and of the couplings x←1, rot←1, y←2, y←3 [µm], in
+    /// [`STATES`] order. Where one changes sign, ḣ changes branch.
+    pub fn switching_functions(&self) -> [f64; NUMBER_OF_SWITCHING_FUNCTIONS] {
+        let mut g = [0.0; NUMBER_OF_SWITCHING_FUNCTIONS];
+        for i in 0..3 {
+            g[i] = self.actuators[i].hysteretic_state();
+        }
+        for k in 0..4 {
+            g[3 + k] = self.couplings[k].hysteretic_state();
+        }
+        g
     }
 
     /// The first state that is non-finite or beyond the divergence bounds
