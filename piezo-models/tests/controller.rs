@@ -233,9 +233,12 @@ fn seed_001_feedforward_and_model_based_decoupling_follow_their_models() {
     p.decoupling_model = DecouplingModel::ModelBased;
     let half_l_um = 0.5 * p.sensor_spacing_mm * 1e3;
     let mut controller = PiezoController::new(p.clone()).unwrap();
-    let mut forward = [p.bouc_wen.y, p.bouc_wen.x, p.bouc_wen.x].map(AsymmetricBoucWen::new);
-    let mut x_from_y = AsymmetricBoucWen::new(p.bouc_wen.x_from_y);
-    let mut y_from_x = AsymmetricBoucWen::new(p.bouc_wen.y_from_x);
+    // The controller's models start where its plant's stacks rest: at the
+    // 0 V end of their exercised loop.
+    let at_rest = |params| AsymmetricBoucWen::at_exercised_rest(params, p.bouc_wen.rest_cycle);
+    let mut forward = [p.bouc_wen.y, p.bouc_wen.x, p.bouc_wen.x].map(at_rest);
+    let mut x_from_y = at_rest(p.bouc_wen.x_from_y);
+    let mut y_from_x = at_rest(p.bouc_wen.y_from_x);
     for n in 0..5000 {
         let t = n as f64 * DT;
         let (x_ref, y_ref) = (6.0 + 2.0 * (7.0 * t).sin(), 6.0 + 5.0 * (3.0 * t).sin());
