@@ -7,7 +7,7 @@ use std::ptr;
 use fmi_schema::fmi2::Causality;
 use fmi_sys::fmi2 as sys;
 
-use crate::{DISCARD, ERROR, Fmu, Instance, OK, State, WARNING, allowed_in};
+use crate::{DISCARD, DriveTo, ERROR, Fmu, FmuUnderTest, Instance, OK, State, WARNING, allowed_in};
 
 fn has_message(log: &[crate::LogRecord], needle: &str) -> bool {
     log.iter().any(|r| r.message.contains(needle))
