@@ -350,13 +350,29 @@ def _excluded(point: dict, rules: list[dict]) -> bool:
 
 
 def _plant_parameters(fmu_path: Path) -> dict:
-    """Start values of the Real parameters of an FMU (fmpy reads the
-    modelDescription)."""
+    """Start value and declared range (min, max; None when open) of every
+    Real parameter of an FMU (fmpy reads the modelDescription)."""
     from fmpy import read_model_description
 
+    def bound(value):
+        return None if value is None else float(value)
+
     description = read_model_description(str(fmu_path))
-    return {v.name: float(v.start) for v in description.modelVariables
+    return {v.name: (float(v.start), bound(v.min), bound(v.max))
+            for v in description.modelVariables
             if v.causality == "parameter" and v.type == "Real" and v.start is not None}
+
+
+def perturbed(nominal: float, factor: float, low, high) -> float:
+    """nominal x factor, kept within the parameter's declared range: outside
+    it the model is not defined (the FMU refuses the value), e.g. a Bouc-Wen
+    exponent n below 1 when its nominal value is 1."""
+    value = nominal * factor
+    if low is not None:
+        value = max(value, low)
+    if high is not None:
+        value = min(value, high)
+    return value
 
 
 def sample_factors(spec: Spec, sample: int, names: dict[int, list[str]]) -> tuple[dict, int]:
@@ -423,13 +439,17 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
             values = dict(point)
             if sample is not None:
                 parameters = scenario["fmu"][mc.instance]["parameters"]
+                applied = {}
                 for name, factor in factors.items():
-                    nominal = parameters.get(name, nominal_start[name])
-                    parameters[name] = nominal * factor
+                    start, low, high = nominal_start[name]
+                    nominal = parameters.get(name, start)
+                    parameters[name] = perturbed(nominal, factor, low, high)
+                    # The factor applied, after the range (the swept value).
+                    applied[name] = parameters[name] / nominal if nominal else factor
                 if mc.seed_parameter:
                     parameters[mc.seed_parameter] = seed
                 values["sample"] = sample
-                values.update({f"factor.{n}": f for n, f in factors.items()})
+                values.update({f"factor.{n}": f for n, f in applied.items()})
             else:
                 seed = _noise_seed(scenario)
             values["seed"] = seed
@@ -666,7 +686,7 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     done_keys = {row["key"] for row in existing}
     todo = [run for run in runs if run.key not in done_keys]
     summary = {"study": spec.study, "runs": len(runs), "skipped": len(runs) - len(todo),
-               "executed": 0, "failed": 0, "interrupted": False}
+               "executed": 0, "failed": 0, "lost": 0, "interrupted": False}
     if not todo:
         summary["rows"] = consolidate(out, spec, keys)
         return summary
@@ -690,7 +710,18 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     done = 0
     try:
         for future in as_completed(futures):
-            row = future.result()
+            try:
+                row = future.result()
+            except Exception as e:  # noqa: BLE001 - the task did not run (see below)
+                # Not a failed run (those are rows) but a task that could not
+                # run: a worker without the package or the master, a task
+                # whose workers died again and again. It stays out of the
+                # table, so the next invocation runs it again.
+                summary["lost"] += 1
+                if summary["lost"] == 1:
+                    print(f"a run could not be executed: {type(e).__name__}: {e}",
+                          file=sys.stderr, flush=True)
+                continue
             journal.add(row)
             done += 1
             summary["executed"] += 1
@@ -761,6 +792,10 @@ def main(argv=None) -> int:
             if summary["interrupted"]:
                 print("interrupted: run the same command again to continue", file=sys.stderr)
                 return 130
+            if summary["lost"]:
+                print(f"{summary['lost']} runs could not be executed (see above): run the "
+                      f"same command again to retry them", file=sys.stderr)
+                return 1
     if not args.no_report:
         from .sweep_report import write_report
 

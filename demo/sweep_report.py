@@ -42,14 +42,27 @@ def load(path: Path) -> tuple[list[dict], dict]:
 
 
 def spec_comment(spec_text: str) -> str:
-    """The spec's leading comment block, as plain text (its conditions)."""
+    """The spec's leading comment block as Markdown: its paragraphs, and its
+    "- " items as a list."""
     lines = []
     for line in spec_text.splitlines():
-        if line.startswith("#"):
-            lines.append(line[1:].strip())
-        elif line.strip():
-            break
-    return " ".join(lines)
+        if not line.startswith("#"):
+            if line.strip():
+                break
+            continue
+        text = line[1:].strip()
+        if text.startswith("- ") or not lines or not text:
+            lines.append(text)
+        elif lines[-1]:
+            lines[-1] += " " + text
+        else:
+            lines.append(text)
+    out = []
+    for text in lines:
+        if text.startswith("- ") and out and out[-1] and not out[-1].startswith("- "):
+            out.append("")
+        out.append(text)
+    return "\n".join(out)
 
 
 def fmt(value, digits=3) -> str:
@@ -135,38 +148,45 @@ def envelope_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
         lines.append(f"| {stage} | {method} | {axis} | {sum(holds)}/{len(holds)} | "
                      f"{fmt(100 * np.nanmedian(rel))} %, {fmt(100 * np.nanmax(rel))} % | "
                      f"{fmt(np.nanmedian(red))}x, {fmt(np.nanmin(red))}x | "
-                     f"{describe_breaks(breaks, tracking_limit, reduction_limit)} |")
+                     f"{describe_breaks(items, holds, breaks, tracking_limit, reduction_limit)} |")
     lines.append("")
     for stage, method in sorted({k[:2] for k in groups}):
         for kind in ("tracking", "coupling"):
             name = f"envelope_{stage}_{method}_{kind}.png"
-            envelope_figure(groups, stage, method, kind, out / name)
+            limit = tracking_limit if kind == "tracking" else reduction_limit
+            envelope_figure(groups, stage, method, kind, limit, out / name)
             lines.append(f"![{kind}, {stage}, {method}]({name})")
         lines.append("")
     return lines
 
 
-def describe_breaks(breaks, tracking_limit, reduction_limit) -> str:
-    """Where the failing points lie, by grid variable, and why."""
+def describe_breaks(items, holds, breaks, tracking_limit, reduction_limit) -> str:
+    """Share of failing points per value of each grid variable, and why."""
     if not breaks:
         return "nowhere on the grid"
+    parts = []
+    for index, name, unit in ((2, "f", " Hz"), (1, "amplitude", ""), (0, "held", "")):
+        counts = defaultdict(lambda: [0, 0])
+        for (key, _), ok in zip(items, holds):
+            counts[key[index]][1] += 1
+            counts[key[index]][0] += not ok
+        parts.append(f"{name}: " + ", ".join(f"{fmt(v)}{unit} {n}/{total}"
+                                              for v, (n, total) in sorted(counts.items())))
     reasons = defaultdict(int)
     for _, pair, rel, red in breaks:
         saturated = max(pair["on"].get("command_saturation") or 0,
                         pair["off"].get("command_saturation") or 0) > 0.01
         if rel > tracking_limit:
-            reasons["tracking" + (" (saturated)" if saturated else "")] += 1
+            reasons["tracking" + (", saturated" if saturated else "")] += 1
         if red < reduction_limit:
-            reasons["decoupling" + (" (saturated)" if saturated else "")] += 1
-    parts = []
-    for index, name, unit in ((2, "f", " Hz"), (1, "amplitude", ""), (0, "held", "")):
-        values = sorted({k[index] for k, *_ in breaks})
-        parts.append(f"{name} in {{{', '.join(fmt(v) for v in values)}}}{unit}")
-    why = ", ".join(f"{n} {reason}" for reason, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
-    return f"{len(breaks)} points: {'; '.join(parts)}; {why}"
+            reasons["decoupling" + (", saturated" if saturated else "")] += 1
+    why = "; ".join(f"{reason} {n}" for reason, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
+    return "failing " + "; ".join(parts) + f" (why: {why})"
 
 
-def envelope_figure(groups, stage, method, kind, path: Path) -> None:
+def envelope_figure(groups, stage, method, kind, limit, path: Path) -> None:
+    """One heatmap (frequency x amplitude) per axis or coupling and held
+    demand, on one colour scale; the values of failing cells in red."""
     axes_present = [a for a in ("x", "y", "theta") if (stage, method, a) in groups]
     panels = []
     for axis in axes_present:
@@ -176,44 +196,51 @@ def envelope_figure(groups, stage, method, kind, path: Path) -> None:
             for _, label in COUPLINGS[axis]:
                 panels.append((axis, label, f"{label}: span without / with decoupling"))
     held_values = sorted({k[0] for a in axes_present for k, _ in groups[(stage, method, a)]})
-    fig, grid = plt.subplots(len(panels), len(held_values),
-                             figsize=(3.6 * len(held_values), 2.6 * len(panels)), squeeze=False)
-    for row, (axis, label, title) in enumerate(panels):
+    grids = []
+    for axis, label, title in panels:
         items = groups[(stage, method, axis)]
         amplitudes = sorted({k[1] for k, _ in items})
         frequencies = sorted({k[2] for k, _ in items})
-        for col, held in enumerate(held_values):
-            ax = grid[row][col]
+        for held in held_values:
             z = np.full((len(amplitudes), len(frequencies)), np.nan)
             for (h, a, f), pair in items:
-                if h != held:
-                    continue
-                if kind == "tracking":
-                    value = 100 * relative_tracking(pair["on"])
-                else:
-                    value = reductions(axis, pair["off"], pair["on"])[label]
-                z[amplitudes.index(a), frequencies.index(f)] = value
-            finite = z[np.isfinite(z) & (z > 0)]
-            norm = LogNorm(vmin=finite.min(), vmax=max(finite.max(), finite.min() * 1.01)) \
-                if finite.size else None
-            image = ax.imshow(z, origin="lower", aspect="auto", norm=norm,
-                              cmap="viridis_r" if kind == "coupling" else "viridis")
-            for i in range(z.shape[0]):
-                for j in range(z.shape[1]):
-                    if np.isfinite(z[i, j]):
-                        ax.text(j, i, fmt(z[i, j], 2), ha="center", va="center", fontsize=7,
-                                color="w")
-            ax.set_xticks(range(len(frequencies)), [fmt(f) for f in frequencies], fontsize=7)
-            ax.set_yticks(range(len(amplitudes)), [fmt(a) for a in amplitudes], fontsize=7)
-            if row == len(panels) - 1:
-                ax.set_xlabel("frequency [Hz]")
-            if col == 0:
-                ax.set_ylabel("amplitude [share of stroke]", fontsize=8)
-            ax.set_title(f"{title}\nheld = {fmt(held)} of stroke", fontsize=8)
-            fig.colorbar(image, ax=ax, shrink=0.8)
-    fig.suptitle(f"{stage}, {method}'s method: "
-                 + ("tracking" if kind == "tracking" else "decoupling"), fontsize=10)
-    fig.tight_layout()
+                if h == held:
+                    z[amplitudes.index(a), frequencies.index(f)] = (
+                        100 * relative_tracking(pair["on"]) if kind == "tracking"
+                        else reductions(axis, pair["off"], pair["on"])[label])
+            grids.append((title, held, amplitudes, frequencies, z))
+    values = np.concatenate([g[-1].ravel() for g in grids])
+    values = values[np.isfinite(values) & (values > 0)]
+    norm = LogNorm(vmin=values.min(), vmax=max(values.max(), values.min() * 1.01)) \
+        if values.size else None
+    fig, grid = plt.subplots(len(panels), len(held_values), squeeze=False,
+                             figsize=(3.3 * len(held_values) + 1, 2.5 * len(panels)))
+    image = None
+    for n, (title, held, amplitudes, frequencies, z) in enumerate(grids):
+        row, col = divmod(n, len(held_values))
+        ax = grid[row][col]
+        image = ax.imshow(z, origin="lower", aspect="auto", norm=norm,
+                          cmap="viridis_r" if kind == "coupling" else "viridis")
+        for i in range(z.shape[0]):
+            for j in range(z.shape[1]):
+                if np.isfinite(z[i, j]):
+                    fails = z[i, j] > 100 * limit if kind == "tracking" else z[i, j] < limit
+                    ax.text(j, i, fmt(z[i, j], 2), ha="center", va="center", fontsize=7,
+                            color="red" if fails else "white",
+                            fontweight="bold" if fails else "normal")
+        ax.set_xticks(range(len(frequencies)), [fmt(f) for f in frequencies], fontsize=7)
+        ax.set_yticks(range(len(amplitudes)), [fmt(a) for a in amplitudes], fontsize=7)
+        if row == len(panels) - 1:
+            ax.set_xlabel("frequency [Hz]", fontsize=8)
+        if col == 0:
+            ax.set_ylabel("amplitude / stroke", fontsize=8)
+        ax.set_title(f"{title}\nheld axes at {fmt(held)} of stroke", fontsize=8)
+    what = (f"tracking RMS / amplitude [%] (red: above {fmt(100 * limit)} %)" if kind == "tracking"
+            else f"coupling span without / with decoupling (red: below {fmt(limit)}x)")
+    fig.suptitle(f"{stage}, {method}'s method: {what}", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 0.92, 1))
+    if image is not None:
+        fig.colorbar(image, ax=grid.ravel().tolist(), shrink=0.6, pad=0.02)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
@@ -244,6 +271,12 @@ def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
         lines.append(f"| {method} | {name} | {fmt(p5)} | {fmt(p50)} | {fmt(p95)} | "
                      f"{len(values)} |")
     lines.append("")
+    clipped = held_at_bounds(rows, factors)
+    if clipped:
+        lines += ["Factors held at a bound of the parameter's declared range (the model is "
+                  "not defined beyond it): " + ", ".join(
+                      f"`{name.removeprefix('factor.')}` in {n} of {total} samples"
+                      for name, (n, total) in clipped.items()) + ".", ""]
     sensitivity = sensitivities(metrics, factors, rows)
     lines += ["Sensitivity: a least-squares fit of log(figure) on every factor, each scaled "
               "to [-1, 1] over its range; the effect is the change of the figure from the "
@@ -274,6 +307,21 @@ def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
     lines.append(f"![robustness]({name})")
     lines.append("")
     return lines
+
+
+def held_at_bounds(rows: list[dict], factors: list[str]) -> dict:
+    """Factors whose smallest or largest value repeats over the samples: a
+    uniform draw never repeats, a bound does."""
+    per_sample = {r["sample"]: r for r in rows}
+    out = {}
+    for name in factors:
+        values = [r[name] for r in per_sample.values() if r.get(name) is not None]
+        if not values:
+            continue
+        at_bound = max(values.count(min(values)), values.count(max(values)))
+        if at_bound > 1:
+            out[name] = (at_bound, len(values))
+    return out
 
 
 def sensitivities(metrics: dict, factors: list[str], rows: list[dict]) -> dict:
