@@ -30,8 +30,10 @@ from __future__ import annotations
 
 import argparse
 import ast
+import atexit
 import copy
 import hashlib
+import io
 import itertools
 import json
 import math
@@ -472,29 +474,42 @@ def _noise_seed(scenario: dict):
 # The task (runs on a worker)
 
 _UNPACKED: dict[str, Path] = {}
+_SCRATCH: Path | None = None
+
+
+def _cache_folder() -> Path:
+    """Where this process unpacks FMUs: the dask worker's local directory
+    (dask removes it with the worker, and purges it after a crash), else a
+    folder in the temporary directory."""
+    global _SCRATCH
+    try:
+        from distributed import get_worker
+
+        return Path(get_worker().local_directory) / "fmus"
+    except (ImportError, ValueError):
+        if _SCRATCH is None:
+            _SCRATCH = Path(tempfile.mkdtemp(prefix="piezo-cosim-fmus-"))
+            atexit.register(shutil.rmtree, _SCRATCH, ignore_errors=True)
+        return _SCRATCH
 
 
 def _unpacked(digest: str, data: bytes) -> Path:
-    """The FMU `data` unpacked in this machine's temporary folder, once per
-    digest; concurrent workers unpack into their own folder and rename."""
+    """The FMU `data` unpacked once per process and digest: its
+    modelDescription.xml, this platform's binaries and its resources."""
     if digest in _UNPACKED and _UNPACKED[digest].is_dir():
         return _UNPACKED[digest]
-    root = Path(tempfile.gettempdir()) / "piezo-cosim-fmus"
-    target = root / digest
-    if not (target / "modelDescription.xml").is_file():
-        if hashlib.sha256(data).hexdigest() != digest:
-            raise RuntimeError(f"FMU {digest[:12]}: the bytes received do not match its digest")
-        root.mkdir(parents=True, exist_ok=True)
-        scratch = Path(tempfile.mkdtemp(prefix=f"{digest[:12]}-", dir=root))
-        import io
+    from fmpy import platform
 
-        with zipfile.ZipFile(io.BytesIO(data)) as archive:
-            archive.extractall(scratch)
-        try:
-            os.rename(scratch, target)
-        except OSError:
-            # Another worker got there first; its copy is the same bytes.
-            shutil.rmtree(scratch, ignore_errors=True)
+    if hashlib.sha256(data).hexdigest() != digest:
+        raise RuntimeError(f"FMU {digest[:12]}: the bytes received do not match its digest")
+    target = _cache_folder() / digest
+    shutil.rmtree(target, ignore_errors=True)
+    target.mkdir(parents=True)
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        wanted = [name for name in archive.namelist()
+                  if name == "modelDescription.xml" or name.startswith("resources/")
+                  or name.startswith(f"binaries/{platform}/")]
+        archive.extractall(target, members=wanted)
     _UNPACKED[digest] = target
     return target
 

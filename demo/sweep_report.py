@@ -30,7 +30,6 @@ COUPLINGS = {
     "x": (("coupling_y_span", "y from x"),),
     "theta": (("coupling_y_span", "y from rotation"),),
 }
-DEG = 180.0 / math.pi
 
 
 def load(path: Path) -> tuple[list[dict], dict]:

@@ -194,7 +194,9 @@ pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunErr
     let mut read: Vec<Vec<(String, u32)>> = vec![Vec::new(); loaded.len()];
     let want_output = |port: &str, read: &mut Vec<Vec<(String, u32)>>| -> Result<(), RunError> {
         let (slot, info) = resolve(port)?;
-        if !read[slot].iter().any(|(_, vr)| *vr == info.vr) {
+        // By name: two names of one value reference (an alias) are two
+        // entries, read twice, so that each has its index.
+        if !read[slot].iter().any(|(name, _)| name == port) {
             read[slot].push((port.to_owned(), info.vr));
         }
         Ok(())
