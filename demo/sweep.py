@@ -20,7 +20,9 @@ the seed, the metrics, the wall time.
   repository with PYTHONPATH set to it.
 - A run is a pure function of its scenario (spec, sample seed): its key is a
   hash of the scenario with the FMUs' contents. A task rescheduled after a
-  worker dies gives the same row, and the table keeps each key once.
+  worker dies gives the same row, and the table keeps each key once. A run
+  that exceeds the spec's `timeout` is a row with status "timeout" and runs
+  again at the next invocation (a loaded machine, not the run, may be why).
 - Rows are journalled to DIR/<study>.journal.jsonl as they arrive; an
   interrupted sweep (Ctrl-C, a lost client) is folded into the table, and the
   same command skips every run already in it.
@@ -550,7 +552,9 @@ def execute_run(run: Run, fmu_data: dict, timeout: float | None) -> dict:
     except master.MasterError as e:
         row.update(status="error", error=str(e)[:2000])
     except subprocess.TimeoutExpired:
-        row.update(status="error", error=f"timeout after {timeout} s")
+        # Not a property of the run (a loaded machine can cause it): the row
+        # says so, and the next invocation runs it again.
+        row.update(status="timeout", error=f"no result within {timeout} s")
     row["task_s"] = time.perf_counter() - started
     row["worker"] = worker
     return row
@@ -615,7 +619,9 @@ def consolidate(out: Path, spec: Spec, keys: dict[str, int]) -> int:
     rows = read_rows(out, spec.study)
     unique = {}
     for row in rows:
-        if row["key"] in keys and row["key"] not in unique:
+        # The table's rows first, then the journal's: a run executed again
+        # (after a timeout) replaces its earlier row.
+        if row["key"] in keys:
             unique[row["key"]] = row
     ordered = sorted(unique.values(), key=lambda r: r["run"])
     if ordered:
@@ -698,10 +704,10 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
             f"{table_path(out, spec.study)}: {len(stale)} of its {len(existing)} rows are not "
             f"runs of {spec.path} as it is now (the spec or the FMUs changed): pass --restart "
             f"to start the table over, or choose another --out")
-    done_keys = {row["key"] for row in existing}
+    done_keys = {row["key"] for row in existing if row.get("status") != "timeout"}
     todo = [run for run in runs if run.key not in done_keys]
     summary = {"study": spec.study, "runs": len(runs), "skipped": len(runs) - len(todo),
-               "executed": 0, "failed": 0, "lost": 0, "interrupted": False}
+               "executed": 0, "failed": 0, "timeouts": 0, "lost": 0, "interrupted": False}
     if not todo:
         summary["rows"] = consolidate(out, spec, keys)
         return summary
@@ -740,7 +746,8 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
             journal.add(row)
             done += 1
             summary["executed"] += 1
-            summary["failed"] += row["status"] != "ok"
+            summary["failed"] += row["status"] == "error"
+            summary["timeouts"] += row["status"] == "timeout"
             if on_row is not None:
                 on_row(row, done)
             if mode == "lines" and time.monotonic() - last_line >= PROGRESS_SECONDS:
@@ -791,6 +798,7 @@ def main(argv=None) -> int:
     except (SpecError, FileNotFoundError) as e:
         print(e, file=sys.stderr)
         return 2
+    timed_out = 0
     with make_client(args.scheduler, args.workers) as client:
         print(f"dask: {len(client.scheduler_info()['workers'])} workers "
               f"({args.scheduler or 'LocalCluster'})", flush=True)
@@ -801,12 +809,17 @@ def main(argv=None) -> int:
                 print(e, file=sys.stderr)
                 return 2
             print(f"{spec.study}: {summary['executed']} runs executed "
-                  f"({summary['failed']} failed), {summary['skipped']} already in the table; "
+                  f"({summary['failed']} failed, {summary['timeouts']} timed out), "
+                  f"{summary['skipped']} already in the table; "
                   f"{summary['rows']} rows in {table_path(args.out, spec.study)}"
                   + (f"; {summary['wall_s']:.1f} s" if "wall_s" in summary else ""), flush=True)
             if summary["interrupted"]:
                 print("interrupted: run the same command again to continue", file=sys.stderr)
                 return 130
+            if summary["timeouts"]:
+                timed_out += summary["timeouts"]
+                print(f"{summary['timeouts']} runs gave no result within {spec.timeout} s: run "
+                      f"the same command again to retry them", file=sys.stderr)
             if summary["lost"]:
                 print(f"{summary['lost']} runs could not be executed (see above): run the "
                       f"same command again to retry them", file=sys.stderr)
@@ -816,7 +829,9 @@ def main(argv=None) -> int:
 
         report = write_report(args.out)
         print(f"report: {report}")
-    return 0
+    # The report shows what is in the tables; a table with timed-out runs is
+    # not complete, and the exit status says so.
+    return 1 if timed_out else 0
 
 
 if __name__ == "__main__":

@@ -64,6 +64,22 @@ def spec_comment(spec_text: str) -> str:
     return "\n".join(out)
 
 
+def excluded_points(spec_text: str) -> list[str]:
+    """The spec's [[exclude]] rules, as a Markdown paragraph (the blank
+    cells of the heatmaps), with the comment that gives their reason."""
+    import tomllib
+
+    try:
+        rules = tomllib.loads(spec_text).get("exclude", [])
+    except tomllib.TOMLDecodeError:
+        return []
+    if not rules:
+        return []
+    text = "; ".join(", ".join(f"{k} = {v}" for k, v in rule.items()) for rule in rules)
+    return [f"Not run (the spec's exclusions, blank in the heatmaps; its comments say why): "
+            f"{text}.", ""]
+
+
 def fmt(value, digits=3) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "–"
@@ -128,6 +144,7 @@ def envelope_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
     points = envelope_points(rows)
     lines = [f"## {meta.get('title', 'Operating envelope')}", "",
              spec_comment(meta.get("spec", "")), "", run_summary(rows), "",
+             *excluded_points(meta.get("spec", "")),
              f"A point **holds** when the tracking RMS (decoupling on) is at most "
              f"{100 * tracking_limit:g} % of the demanded amplitude and decoupling shrinks every "
              f"Table 3 coupling span at least {reduction_limit:g}x. Saturation: share of the "
@@ -254,7 +271,7 @@ def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
     factors = sorted({k for r in rows for k in r if k.startswith("factor.")})
     by = defaultdict(dict)
     for r in ok:
-        by[(r["method"], r["axis"], r["sample"])][r["decoupling"]] = r
+        by[(r.get("method", "preset"), r["axis"], r["sample"])][r["decoupling"]] = r
     metrics = defaultdict(dict)  # (method, name) -> sample -> value
     for (method, axis, sample), pair in by.items():
         if "on" in pair:

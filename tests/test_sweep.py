@@ -1,7 +1,7 @@
 """Sweeps on dask.distributed (demo/sweep.py): a LocalCluster, an existing
 scheduler with two worker processes on 127.0.0.1, a worker killed mid-sweep,
-an interrupted sweep continued, and the same table whatever the number of
-workers.
+an interrupted sweep continued, a timed-out run run again, and the same table
+whatever the number of workers.
 
 The spec is small and its runs short (8 runs of 0.3-0.6 s of the loop at
 10 kHz, a two-sample Monte Carlo over a grid of four), so that the cluster's
@@ -11,6 +11,7 @@ not depend on the runs' length.
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import signal
@@ -283,6 +284,28 @@ def test_killing_a_worker_mid_sweep_loses_and_duplicates_no_run(spec_path, refer
     rows = rows_of(tmp_path)
     assert [r["run"] for r in rows] == list(range(RUNS))
     assert results(rows) == results(reference_table)
+
+
+def test_a_run_that_timed_out_is_run_again(spec_path, reference_table, tmp_path):
+    """A run over the spec's timeout is a row saying so (a loaded machine,
+    not the run, may be why); the next invocation runs it again, and its
+    result replaces that row."""
+    import pyarrow.parquet as pq
+
+    spec = sweep.load_spec(spec_path)
+    runs, fmus = sweep.expand(spec)
+    data = {digest: path.read_bytes() for digest, path in fmus.items()}
+    slow = copy.deepcopy(runs[3])
+    slow.scenario["duration"] = 60.0  # about 0.3 s of the master at least
+    row = sweep.execute_run(slow, data, timeout=0.05)
+    assert row["status"] == "timeout" and row["key"] == runs[3].key, row
+    assert row["error"] == "no result within 0.05 s"
+    table = [dict(r) for r in reference_table]
+    table[3] = row
+    pq.write_table(sweep._rows_to_table(table, spec), sweep.table_path(tmp_path, "small"))
+    summary = local_sweep(spec_path, tmp_path, workers=1)
+    assert (summary["executed"], summary["skipped"], summary["timeouts"]) == (1, RUNS - 1, 0)
+    assert results(rows_of(tmp_path)) == results(reference_table)
 
 
 def test_a_stale_table_is_not_mixed_with_new_runs(spec_path, reference_table, tmp_path):
