@@ -129,6 +129,12 @@ def relative_tracking(row: dict) -> float:
     return row["tracking_rms"] / (span / 2) if span > 0 else math.nan
 
 
+def realtime(row: dict) -> float:
+    """Simulated seconds per second of the master's wall time."""
+    wall = row.get("wall_s") or 0.0
+    return row["simulated_s"] / wall if wall > 0 else math.nan
+
+
 def reductions(axis: str, off: dict, on: dict) -> dict:
     out = {}
     for metric, label in COUPLINGS[axis]:
@@ -148,22 +154,28 @@ def envelope_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
              f"A point **holds** when the tracking RMS (decoupling on) is at most "
              f"{100 * tracking_limit:g} % of the demanded amplitude and decoupling shrinks every "
              f"Table 3 coupling span at least {reduction_limit:g}x. Saturation: share of the "
-             f"measured period with a command at the controller's limit.", ""]
+             f"measured period with a command at the controller's limit. Speed: simulated time "
+             f"over the master's wall time per run (both FMUs and the loop, on the machine and "
+             f"under the load of this sweep); below 1x the loop could not keep its 10 kHz "
+             f"sample in real time.", ""]
     groups = defaultdict(list)
     for key, pair in points.items():
         if "on" in pair and "off" in pair:
             groups[key[:3]].append((key[3:], pair))
     lines += ["| stage | method | axis | points holding | tracking RMS / amplitude (median, worst) "
-              "| coupling reduction (median, worst) | where it breaks |",
-              "|---|---|---|---|---|---|---|"]
+              "| coupling reduction (median, worst) | speed x real time (median, slowest) "
+              "| where it breaks |",
+              "|---|---|---|---|---|---|---|---|"]
     for (stage, method, axis), items in sorted(groups.items()):
         rel = [relative_tracking(pair["on"]) for _, pair in items]
         red = [min(reductions(axis, pair["off"], pair["on"]).values()) for _, pair in items]
         holds = [r <= tracking_limit and d >= reduction_limit for r, d in zip(rel, red)]
         breaks = [(k, pair, r, d) for (k, pair), r, d, h in zip(items, rel, red, holds) if not h]
+        speed = [realtime(pair[d]) for _, pair in items for d in ("off", "on")]
         lines.append(f"| {stage} | {method} | {axis} | {sum(holds)}/{len(holds)} | "
                      f"{fmt(100 * np.nanmedian(rel))} %, {fmt(100 * np.nanmax(rel))} % | "
                      f"{fmt(np.nanmedian(red))}x, {fmt(np.nanmin(red))}x | "
+                     f"{fmt(np.nanmedian(speed))}x, {fmt(np.nanmin(speed))}x | "
                      f"{describe_breaks(items, holds, breaks, tracking_limit, reduction_limit)} |")
     lines.append("")
     for stage, method in sorted({k[:2] for k in groups}):
