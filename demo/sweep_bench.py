@@ -3,8 +3,9 @@ not a test; docs/sweeps.md keeps its figures).
 
     python -m demo.sweep_bench [--runs 1000] [--repeat 20] [--out out/sweep-bench]
 
-1. One 4 s closed-loop run at 10 kHz (Fig. 10's y run: sine, PI on y,
-   decoupling, sensor noise, metrics) through piezo-cosim, `--repeat` times:
+1. One 4 s closed-loop run at 10 kHz (piezo-cosim/examples/table3_y.toml:
+   Table 3's y run with decoupling, sensor noise, metrics) through
+   piezo-cosim, `--repeat` times:
    the process's wall time as a sweep task sees it (start to exit, FMUs
    from unpacked folders), the master's own wall time (loading, loop,
    metrics) and the loop's; real-time factor = 4 s / wall time.
@@ -26,6 +27,7 @@ import statistics
 import sys
 import tempfile
 import time
+import tomllib
 from pathlib import Path
 
 from . import master, sweep
@@ -33,6 +35,7 @@ from . import master, sweep
 REPO = Path(__file__).resolve().parent.parent
 PLANT = REPO / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO / "dist" / "PiezoController.fmu"
+SINGLE_RUN = REPO / "piezo-cosim" / "examples" / "table3_y.toml"
 
 
 def cpu_busy() -> tuple[int, int]:
@@ -71,21 +74,10 @@ def unpacked(fmu: Path, into: Path) -> Path:
 
 
 def single_run(repeat: int, scratch: Path) -> dict:
-    plant, controller = unpacked(PLANT, scratch), unpacked(CONTROLLER, scratch)
-    y = {"offset": 7.0, "start": 1.0, "approach": 0.5,
-         "sines": [{"amplitude": 5.0, "frequency": 1.0, "phase": -1.5707963267948966}]}
-    scenario = {
-        "duration": 4.0,
-        "fmu": {"plant": {"path": str(plant),
-                          "parameters": {"noise.enabled": True, "noise.seed": 2024}},
-                "controller": {"path": str(controller),
-                               "parameters": {"feedback_x": False, "feedback_theta": False,
-                                              "decoupling": True}}},
-        "signal": {"controller.y_ref": y,
-                   "controller.x_ref": {"offset": 8.0, "start": 1.0, "approach": 0.5},
-                   "controller.theta_ref": {"offset": 0.0}},
-        "metrics": {"driven": "y", "from": 2.0},
-    }
+    scenario = tomllib.loads(SINGLE_RUN.read_text())
+    # As a sweep task runs it: the FMUs from their unpacked folders.
+    scenario["fmu"]["plant"]["path"] = str(unpacked(PLANT, scratch))
+    scenario["fmu"]["controller"]["path"] = str(unpacked(CONTROLLER, scratch))
     master.run(scenario)  # warm the page cache
     process, wall, loop = [], [], []
     with Load() as load:
