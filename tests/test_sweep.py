@@ -215,8 +215,11 @@ def dask_cluster(tmp_path_factory):
                                           stdout=log, stderr=subprocess.STDOUT))
 
     try:
+        # Port 0 for its HTTP server too (health checks, even without the
+        # dashboard): 8787 may belong to a user's cluster or another test's.
         start("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-              "--scheduler-file", str(scheduler_file), "--idle-timeout", "60s")
+              "--dashboard-address", "127.0.0.1:0", "--scheduler-file", str(scheduler_file),
+              "--idle-timeout", "60s")
         deadline = time.monotonic() + 60
         while not scheduler_file.is_file():
             if time.monotonic() > deadline or processes[0].poll() is not None:
