@@ -13,8 +13,9 @@ overrides the path). Python runs it as a child process, one process per run:
   scenario;
 - the CLI users run and the sweeps run are the same binary, with no Python
   ABI to build against.
-What it costs, a process start and two dlopen per run (about 3 ms, docs/sweeps.md),
-is small beside a run of a second or more of the loop at 10 kHz.
+What it costs per run, about 8 ms (the process started from Python, both FMUs
+loaded, initialized and terminated; docs/sweeps.md), is small beside a run of a
+second or more of the loop at 10 kHz (6-10 ms per simulated second).
 
 A scenario is a dict (or a TOML/JSON file) in the format of
 piezo-cosim/src/scenario.rs; `run` hands it to the master as JSON on stdin
