@@ -151,15 +151,19 @@ stage-preset: fmus
 	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
 
-# PiezoController identified on the XY200S preset of FlexureStage, by the same
-# procedure as the stage preset, about a home at the same fraction of the
-# strokes (90, 85 um) and with the PI gains scaled by the inverse of the
-# XY200S's um per volt relative to seed 000's stage (x 12 %, y 11 %: 0.085).
+# PiezoController identified on the XY200S preset of FlexureStage by the same
+# procedure as the stage preset, rescaled to its strokes (144.37 / 12.74 =
+# 11.33: 113 um sines, cutoffs at +-113 um), with the PI gains scaled by the
+# inverse of the XY200S's um per volt relative to seed 000's stage (0.085),
+# its 0..10 V command range (0..150 V, seed 001 §5.2) and therefore the held
+# axis at half stroke (72, 75 um), the home seed 000 §3.2 gives an axis whose
+# actuators cannot go below 0 V. It does not rotate (one x actuator).
 xy200s-controller-preset: fmus
 	$(CARGO) build --release --locked -p piezo-identify
 	mkdir -p out/stage
 	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu \
-	  --plant-parameters $(DIST)/presets/FlexureStage.xy200s.json --home 90,85 --gain-scale 0.085 \
+	  --plant-parameters $(DIST)/presets/FlexureStage.xy200s.json --scale 11.3320 --no-rotation \
+	  --held 72.19,74.64 --command-range 0,10 --gain-scale 0.085 \
 	  --rounds 3 --out piezo-models/presets/piezo_controller_xy200s.json \
 	  --report out/stage/xy200s_identification.json
 	$(MAKE) fmus
@@ -174,21 +178,15 @@ xy200s-preset: system-deps
 	  --report out/xy200s/conversion.json
 
 # The identification figures: seed 000's model comparison on the plant (F of
-# eq. 7, evaluation time), and the real P-885 stack (unseen test file) fitted
-# by seed 000's modified inverse P-I and by seed 001's Bouc-Wen (GA-PSO + LM).
+# eq. 7, evaluation time), then the default identification of every real
+# record (P-885, split in two and fitted/validated) and of the lab-like
+# records from FlexureStage by seed 000's modified inverse P-I and seed 001's
+# Bouc-Wen, seeds 0-2, beside their baselines (docs/identification.md).
 identify: system-deps
 	$(CARGO) build --release --locked -p piezo-identify
 	mkdir -p out/identify
 	$(RELEASE)/piezo-identify compare --synthetic | tee out/identify/compare.txt
-	$(RELEASE)/piezo-identify inverse-pi piezo-identify/tests/data/piezo-p885/Model_Vi_Do.dat \
-	  --input 0 --output 4 --rate 200 --warm-up 0.1 --smooth 2 --rate-independent --decimation 2 \
-	  --validate piezo-identify/tests/data/piezo-p885/Test_Vi_Do_Di.dat \
-	  --out out/identify/p885_inverse_pi.json | tee out/identify/p885.txt
-	$(RELEASE)/piezo-identify bouc-wen piezo-identify/tests/data/piezo-p885/Model_Vi_Do.dat \
-	  --input 0 --output 4 --rate 200 --warm-up 0.1 --smooth 2 --decimation 2 \
-	  --validate piezo-identify/tests/data/piezo-p885/Test_Vi_Do_Di.dat \
-	  --out out/identify/p885_bouc_wen.json --report out/identify/p885_bouc_wen_report.json \
-	  | tee out/identify/p885_bouc_wen.txt
+	piezo-identify/benches/figures.sh $(RELEASE)/piezo-identify | tee out/identify/figures.md
 
 # The co-simulation master (piezo-cosim/), shipped inside the Python package
 # as demo/bin/piezo-cosim: `python -m demo.master` and the sweeps' dask

@@ -16,32 +16,8 @@ import fmpy
 from tqdm import tqdm
 
 from .cosim import SAMPLE_PERIOD, Fmu, simulate
-from .experiments import experiments, metrics
+from .experiments import CONDITIONS, experiments, metrics
 from .report import figure, write_report
-
-CONDITIONS = [
-    "Home pose x = 8 um, y = 7 um, theta_z = 0: the middle of what this plant can reach, "
-    "given the static coupling between the axes and the actuators' remanence at 0 V "
-    "(y ≈ 1.3..13 um with x at home, x ≈ 2..14 um with y at home). Non-driven axes hold "
-    "home; seed 000's 'demand held at zero' is read as held at home (the x pair must be "
-    "biased to rotate both ways, and a compensation needs room to act both ways).",
-    "Each run starts at rest; the reference approaches the trajectory's start by a raised "
-    "cosine over 0.5 s and holds 0.5 s; t = 0 in the figures is the start of the trajectory.",
-    "Single-axis sines: 1 Hz, 10 um peak to peak about home starting at the bottom (x 3..13, "
-    "y 2..12 um), or "
-    "+-9.2e-3 deg (eq. 16's amplitude) for theta_z; Fig. 8 the same y sine at 10 Hz.",
-    "Errors are demand minus sensor reading (s1; (s2+s3)/2; (s2-s3)/L; x2 = s2, x3 = s3), "
-    "sensor noise on, over whole cycles after one settling cycle (see each run's window in "
-    "its PNG, dotted line).",
-    "Fig. 7 / Table 3 without decoupling and Fig. 10 / Table 3 with it: feedback on the driven "
-    "axis only, feedforward of the constant demand on the others.",
-    "Fig. 11: eq. (13) read as a y demand in um (its values, 2..9, fit the y stroke).",
-    "Fig. 12: contour error = distance of the measured point from the demanded circle minus "
-    "its radius; the 2-norm is over one period (2.5 s) at the sample rate, which is what "
-    "makes its size comparable to the paper's 11.19 / 5.72.",
-    "Fig. 13: seed 000 prints only the rotation demand (eq. 16); y follows eq. (15).",
-]
-
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

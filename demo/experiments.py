@@ -1,32 +1,38 @@
 """Seed 000's experiments (§3.2, §5; Fig. 6-13, Table 3), as closed-loop runs
-of PiezoController and FlexureStage.
+of PiezoController and FlexureStage, with the demands as the paper prints them.
 
-Conditions the paper leaves open, and what is assumed here (report.md repeats
-them):
+Demands are absolute, measured from the stage's de-energized rest (every
+actuator at 0 V, every reading 0):
 
-- Home pose: x = 8 um, y = 7 um, theta_z = 0, the middle of the range this
-  plant reaches: the x pair at home lifts y by ~1 um and y at home lifts x by
-  ~1.5 um (the static coupling of Table 3's spans), and a de-energized actuator
-  keeps ~0.5 um of remanence, so y spans ~1.3..13 um and x ~2..14 um. The
-  printed trajectories (circle eq. 14-15 about (6, 6), eq. 13, eq. 16) keep
-  their own values. "The demand on the other two axes held at zero" is read
-  as: held at home (the x pair must be biased to rotate both ways, §3.2, and
-  a decoupling compensation needs room to act both ways).
-- Every run starts at rest, de-energized. The reference moves from the origin
-  to the trajectory's start by a raised cosine over 0.5 s, holds 0.5 s, and
-  the trajectory starts at t = 1 s, so no run starts with a step.
-- Single-axis sines (Fig. 6, 7, 10, Table 3): 1 Hz, 10 um peak to peak about
-  home starting at the bottom (y: 7 + 5 sin(2 pi t - pi/2)), or +-9.2e-3 deg
-  for theta_z (the amplitude of eq. 16). Fig. 8: the same y sine at 10 Hz.
+- Single-axis sines (Fig. 6, 7, 10, Table 3): "the motion axis was driven
+  (10 um or 9.2e-3 deg), with the demand on the other two axes held at zero"
+  (§5). x and y: a 1 Hz sine from 0 to 10 um starting at the bottom
+  (y = 5 - 5 cos 2 pi t), the other axes demanded at 0. theta_z: +-9.2e-3 deg
+  (eq. 16's amplitude), y at 0 and x at half its stroke (12.74 / 2 um), the
+  home §3.2 defines for rotation: "in order to implement the rotational
+  motion of the platform, the home position in the x direction should be
+  defined at the half stroke". About x = 0 the same rotation would need
+  -5.9 um from one stack (about -46 V), beyond any amplifier of the paper.
+  Seed 000 does not print the sine frequency of Fig. 6-7: 1 Hz, the
+  fastest component of its identification signal eq. (6), read before any
+  run (Fig. 8's "higher frequency" is 10 Hz).
+- Fig. 11: eq. (13) as a y demand [um] (2..9 um), x and theta at 0.
+- Fig. 12: the circle eq. (14)-(15) as printed, theta at 0.
+- Fig. 13: theta_z by eq. (16), x at its half stroke as for every rotation;
+  seed 000 does not print Fig. 13's y demand: y follows eq. (15)'s sine
+  (the same 0.4 Hz), 1..11 um.
+- Every run starts at rest; the reference reaches the trajectory's start by a
+  raised cosine over 0.5 s and holds 0.5 s, so no run starts with a step.
 - Errors are demand minus measurement, from the sensors, with the plant's
   sensor noise on (seeded), as the paper measured them: e_y = y_d - s1,
   e_x = x_d - (s2+s3)/2, e_theta = theta_d - (s2-s3)/L, coupling error in
   x2 = x_d2 - s2 and in x3 = x_d3 - s3 (x_d2,3 = x_d +- theta_d L/2).
   Metrics are taken over whole cycles after one settling cycle.
-- Table 3 and Fig. 7/10: feedback on the driven axis only, the other axes
-  getting feedforward of their constant demand (plus the decoupling
-  compensation when it is on): with feedback on, ~2 um coupling could not
-  have survived. The same runs with feedback on all axes are reported beside.
+- Fig. 6, 7, 10 and Table 3: feedback on the driven axis only, the other
+  axes getting feedforward of their demand (plus the decoupling
+  compensation when it is on): with feedback on, ~2 um of coupling could not
+  have been measured. Fig. 11-13 use the whole controller of Fig. 9, PI on
+  every axis.
 """
 
 from __future__ import annotations
@@ -38,13 +44,23 @@ from pathlib import Path
 
 import numpy as np
 
-HOME = (8.0, 7.0, 0.0)
 APPROACH_TIME = 0.5
 SETTLE_TIME = 0.5
 START = APPROACH_TIME + SETTLE_TIME
 SINE_HZ = 1.0
-SINE_AMPLITUDE_UM = 5.0
-ROTATION_AMPLITUDE_RAD = math.radians(9.2e-3)
+#: Single-axis sines: cycles run before the two that are measured. The
+#: plant's Bouc-Wen minor loops need about four cycles to settle when an
+#: actuator starts cycling about a new point (the offset left shrinks by
+#: about 0.35 per cycle): the paper's steady figures are taken after three.
+SETTLING_CYCLES = 3
+MEASURED_CYCLES = 2
+#: Peak-to-peak of the x and y sines, from 0 (seed 000 §5: 10 um).
+TRANSLATION_SPAN_UM = 10.0
+#: x demand whenever the platform rotates: half the x stroke (§2: 12.74 um),
+#: the home §3.2 defines for rotation.
+ROTATION_X_UM = 12.74 / 2.0
+ROTATION_AMPLITUDE_DEG = 9.2e-3
+ROTATION_AMPLITUDE_RAD = math.radians(ROTATION_AMPLITUDE_DEG)
 #: Plant parameters of every run: sensor noise on, seeded (LK-H050 class).
 PLANT_PARAMETERS = {"noise.enabled": True, "noise.seed": 2024}
 
@@ -79,25 +95,26 @@ def trajectory(path, start_pose=None):
     return reference
 
 
-def pose(x=None, y=None, theta=None):
-    """Columns of an (n, 3) reference; missing axes hold home."""
+def pose(x=0.0, y=0.0, theta=0.0):
+    """Columns of an (n, 3) reference: each axis a constant or a function of tau."""
 
     def path(tau):
         n = len(tau)
-        cols = []
-        for value, home in zip((x, y, theta), HOME):
-            cols.append(np.full(n, home) if value is None else value(tau))
-        return np.column_stack(cols)
+        return np.column_stack([
+            value(tau) if callable(value) else np.full(n, float(value))
+            for value in (x, y, theta)
+        ])
 
     return path
 
 
-def sine_up_from_bottom(amplitude, frequency, centre):
-    return lambda tau: centre + amplitude * np.sin(2 * np.pi * frequency * tau - np.pi / 2)
+def sine_from(base, span, frequency):
+    """A sine from `base` to `base + span` starting at the bottom."""
+    return lambda tau: base + 0.5 * span * (1.0 - np.cos(2 * np.pi * frequency * tau))
 
 
-def rotation_sine(frequency=SINE_HZ):
-    return lambda tau: ROTATION_AMPLITUDE_RAD * np.sin(2 * np.pi * frequency * tau)
+def rotation_sine(amplitude_rad=ROTATION_AMPLITUDE_RAD, frequency=SINE_HZ):
+    return lambda tau: amplitude_rad * np.sin(2 * np.pi * frequency * tau)
 
 
 @dataclass(frozen=True)
@@ -123,12 +140,22 @@ class Experiment:
         return trajectory(self.path)
 
 
-def single_axis(axis: str, frequency: float = SINE_HZ):
+def single_axis(axis: str, frequency: float = SINE_HZ, span: float = TRANSLATION_SPAN_UM,
+                held: float = 0.0, rotation_rad: float = ROTATION_AMPLITUDE_RAD):
+    """Seed 000 §5's single-axis run: the driven axis's sine from rest, the
+    other translation demanded at `held` (the paper: 0); a rotation runs about
+    x at half stroke."""
     if axis == "y":
-        return pose(y=sine_up_from_bottom(SINE_AMPLITUDE_UM, frequency, HOME[1]))
+        return pose(x=held, y=sine_from(0.0, span, frequency))
     if axis == "x":
-        return pose(x=sine_up_from_bottom(SINE_AMPLITUDE_UM, frequency, HOME[0]))
-    return pose(theta=rotation_sine(frequency))
+        return pose(x=sine_from(0.0, span, frequency), y=held)
+    return pose(x=ROTATION_X_UM, y=held, theta=rotation_sine(rotation_rad, frequency))
+
+
+def single_axis_timing(frequency: float = SINE_HZ) -> tuple[float, float]:
+    """(duration after the start, start of the measured window) of a
+    single-axis run: SETTLING_CYCLES, then MEASURED_CYCLES."""
+    return (SETTLING_CYCLES + MEASURED_CYCLES) / frequency, SETTLING_CYCLES / frequency
 
 
 def driven_axis_feedback(axis: str) -> dict:
@@ -144,51 +171,45 @@ def circle(tau):
 
 
 def y_and_rotation(tau):
-    """eq. (16): theta_z = 9.2 sin(0.8 pi t) x 1e-3 deg, with y following eq. (15)'s
-    sine (seed 000 does not print the y demand of Fig. 13)."""
+    """eq. (16): theta_z = 9.2 sin(0.8 pi t) x 1e-3 deg about x at half stroke,
+    with y following eq. (15)'s sine (seed 000 does not print Fig. 13's y)."""
     return np.column_stack(
-        [np.full_like(tau, HOME[0]), 5 * np.sin(0.8 * np.pi * tau - 0.5 * np.pi) + 6,
+        [np.full_like(tau, ROTATION_X_UM), 5 * np.sin(0.8 * np.pi * tau - 0.5 * np.pi) + 6,
          np.radians(9.2e-3 * np.sin(0.8 * np.pi * tau))]
     )
 
 
 def composite(tau):
     """eq. (13), applied to y in um: 5.5 + 1.5 sin(2 pi t - pi/2) + sin(0.6 pi t - pi/2)
-    + sin(pi t - pi/2); its period is 10 s."""
+    + sin(pi t - pi/2); its period is 10 s. x and theta at 0."""
     y = (5.5 + 1.5 * np.sin(2 * np.pi * tau - 0.5 * np.pi) + np.sin(0.6 * np.pi * tau - 0.5 * np.pi)
          + np.sin(np.pi * tau - 0.5 * np.pi))
-    return np.column_stack([np.full_like(tau, HOME[0]), y, np.zeros_like(tau)])
+    return np.column_stack([np.zeros_like(tau), y, np.zeros_like(tau)])
 
 
 def experiments() -> list[Experiment]:
     """Every run of the demo, in report order."""
     runs = [
-        Experiment("fig6_y_ff", "y sine, feedforward only", "Fig. 6", single_axis("y"), 3.0, 1.0,
-                   {**NO_FEEDBACK, "decoupling": False}, "y"),
+        Experiment("fig6_y_ff", "y sine, feedforward only", "Fig. 6", single_axis("y"),
+                   *single_axis_timing(), {**NO_FEEDBACK, "decoupling": False}, "y"),
     ]
     for axis in ("y", "x", "theta"):
         runs.append(Experiment(
-            f"fig7_{axis}_ffpi", f"{axis} sine, feedforward + PI on {axis}", "Fig. 7",
-            single_axis(axis), 3.0, 1.0, {**driven_axis_feedback(axis), "decoupling": False}, axis))
+            f"fig7_{axis}_ffpi", f"{axis} sine, feedforward + PI on {axis}", "Fig. 7 / Table 3",
+            single_axis(axis), *single_axis_timing(),
+            {**driven_axis_feedback(axis), "decoupling": False}, axis))
     for axis in ("y", "x", "theta"):
         runs.append(Experiment(
             f"fig10_{axis}_decoupled", f"{axis} sine, feedforward + PI on {axis} + decoupling",
-            "Fig. 10 / Table 3", single_axis(axis), 3.0, 1.0,
+            "Fig. 10 / Table 3", single_axis(axis), *single_axis_timing(),
             {**driven_axis_feedback(axis), "decoupling": True}, axis))
-    for axis in ("y", "x", "theta"):
-        for decoupling in (False, True):
-            tag = "decoupled" if decoupling else "coupled"
-            runs.append(Experiment(
-                f"allfb_{axis}_{tag}",
-                f"{axis} sine, PI on all axes{' + decoupling' if decoupling else ''}",
-                "Table 3 (feedback on all axes)", single_axis(axis), 3.0, 1.0,
-                {**ALL_FEEDBACK, "decoupling": decoupling}, axis))
-    runs += seed001_experiments()
     runs += [
         Experiment("fig8_y_10hz_ff", "y sine at 10 Hz, feedforward only", "Fig. 8",
-                   single_axis("y", 10.0), 1.0, 0.5, {**NO_FEEDBACK, "decoupling": False}, "y"),
-        Experiment("fig8_y_10hz_ffpi", "y sine at 10 Hz, feedforward + PI", "Fig. 8",
-                   single_axis("y", 10.0), 1.0, 0.5, {**ALL_FEEDBACK, "decoupling": True}, "y"),
+                   single_axis("y", 10.0), *single_axis_timing(10.0),
+                   {**NO_FEEDBACK, "decoupling": False}, "y"),
+        Experiment("fig8_y_10hz_ffpi", "y sine at 10 Hz, feedforward + PI on y", "Fig. 8",
+                   single_axis("y", 10.0), *single_axis_timing(10.0),
+                   {**driven_axis_feedback("y"), "decoupling": False}, "y"),
         Experiment("fig11_composite", "composite signal eq. (13) on y, decoupling controller",
                    "Fig. 11", composite, 10.0, 0.0, {**ALL_FEEDBACK, "decoupling": True}, "y"),
         Experiment("fig12_circle_coupled", "circle eq. (14)-(15), feedforward + PI",
@@ -201,15 +222,67 @@ def experiments() -> list[Experiment]:
                    "Fig. 13b", y_and_rotation, 5.0, 2.5, {**ALL_FEEDBACK, "decoupling": True},
                    "ytheta"),
     ]
+    for axis in ("y", "x", "theta"):
+        for decoupling in (False, True):
+            tag = "decoupled" if decoupling else "coupled"
+            runs.append(Experiment(
+                f"allfb_{axis}_{tag}",
+                f"{axis} sine, PI on all axes{' + decoupling' if decoupling else ''}",
+                "Table 3 (feedback on all axes)", single_axis(axis), *single_axis_timing(),
+                {**ALL_FEEDBACK, "decoupling": decoupling}, axis))
+    runs += seed001_experiments()
     return runs
 
+
+#: The conditions and readings report.md lists (the module comment says why).
+CONDITIONS = [
+    "Demands as seed 000 prints them, absolute from the de-energized rest (every stack at "
+    "0 V on its working loop, every reading 0): a single-axis sine drives its axis from 0 to "
+    "10 um (y = 5 - 5 cos 2 pi t) with the other axes demanded at 0; a rotation runs "
+    "+-9.2e-3 deg about x at half its stroke (6.37 um), the home §3.2 defines for rotation, "
+    "y at 0. The stacks go below 0 V where the demand needs it: the PI E-505 takes -2..12 V "
+    "(-20..120 V at the stacks), the controller's command range.",
+    "Single-axis sines at 1 Hz (seed 000 does not print the frequency of Fig. 6-7; 1 Hz is "
+    "the fastest component of its identification signal eq. (6) and Fig. 8's 'higher "
+    "frequency' is 10 Hz). Each run starts at rest; the reference reaches the trajectory's "
+    "start by a raised cosine over 0.5 s and holds 0.5 s; t = 0 in the figures is the start "
+    "of the trajectory.",
+    f"Single-axis figures are taken over {MEASURED_CYCLES} cycles after {SETTLING_CYCLES} "
+    "settling cycles: the plant's Bouc-Wen minor loops need about four cycles to settle when "
+    "a held actuator starts cycling about a new point (the offset left shrinks by about 0.35 "
+    "per cycle). Other runs: the circle and eq. (16) over their second revolution "
+    "(2.5 s), eq. (13) over its first period (10 s).",
+    "Errors are demand minus sensor reading (s1; (s2+s3)/2; (s2-s3)/L; x2 = s2, x3 = s3), "
+    "sensor noise on (0.005 um RMS per reading, seeded), as the paper measured them.",
+    "Fig. 6, 7, 10 and Table 3: feedback on the driven axis only, feedforward of the demand "
+    "(plus the decoupling compensation when it is on) on the others, as the paper. Fig. 11-13: "
+    "the whole controller of Fig. 9, PI on every axis.",
+    "Fig. 11: eq. (13) read as a y demand in um (its values, 2..9, fit the y stroke), x and "
+    "theta at 0.",
+    "Fig. 12: contour error = distance of the measured point from the demanded circle minus "
+    "its radius; the 2-norm is the square root of the sum of squares over one revolution "
+    "(2.5 s) at the 10 kHz loop rate, 25,001 samples: at that count the paper's 2-norms "
+    "(11.19, 5.72) and its error bounds (+-162/+-117 nm, +-97/+-65 nm) describe the same "
+    "errors (RMS 0.071 and 0.036 um). The text prints '11.19 and 5.72 with and without' "
+    "beside 'significantly improved when the decoupling technique is enabled'; the larger "
+    "norm is read as the one without decoupling.",
+    "Fig. 13: theta_z by eq. (16) about x at half stroke; seed 000 does not print the y "
+    "demand: y follows eq. (15)'s sine (1..11 um, the same 0.4 Hz).",
+]
+
+
+#: A pose in the middle of both strokes, x at its rotation home: where the
+#: packaged closed loop (demo.systems) parks the stage.
+MID_STROKE = (ROTATION_X_UM, 12.22 / 2.0, 0.0)
+#: Seed 001's single-axis homes on FlexureStage (its runs about a home).
+S001_HOME = (8.0, 7.0, 0.0)
 
 # The stages seed 001's experiments run on: FlexureStage as it starts, and
 # its XY200S parameter set with the controller identified on it (both sets
 # written by `make fmus` from the Rust tables). The XY200S home sits at the
 # same fraction of its strokes as seed 000's (piezo-identify's --home).
 S001_STAGES = {
-    "flexure": {"home": HOME, "plant": None, "controller": None},
+    "flexure": {"home": S001_HOME, "plant": None, "controller": None},
     "xy200s": {
         "home": (90.0, 85.0, 0.0),
         "plant": "FlexureStage.xy200s.json",
@@ -252,7 +325,8 @@ def seed001_experiments() -> list[Experiment]:
             def columns(tau):
                 cols = [np.full(len(tau), home[0]), np.full(len(tau), home[1]),
                         np.zeros(len(tau))]
-                cols[index[axis]] = sine_up_from_bottom(amplitude, S001_HZ, home[index[axis]])(tau)
+                base = home[index[axis]] - amplitude
+                cols[index[axis]] = sine_from(base, 2 * amplitude, S001_HZ)(tau)
                 if other_at_zero:
                     cols[index[other]] = np.zeros(len(tau))
                 return np.column_stack(cols)
@@ -266,7 +340,7 @@ def seed001_experiments() -> list[Experiment]:
                     s001_key(stage, method, f"linearity_{axis}"),
                     f"{axis} 2 Hz sine of {amplitude} um, feedforward only ({method}'s method, "
                     f"{stage})",
-                    "seed 001 §5.2", path(axis, amplitude, True), 2.0, 1.0,
+                    "seed 001 §5.2", path(axis, amplitude, True), *single_axis_timing(S001_HZ),
                     {**base, **NO_FEEDBACK, **selectors, "decoupling": False}, axis,
                     plant=plant))
             for axis in ("y", "x"):
@@ -276,7 +350,7 @@ def seed001_experiments() -> list[Experiment]:
                         s001_key(stage, method, f"coupling_{axis}_{tag}"),
                         f"{axis} 2 Hz sine of 2 um, other axis held, feedforward only"
                         f"{' + decoupling' if decoupling else ''} ({method}'s method, {stage})",
-                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), 2.0, 1.0,
+                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), *single_axis_timing(S001_HZ),
                         {**base, **NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis,
                         plant=plant))
     return runs

@@ -11,6 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from . import paper  # noqa: E402
 from .experiments import (  # noqa: E402
     S001_LINEARITY_UM,
     S001_STAGES,
@@ -101,81 +102,8 @@ def _um(v: float) -> str:
     return f"{v:.4f} um"
 
 
-def _nm_range(r) -> str:
-    return f"[{1e3 * r[0]:.0f}, {1e3 * r[1]:.0f}] nm"
-
-
-def _deg(v: float) -> str:
-    return f"{v * DEG:.3g} deg"
-
-
-def _deg_range(r) -> str:
-    return f"[{r[0] * DEG:.3g}, {r[1] * DEG:.3g}] deg"
-
-
 def _verdict(ok: bool | None) -> str:
     return "" if ok is None else ("met" if ok else "**missed**")
-
-
-def paper_table(results: dict) -> list[tuple]:
-    """(what, paper, simulated, target, verdict, where) rows: every figure of
-    ../shared/README.md for seed 000 that the closed loop reproduces."""
-    r = results
-    rows = []
-    f6 = r["fig6_y_ff"]
-    rows.append(("y sine, feedforward only: max / RMS error", "0.2389 / 0.0850 um",
-                 f"{_um(f6['tracking_max'])} / {_um(f6['tracking_rms'])}", "", None, "Fig. 6"))
-    for axis, paper, where in (("y", (0.0544, 0.0134), "Fig. 7a"), ("x", (0.0701, 0.0171), "Fig. 7b")):
-        m = r[f"fig7_{axis}_ffpi"]
-        ok = m["tracking_max"] <= paper[0] and m["tracking_rms"] <= paper[1]
-        rows.append((f"{axis} sine, feedforward + PI: max / RMS error",
-                     f"{paper[0]} / {paper[1]} um",
-                     f"{_um(m['tracking_max'])} / {_um(m['tracking_rms'])}",
-                     "<= paper", ok, where))
-    m = r["fig7_theta_ffpi"]
-    paper = (math.radians(1.21e-4), math.radians(3.3e-5))
-    ok = m["tracking_max"] <= paper[0] and m["tracking_rms"] <= paper[1]
-    rows.append(("theta_z sine, feedforward + PI: max / RMS error", "1.21e-4 / 3.3e-5 deg",
-                 f"{_deg(m['tracking_max'])} / {_deg(m['tracking_rms'])}", "<= paper", ok,
-                 "Fig. 7c"))
-    for name, axis, key, paper in (
-        ("x2 from y", "y", "coupling_x2_span", (2.2065, 0.3173)),
-        ("x3 from y", "y", "coupling_x3_span", (2.7435, 0.6152)),
-        ("y from x", "x", "coupling_y_span", (1.2482, 0.3239)),
-        ("y from rotation", "theta", "coupling_y_span", (1.6784, 0.3718)),
-    ):
-        without = r[f"fig7_{axis}_ffpi"][key]
-        with_ = r[f"fig10_{axis}_decoupled"][key]
-        ratio = without / with_
-        rows.append((f"coupling span {name}, without / with decoupling (ratio)",
-                     f"{paper[0]} / {paper[1]} um ({paper[0] / paper[1]:.1f}x)",
-                     f"{without:.4f} / {with_:.4f} um ({ratio:.1f}x)", ">= 7x", ratio >= 7.0,
-                     "Table 3"))
-    m = r["fig11_composite"]
-    rows.append(("composite eq. (13): max / RMS error", "0.1466 / 0.0425 um",
-                 f"{_um(m['tracking_max'])} / {_um(m['tracking_rms'])}", "", None, "Fig. 11"))
-    a, b = r["fig12_circle_coupled"], r["fig12_circle_decoupled"]
-    rows.append(("circle eq. (14)-(15): 2-norm of the contour error, without / with decoupling",
-                 "11.19 / 5.72 (order ambiguous in the text)",
-                 f"{a['contour_2norm']:.2f} / {b['contour_2norm']:.2f} um "
-                 f"({a['contour_samples']} samples)",
-                 "with < without", b["contour_2norm"] < a["contour_2norm"], "Fig. 12"))
-    rows.append(("circle: x / y errors within, without decoupling", "+-162 / +-117 nm",
-                 f"{_nm_range(a['x_error_range'])} / {_nm_range(a['y_error_range'])}", "", None,
-                 "Fig. 12a"))
-    rows.append(("circle: x / y errors within, with decoupling", "+-97 / +-65 nm",
-                 f"{_nm_range(b['x_error_range'])} / {_nm_range(b['y_error_range'])}", "", None,
-                 "Fig. 12b"))
-    a, b = r["fig13_y_theta_coupled"], r["fig13_y_theta_decoupled"]
-    rows.append(("y + theta_z eq. (16): theta_z error, without -> with decoupling",
-                 "[-1.68e-4, 1.87e-4] -> [-1.73e-4, 1.11e-4] deg",
-                 f"{_deg_range(a['theta_error_range'])} -> {_deg_range(b['theta_error_range'])}",
-                 "", None, "Fig. 13"))
-    rows.append(("y + theta_z eq. (16): y error, without -> with decoupling",
-                 "[-170, 123] -> [-113, 102] nm",
-                 f"{_nm_range(a['y_error_range'])} -> {_nm_range(b['y_error_range'])}", "", None,
-                 "Fig. 13"))
-    return rows
 
 
 STAGE_NAMES = {"flexure": "FlexureStage (seed 000's stage)", "xy200s": "XY200S (seed 001's stage)"}
@@ -205,8 +133,9 @@ def seed001_section(results: dict) -> list[str]:
         "Feedforward only (seed 001 uses no feedback), 2 Hz sines about each stage's "
         "single-axis home (FlexureStage x 8 um, y 7 um; XY200S x 90 um, y 85 um, the same "
         "fraction of its strokes). Linearity runs demand 0 on the other axis (seed 001 §5.2 "
-        "holds it at 0 V); coupling runs hold the other axis at its home (above 0 V: the "
-        "actuators cannot retract, so a coupling can only be cancelled from a home). Seed "
+        "holds it at 0 V); coupling runs hold the other axis at its home (the XY200S's amplifier gives "
+        "0..150 V only, so there a coupling can be cancelled only from above its rest; "
+        "FlexureStage runs the same protocol, for one table). Seed "
         "001's method is PiezoController with `hysteresis_model = 2` (inverse Bouc-Wen, eq. 6) "
         "and `decoupling_model = 2` (model-based, eq. 7-16); seed 000's is 1 and 1. Each "
         "stage's controller is identified on it (`piezo-identify stage`: the `stage` preset on "
@@ -267,6 +196,8 @@ def seed001_section(results: dict) -> list[str]:
 
 
 def write_report(path: Path, results: dict, context: dict) -> None:
+    rows = paper.rows(results)
+    met = sum(r.met for r in rows)
     lines = [
         "# Seed 000's and seed 001's experiments on the simulated stage",
         "",
@@ -274,17 +205,21 @@ def write_report(path: Path, results: dict, context: dict) -> None:
         "closing the loop on FlexureStage, co-simulated with fmpy "
         f"(FMPy {context['fmpy']}) at {1 / context['step']:.0f} Hz, "
         f"Jacobi master, references previewed by {context['preview']} samples, "
-        "sensor noise on (seeded).",
+        "sensor noise on (seeded), with the demands exactly as seed 000 prints them "
+        "(conditions at the end).",
         f"Controller parameters: the FMU's start values, the `{context['preset']}` preset "
-        "(identified on the plant); switches per run as listed below.",
+        "(identified on the plant by seed 000's procedure); switches per run as listed below.",
         "",
-        "## Each figure of ../shared/README.md beside the simulated one",
+        "## Every numbered figure of seed 000 beside the simulated one",
         "",
-        "| what | seed 000 | simulated | target | verdict | where |",
+        f"{met} of {len(rows)} at or under the paper's figure.",
+        "",
+        "| what | seed 000 | simulated | rule | verdict | where |",
         "|---|---|---|---|---|---|",
     ]
-    for what, paper, sim, target, ok, where in paper_table(results):
-        lines.append(f"| {what} | {paper} | {sim} | {target} | {_verdict(ok)} | {where} |")
+    for r in rows:
+        lines.append(f"| {r.what} | {r.paper} | {r.simulated} | {r.rule} | {_verdict(r.met)} "
+                     f"| {r.where} |")
     lines += [
         "",
         "## Table 3 with feedback on all three axes",

@@ -22,7 +22,7 @@ Rust parameter structs) with the demo's run conditions on top.
 The system configuration (SYSTEM_PRESETS + SYSTEM_OVERRIDES): FlexureStage's
 seed000 set with the demo's seeded sensor noise on (demo.experiments.
 PLANT_PARAMETERS), PiezoController's stage set, and the references held at the
-demo's home pose (demo.experiments.HOME). Loaded as is, both the SSP and the
+demo's home pose (demo.experiments.MID_STROKE). Loaded as is, both the SSP and the
 container FMU run the stage from rest to home and hold it there with feedback
 on every axis, at the controller's 10 kHz.
 
@@ -64,7 +64,7 @@ from demo.cosim import (
     SAMPLE_PERIOD,
     SENSORS,
 )
-from demo.experiments import HOME, PLANT_PARAMETERS
+from demo.experiments import MID_STROKE, PLANT_PARAMETERS
 
 SYSTEM_NAME = "PiezoStageSystem"
 LOOP_NAME = "PiezoStageLoop"
@@ -79,7 +79,7 @@ SYSTEM_PRESETS = {
 #: What the system sets on top of the presets: the demo's conditions.
 SYSTEM_OVERRIDES = {
     PLANT_INSTANCE: dict(PLANT_PARAMETERS),
-    CONTROLLER_INSTANCE: dict(zip(REFERENCES, HOME)),
+    CONTROLLER_INSTANCE: dict(zip(REFERENCES, MID_STROKE)),
 }
 
 NS = {

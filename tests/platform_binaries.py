@@ -63,6 +63,31 @@ def cosimulation_functions() -> frozenset[str]:
     return frozenset(names)
 
 
+@cache
+def model_exchange_functions() -> frozenset[str]:
+    """The model-exchange section of the official fmi2Functions.h (10
+    functions in FMI 2.0.x)."""
+    text = (fmi_headers() / "fmi2Functions.h").read_text()
+    exchange = text.index("Functions for FMI2 for Model Exchange")
+    cosimulation = text.index("Functions for FMI2 for Co-Simulation")
+    names = {
+        match.group(1)
+        for match in re.finditer(r"^#define\s+(fmi2\w+)\s+fmi2FullName\(\1\)", text, re.M)
+        if exchange < match.start() < cosimulation
+    }
+    assert len(names) == 10, sorted(names)
+    return frozenset(names)
+
+
+def expected_functions(model: str) -> frozenset[str]:
+    """What the model's binary exports: the common and co-simulation
+    functions, and the model-exchange ones when its modelDescription offers
+    Model Exchange (FlexureStage does, PiezoController does not)."""
+    if read_model_description(str(fmu_path(model))).modelExchange is not None:
+        return cosimulation_functions() | model_exchange_functions()
+    return cosimulation_functions()
+
+
 def require_tool(name: str, why: str) -> str:
     """The tool's path; fails the test with how to get it when it is missing."""
     path = shutil.which(name)

@@ -78,8 +78,8 @@ def test_validate_fmu_reports_no_problem(fmu_path):
 def test_model_description_declares_the_promised_interface(fmu_path):
     md = fmpy.read_model_description(str(fmu_path))
     cs = md.coSimulation
-    assert cs is not None and md.modelExchange is None, "a co-simulation-only FMU is promised"
-    assert cs.modelIdentifier == "FlexureStage"
+    assert cs is not None and md.modelExchange is not None, "both interfaces are promised"
+    assert cs.modelIdentifier == md.modelExchange.modelIdentifier == "FlexureStage"
     expected_flags = {
         "canHandleVariableCommunicationStepSize": True,
         "canGetAndSetFMUstate": True,
@@ -719,11 +719,21 @@ def test_log_fmi_calls_traces_every_call(env):
 
 def test_outputs_have_no_direct_feedthrough(env):
     md = env.md
-    for unknown in list(md.outputs) + list(md.initialUnknowns):
-        assert unknown.dependencies == [], (
-            f"{unknown.variable.name}: ModelStructure dependencies should be empty, got "
-            f"{[v.name for v in unknown.dependencies] if unknown.dependencies is not None else None}"
-        )
+    # No output depends on an input; in Model Exchange the sensors depend on
+    # the pose states (x, y, theta_z, outputs themselves, list none).
+    states = {d.variable.derivative.name for d in md.derivatives}
+    for unknown in md.outputs:
+        names = [v.name for v in unknown.dependencies]
+        assert not set(names) & set(INPUTS), f"{unknown.variable.name} depends on {names}"
+        assert set(names) <= states, f"{unknown.variable.name} depends on {names}"
+    # After initialization the outputs and the states are at rest, whatever
+    # the inputs and parameters.
+    for unknown in md.initialUnknowns:
+        if unknown.variable.causality == "output" or unknown.variable.name in states:
+            assert unknown.dependencies == [], (
+                f"{unknown.variable.name}: initial dependencies should be empty, got "
+                f"{[v.name for v in unknown.dependencies] if unknown.dependencies is not None else None}"
+            )
     assert {u.variable.name for u in md.outputs} == set(OUTPUTS)
 
     s = env.instantiate("feedthrough").initialize()
@@ -870,17 +880,18 @@ def test_sensor_noise_rms_parameter_is_used(env):
 
 
 # --------------------------------------------------------------------------
-# amplifier clipping (spec: 0..100 V, one warning per channel)
+# amplifier clipping (E-505: input -3..13 V, output -30..130 V; one warning
+# per channel)
 # --------------------------------------------------------------------------
 
 
 def test_amplifier_clipping_warns_once_per_channel(env):
     s = env.instantiate("clip").initialize()
-    s.set_real({"u1": 15.0, "u2": -3.0, "u3": 5.0})
+    s.set_real({"u1": 15.0, "u2": -4.0, "u3": 5.0})
     s.step_n(500)  # 50 ms: the 3 kHz amplifiers have settled
     v = s.get("amplifier.voltage[1]", "amplifier.voltage[2]", "amplifier.voltage[3]")
-    assert v[0] == pytest.approx(100.0) and v[1] == pytest.approx(0.0) and v[2] == pytest.approx(50.0), (
-        f"amplifier voltages {v}: expected 150 V clipped to 100 V, -30 V clipped to 0 V, 50 V"
+    assert v[0] == pytest.approx(130.0) and v[1] == pytest.approx(-30.0) and v[2] == pytest.approx(50.0), (
+        f"amplifier voltages {v}: expected 15 V clipped to 13 V (130 V), -4 V to -3 V (-30 V), 50 V"
     )
     warnings = s.log.matching("clipped", status=fmi2.fmi2Warning)
     per_channel = sorted(re.search(r"PZT(\d)", w.text).group(1) for w in warnings)

@@ -56,7 +56,7 @@ from demo.cosim import (
     Fmu,
     simulate,
 )
-from demo.experiments import HOME
+from demo.experiments import MID_STROKE
 from demo.systems import (
     LOOP_NAME,
     SYSTEM_NAME,
@@ -115,7 +115,7 @@ def trajectory(t):
     phase: all three axes and all three commands move."""
     t = np.atleast_1d(np.asarray(t, dtype=float))
     blend = 0.5 * (1.0 - np.cos(np.pi * np.clip(t / 0.1, 0.0, 1.0)))
-    r = blend[:, None] * np.asarray(HOME)[None, :]
+    r = blend[:, None] * np.asarray(MID_STROKE)[None, :]
     phase = 2 * np.pi * 20.0 * np.maximum(t - 0.1, 0.0)
     r[:, 0] += 2.0 * np.sin(phase)
     r[:, 1] += 2.0 * (1.0 - np.cos(phase))
@@ -124,7 +124,7 @@ def trajectory(t):
 
 
 def hold_home(t):
-    return np.tile(np.asarray(HOME, dtype=float), (len(np.atleast_1d(t)), 1))
+    return np.tile(np.asarray(MID_STROKE, dtype=float), (len(np.atleast_1d(t)), 1))
 
 
 def nanosecond_points(steps: int) -> np.ndarray:
@@ -204,10 +204,10 @@ def test_controller_alone_with_a_demand_and_no_stage_saturates_without_wind_up()
     # sees a constant error, drives the commands to the 10 V limit and its
     # integrator holds once a channel it drives is limited.
     result = fmpy.simulate_fmu(
-        str(require(CONTROLLER, "fmus")), start_values=dict(zip(REFERENCES, HOME))
+        str(require(CONTROLLER, "fmus")), start_values=dict(zip(REFERENCES, MID_STROKE))
     )
     assert_commands_are_the_limited_sum(result)
-    assert result["e_x"][-1] == HOME[0] and result["e_y"][-1] == HOME[1]
+    assert result["e_x"][-1] == MID_STROKE[0] and result["e_y"][-1] == MID_STROKE[1]
     _, high = controller_limits()
     for name in ("u1", "u3"):  # u2 shares u3's x integrator, which holds first
         limited = np.flatnonzero(result[name] >= high)
@@ -382,7 +382,7 @@ def test_libcosim_runs_the_ssp_as_the_direct_loop(fmus, members):
     # The .ssv's values reached the FMUs: the references held at home and
     # the seeded sensor noise on (0.01 um RMS: s1 - y over 2000 samples
     # estimates it within a few per cent).
-    assert held == list(HOME) and noise
+    assert held == list(MID_STROKE) and noise
     noise_rms = np.std(rows[:, PLANT_OUTPUTS.index("s1")] - rows[:, PLANT_OUTPUTS.index("y")])
     assert noise_rms == pytest.approx(members[PLANT_INSTANCE].parameters["noise.rms"], rel=0.1)
     reference = sensors_of(
@@ -449,7 +449,7 @@ def test_container_fmu_exposes_the_loop_and_both_parameter_sets(members):
     for v in description.modelVariables:
         by_causality.setdefault(v.causality, []).append(v)
     assert [v.name for v in by_causality["input"]] == list(REFERENCES)
-    assert [float(v.start) for v in by_causality["input"]] == list(HOME)
+    assert [float(v.start) for v in by_causality["input"]] == list(MID_STROKE)
     expected_outputs = [
         v.name for m in members.values() for v in m.description.modelVariables if v.causality == "output"
     ]
@@ -493,8 +493,8 @@ def test_container_default_experiment_holds_home_as_the_direct_loop(fmus, member
     # the platform sits at home within 0.02 um (twice the RMS of the sensor
     # noise the loop feeds back).
     tail = result["time"] >= duration - 0.1
-    assert abs(result["x"][tail].mean() - HOME[0]) < 0.02
-    assert abs(result["y"][tail].mean() - HOME[1]) < 0.02
+    assert abs(result["x"][tail].mean() - MID_STROKE[0]) < 0.02
+    assert abs(result["y"][tail].mean() - MID_STROKE[1]) < 0.02
 
 
 def test_container_tracks_a_trajectory_as_the_direct_loop(fmus, members):

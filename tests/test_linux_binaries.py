@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.platform_binaries import MODELS, cosimulation_functions, extract_binary, require_tool
+from tests.platform_binaries import MODELS, expected_functions, extract_binary, require_tool
 
 #: The oldest glibc the binaries must load with (released 2012; RHEL 7).
 GLIBC_BASELINE = (2, 17)
@@ -105,6 +105,6 @@ def test_depends_on_glibc_libraries_only(linux_binary):
 def test_exports_the_fmi_functions_and_nothing_else(linux_binary):
     model, library = linux_binary
     defined, _ = dynamic_symbols(library)
-    expected = cosimulation_functions()
+    expected = expected_functions(model)
     assert expected - defined == set(), f"{model}: missing {sorted(expected - defined)}"
     assert defined - expected == set(), f"{model}: also exports {sorted(defined - expected)}"

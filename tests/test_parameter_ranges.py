@@ -156,7 +156,7 @@ PHYSICAL_RANGE_CASES = [
     # bounds that depend on another parameter
     ("PiezoController", {"command_min": 5.0, "command_max": 5.0}, "command_max", "= 5",
      "> command_min"),
-    ("FlexureStage", {"amplifier.v_max": -1.0}, "amplifier.v_max", "= -1", "v_max > v_min"),
+    ("FlexureStage", {"amplifier.v_max": -40.0}, "amplifier.v_max", "= -40", "v_max > v_min"),
     ("FlexureStage", {"pzt[1].creep_time": 1e-5}, "pzt[1].creep_time", "0.00001",
      "creep_time > 10 x amplifier time constant"),
     # no mode without a frequency; damping within its declared [0, 1]
@@ -200,7 +200,11 @@ def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
     happens must fail, naming the state and the time."""
     env = envs["FlexureStage"]
     slave = env.instantiate("diverging")
+    # From a de-energized, never-cycled stack: the ramp below is the first
+    # travel (the default rest, after a 0-100-0 V cycle, would already have
+    # escaped; the test after this one covers that).
     slave.initialize(start_values={
+        "rest_cycle_voltage": 0.0,
         "coupling.x_from_pzt1.beta": -0.55,
         "coupling.x_from_pzt1.gamma": -0.13,
     })
@@ -222,6 +226,27 @@ def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
     # The instance is in the error state: stepping on is refused, not NaN.
     assert step_status(slave, 1e-4) == fmi2.fmi2Error
     print(f"diverged after {steps} steps: {message}")
+    slave.free()
+
+
+def test_diverging_hysteresis_at_the_exercised_rest_is_reported(envs):
+    """The same parameters with the default rest: the 0-100-0 V cycle the
+    stacks rest after (`rest_cycle_voltage`) already escapes. The instance
+    must say so, naming the state, and refuse to step, not return NaN."""
+    slave = envs["FlexureStage"].instantiate("diverging-rest")
+    status = fmi2.fmi2OK
+    try:
+        slave.initialize(start_values={
+            "coupling.x_from_pzt1.beta": -0.55,
+            "coupling.x_from_pzt1.gamma": -0.13,
+        })
+        status = step_status(slave, 1e-4)
+    except FMICallException as failed:
+        status = failed.status
+    assert status == fmi2.fmi2Error, slave.log.dump()
+    message = " ".join(r.text for r in slave.log.matching("diverged", status=fmi2.fmi2Error))
+    assert "coupling x from PZT1" in message, slave.log.dump()
+    print(message)
     slave.free()
 
 

@@ -5,9 +5,8 @@ stage preset's Bouc-Wen models (identified on FlexureStage by
 `piezo-identify stage`).
 
 Seed 001 §5.3's experiment on seed 000's stage: y follows a 2 Hz sine of
-2 um amplitude by feedforward alone while x is held at its home (above 0 V:
-the actuators cannot retract, so a coupling can only be cancelled from a
-home), no feedback. The x displacement the y motion causes is the coupling.
+2 um amplitude by feedforward alone while x is held at its home (the demo's
+seed 001 protocol, which the XY200S's 0..150 V amplifier needs), no feedback. The x displacement the y motion causes is the coupling.
 """
 
 from __future__ import annotations

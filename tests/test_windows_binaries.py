@@ -1,6 +1,7 @@
 """The win64 binary in each .fmu, as Simulink users on Windows get it:
 
-- it exports every FMI 2.0 common and co-simulation function under its
+- it exports every FMI 2.0 common and co-simulation function (and the
+  model-exchange ones where the FMU offers Model Exchange) under its
   standard, unprefixed name, and imports Windows' own DLLs only (no
   libgcc_s_seh-1.dll, libwinpthread-1.dll or other mingw runtime: Rust's
   standard library and libgcc's unwinder, which catches panics at the C
@@ -37,7 +38,7 @@ from tests.platform_binaries import (
     C_IMPORTER_CASES,
     MODELS,
     compile_c,
-    cosimulation_functions,
+    expected_functions,
     extract_binary,
     fmu_path,
     require_tool,
@@ -122,7 +123,7 @@ def dll(request, tmp_path) -> tuple[str, Path]:
 def test_exports_every_fmi_function_unprefixed(dll):
     model, library = dll
     exports = dll_exports(library)
-    expected = cosimulation_functions()
+    expected = expected_functions(model)
     print(f"{model}.dll exports {len(exports & expected)} FMI functions"
           f"{', and ' + ', '.join(sorted(exports - expected)) if exports - expected else ''}")
     assert expected - exports == set(), f"{model}: missing {sorted(expected - exports)}"

@@ -7,7 +7,17 @@ use std::ptr;
 use fmi_schema::fmi2::Causality;
 use fmi_sys::fmi2 as sys;
 
-use crate::{DISCARD, DriveTo, ERROR, Fmu, FmuUnderTest, Instance, OK, State, WARNING, allowed_in};
+use crate::model_exchange::MODEL_EXCHANGE_FUNCTIONS;
+use crate::{
+    DISCARD, DriveTo, ERROR, Fmu, FmuUnderTest, Instance, Interface, InterfaceStates, OK, State,
+    WARNING, allowed,
+};
+
+mod model_exchange;
+mod restore;
+
+pub use model_exchange::*;
+pub use restore::*;
 
 fn has_message(log: &[crate::LogRecord], needle: &str) -> bool {
     log.iter().any(|r| r.message.contains(needle))
@@ -22,7 +32,8 @@ fn assert_logged(log: &[crate::LogRecord], function: &str, needle: &str) {
 }
 
 /// Every FMI 2.0 common and co-simulation function resolves (the binding
-/// types each symbol with the official typedef), and the dynamic symbol table
+/// types each symbol with the official typedef), the Model Exchange ones too
+/// when modelDescription offers Model Exchange, and the dynamic symbol table
 /// holds nothing else.
 pub fn exports_every_function_and_nothing_else(fmu: &Fmu) {
     let b = &fmu.binding;
@@ -80,6 +91,32 @@ pub fn exports_every_function_and_nothing_else(fmu: &Fmu) {
         ("fmi2GetBooleanStatus", b.fmi2GetBooleanStatus.is_ok()),
         ("fmi2GetStringStatus", b.fmi2GetStringStatus.is_ok()),
     ];
+    let model_exchange = [
+        ("fmi2EnterEventMode", b.fmi2EnterEventMode.is_ok()),
+        ("fmi2NewDiscreteStates", b.fmi2NewDiscreteStates.is_ok()),
+        (
+            "fmi2EnterContinuousTimeMode",
+            b.fmi2EnterContinuousTimeMode.is_ok(),
+        ),
+        (
+            "fmi2CompletedIntegratorStep",
+            b.fmi2CompletedIntegratorStep.is_ok(),
+        ),
+        ("fmi2SetTime", b.fmi2SetTime.is_ok()),
+        ("fmi2SetContinuousStates", b.fmi2SetContinuousStates.is_ok()),
+        ("fmi2GetDerivatives", b.fmi2GetDerivatives.is_ok()),
+        ("fmi2GetEventIndicators", b.fmi2GetEventIndicators.is_ok()),
+        ("fmi2GetContinuousStates", b.fmi2GetContinuousStates.is_ok()),
+        (
+            "fmi2GetNominalsOfContinuousStates",
+            b.fmi2GetNominalsOfContinuousStates.is_ok(),
+        ),
+    ];
+    let resolved: Vec<(&str, bool)> = if fmu.offers_model_exchange() {
+        resolved.iter().chain(&model_exchange).copied().collect()
+    } else {
+        resolved.to_vec()
+    };
     let missing: Vec<&str> = resolved
         .iter()
         .filter(|(_, ok)| !ok)
@@ -122,7 +159,17 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
     let md = &fmu.description;
     assert_eq!(md.fmi_version, "2.0");
     let cs = md.co_simulation.as_ref().expect("a CoSimulation element");
-    assert!(md.model_exchange.is_none(), "co-simulation only");
+    if let Some(me) = &md.model_exchange {
+        // One binary serves both interfaces.
+        assert_eq!(me.model_identifier, cs.model_identifier);
+        assert_eq!(me.can_get_and_set_fmu_state, Some(true));
+        assert_eq!(me.can_serialize_fmu_state, Some(true));
+        assert_eq!(me.can_be_instantiated_only_once_per_process, Some(false));
+        assert_eq!(me.provides_directional_derivative, Some(false));
+        assert!(fmu.number_of_states() > 0, "Model Exchange without states");
+    } else {
+        assert_eq!(fmu.number_of_states(), 0, "states without Model Exchange");
+    }
     assert_eq!(cs.can_handle_variable_communication_step_size, Some(true));
     assert_eq!(cs.can_get_and_set_fmu_state, Some(true));
     assert_eq!(cs.can_serialize_fmu_state, Some(true));
@@ -155,6 +202,15 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
         .map(|u| u.index)
         .collect();
     assert_eq!(listed, outputs, "ModelStructure/Outputs");
+    // InitialUnknowns: the outputs, and the states and state derivatives
+    // (FMI 2.0.4 §2.2.8; here all of them are calculated), in index order.
+    let mut expected = outputs.clone();
+    for unknown in &md.model_structure.derivatives.unknowns {
+        expected.push(unknown.index);
+        expected.push(crate::model_exchange::state_of(fmu, unknown.index));
+    }
+    expected.sort_unstable();
+    expected.dedup();
     let initial: Vec<u32> = md
         .model_structure
         .initial_unknowns
@@ -162,7 +218,7 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
         .iter()
         .map(|u| u.index)
         .collect();
-    assert_eq!(initial, outputs, "ModelStructure/InitialUnknowns");
+    assert_eq!(initial, expected, "ModelStructure/InitialUnknowns");
 }
 
 /// Outputs whose ModelStructure dependencies exclude an input do not move when
@@ -237,7 +293,7 @@ pub fn instantiate_refuses_bad_arguments(fmu: &Fmu) {
         );
         assert!(c.is_null(), "NULL GUID accepted");
         assert!(has_message(&sink.take(), "fmuGUID"));
-        // Model exchange is not offered.
+        // Model exchange, where it is not offered; an fmuType that is neither.
         let c = b.fmi2Instantiate(
             name.as_ptr(),
             sys::fmi2Type_fmi2ModelExchange,
@@ -247,8 +303,25 @@ pub fn instantiate_refuses_bad_arguments(fmu: &Fmu) {
             0,
             0,
         );
-        assert!(c.is_null(), "model exchange accepted");
-        assert!(has_message(&sink.take(), "co-simulation"));
+        if fmu.offers_model_exchange() {
+            assert!(!c.is_null(), "model exchange refused: {:#?}", sink.take());
+            b.fmi2FreeInstance(c);
+            sink.take();
+        } else {
+            assert!(c.is_null(), "model exchange accepted");
+            assert!(has_message(&sink.take(), "co-simulation only"));
+        }
+        let c = b.fmi2Instantiate(
+            name.as_ptr(),
+            2,
+            guid.as_ptr(),
+            ptr::null(),
+            &callbacks,
+            0,
+            0,
+        );
+        assert!(c.is_null(), "fmuType 2 accepted");
+        assert!(has_message(&sink.take(), "fmuType"));
         // NULL instance name.
         let c = b.fmi2Instantiate(
             ptr::null(),
@@ -410,7 +483,7 @@ fn probe(inst: &mut Instance<'_>, function: &str) -> sys::fmi2Status {
                 sys::fmi2StatusKind_fmi2PendingStatus,
                 string.as_mut_ptr(),
             ),
-            other => panic!("no probe for {other}"),
+            other => model_exchange::probe(inst, other),
         }
     }
 }
@@ -465,46 +538,86 @@ const DISCARDED_QUERIES: [&str; 3] = [
     "fmi2GetStringStatus",
 ];
 
-/// Every function in every reachable state: legal calls succeed (or are
-/// refused as not offered), illegal ones return fmi2Error, name the function
-/// and the reason, and leave the instance in its error state.
+/// A call that is legal in `state` and not in the error state, to see whether
+/// an instance went there; `None` where the standard has none (a terminated
+/// model-exchange instance allows the same calls as one in error).
+fn legal_except_in_error(interface: Interface, state: State) -> Option<&'static str> {
+    match state {
+        State::Instantiated => Some("fmi2SetupExperiment"),
+        State::InitializationMode => Some("fmi2ExitInitializationMode"),
+        State::StepComplete => Some("fmi2DoStep"),
+        State::EventMode => Some("fmi2EnterContinuousTimeMode"),
+        State::ContinuousTimeMode => Some("fmi2SetTime"),
+        State::Terminated if interface == Interface::CoSimulation => Some("fmi2GetRealStatus"),
+        State::Terminated | State::Error => None,
+    }
+}
+
+/// The interfaces modelDescription offers.
+pub(crate) fn interfaces(fmu: &Fmu) -> Vec<Interface> {
+    let mut interfaces = vec![Interface::CoSimulation];
+    if fmu.offers_model_exchange() {
+        interfaces.push(Interface::ModelExchange);
+    }
+    interfaces
+}
+
+/// Every function in every reachable state of every interface the FMU
+/// offers: legal calls succeed (or are refused as not offered), illegal ones
+/// (a function of the other interface among them) return fmi2Error, name the
+/// function and the reason, and leave the instance in its error state.
 pub fn state_machine_allows_exactly_the_standard_calls(fmu: &Fmu) {
     let mut failures = Vec::new();
-    for state in State::ALL {
-        for function in INSTANCE_FUNCTIONS
-            .iter()
-            .copied()
-            .filter(|f| *f != "fmi2FreeInstance")
-        {
-            let mut inst = fmu.instantiate("state-machine", false);
-            inst.drive_to(state);
-            let status = probe(&mut inst, function);
-            let log = inst.take_log();
-            let legal = allowed_in(function, state);
-            let outcome = if !legal {
-                if status != ERROR {
-                    Some(format!("illegal but returned {status}"))
-                } else if !log.iter().any(|r| {
-                    r.message.starts_with(function) && r.message.contains("illegal call sequence")
-                }) {
-                    Some(format!(
-                        "refused without naming the function and the reason: {log:?}"
-                    ))
-                } else if probe(&mut inst, "fmi2DoStep") != ERROR && state != State::Error {
-                    Some("the instance did not enter its error state".to_owned())
+    let model_exchange: &[&str] = if fmu.offers_model_exchange() {
+        &MODEL_EXCHANGE_FUNCTIONS
+    } else {
+        &[]
+    };
+    for interface in interfaces(fmu) {
+        for &state in interface.states() {
+            for function in INSTANCE_FUNCTIONS
+                .iter()
+                .chain(model_exchange)
+                .copied()
+                .filter(|f| *f != "fmi2FreeInstance")
+            {
+                let mut inst = fmu.instantiate_for(interface, "state-machine");
+                inst.drive_to(state);
+                let status = probe(&mut inst, function);
+                let log = inst.take_log();
+                let legal = allowed(interface, function, state);
+                let outcome = if !legal {
+                    if status != ERROR {
+                        Some(format!("illegal but returned {status}"))
+                    } else if !log.iter().any(|r| {
+                        r.message.starts_with(function)
+                            && r.message.contains("illegal call sequence")
+                    }) {
+                        Some(format!(
+                            "refused without naming the function and the reason: {log:?}"
+                        ))
+                    } else if let Some(witness) = legal_except_in_error(interface, state)
+                        && probe(&mut inst, witness) != ERROR
+                    {
+                        // Legal in the state it was in, illegal in the error state.
+                        Some(format!(
+                            "the instance did not enter its error state ({witness} succeeded)"
+                        ))
+                    } else {
+                        None
+                    }
+                } else if NOT_OFFERED.contains(&function) {
+                    (status != ERROR || !has_message(&log, "not offered"))
+                        .then(|| format!("not-offered capability answered {status}: {log:?}"))
+                } else if DISCARDED_QUERIES.contains(&function) {
+                    (status != DISCARD)
+                        .then(|| format!("expected fmi2Discard, got {status}: {log:?}"))
                 } else {
-                    None
+                    (status != OK).then(|| format!("legal call returned {status}: {log:?}"))
+                };
+                if let Some(problem) = outcome {
+                    failures.push(format!("{function} in {interface:?} {state:?}: {problem}"));
                 }
-            } else if NOT_OFFERED.contains(&function) {
-                (status != ERROR || !has_message(&log, "not offered"))
-                    .then(|| format!("not-offered capability answered {status}: {log:?}"))
-            } else if DISCARDED_QUERIES.contains(&function) {
-                (status != DISCARD).then(|| format!("expected fmi2Discard, got {status}: {log:?}"))
-            } else {
-                (status != OK).then(|| format!("legal call returned {status}: {log:?}"))
-            };
-            if let Some(problem) = outcome {
-                failures.push(format!("{function} in {state:?}: {problem}"));
             }
         }
     }
@@ -518,10 +631,12 @@ pub fn state_machine_allows_exactly_the_standard_calls(fmu: &Fmu) {
 /// fmi2FreeInstance works in every state, including the error state, and a
 /// NULL instance is ignored.
 pub fn free_instance_in_every_state(fmu: &Fmu) {
-    for state in State::ALL {
-        let mut inst = fmu.instantiate("free", false);
-        inst.drive_to(state);
-        drop(inst);
+    for interface in interfaces(fmu) {
+        for &state in interface.states() {
+            let mut inst = fmu.instantiate_for(interface, "free");
+            inst.drive_to(state);
+            drop(inst);
+        }
     }
     unsafe { fmu.binding.fmi2FreeInstance(ptr::null_mut()) };
 }
@@ -830,18 +945,6 @@ pub fn corrupted_states_are_refused(fmu: &Fmu) {
     assert_eq!(status, ERROR);
     assert_logged(&inst.take_log(), "fmi2SerializeFMUstate", "size");
     let _ = inst.free_state(&mut state);
-}
-
-/// A state taken before initialization cannot be restored after it (and the
-/// other way round): the model's data would not match the instance.
-pub fn states_do_not_cross_initialization(fmu: &Fmu) {
-    let mut inst = fmu.instantiate("cross", false);
-    let (status, mut early) = inst.get_state();
-    assert_eq!(status, OK);
-    inst.initialize();
-    assert_eq!(inst.set_state(early), ERROR);
-    assert_logged(&inst.take_log(), "fmi2SetFMUstate", "before initialization");
-    let _ = inst.free_state(&mut early);
 }
 
 pub fn status_queries(fmu: &Fmu) {

@@ -5,15 +5,17 @@
 //! instance, written from the standard (FMI 2.0.4) and the modelDescription,
 //! not from the layer under test:
 //!
-//! - the FMI state of the instance, moved by every call that returns, and
-//!   [`allowed_in`] (§4.2.4) to decide whether a call is legal in it; after
-//!   `fmi2Error` the instance is in its error state (§2.1.3: "the simulation
-//!   cannot be continued with this FMU instance"), which only `fmi2Reset` and
-//!   `fmi2FreeInstance` leave;
+//! - the interface of the instance (Co-Simulation, or Model Exchange when the
+//!   FMU offers it) and its FMI state, moved by every call that returns, and
+//!   [`allowed`] (§4.2.4, §3.2.3) to decide whether a call is legal in it;
+//!   after `fmi2Error` the instance is in its error state (§2.1.3: "the
+//!   simulation cannot be continued with this FMU instance"), which
+//!   `fmi2Reset`, `fmi2FreeInstance` and the restore of an FMU state leave;
 //! - the value of every parameter and input (start values from the
-//!   modelDescription, then what was set), its time and start time, and
-//!   whether it was initialized; FMU states and serialized states carry a copy
-//!   of that model, so restoring one restores the oracle's too.
+//!   modelDescription, then what was set), its time and start time; FMU states
+//!   and serialized states carry a copy of that model and the machine state
+//!   they were taken in, so restoring one restores the oracle's too, state
+//!   machine included.
 //!
 //! The oracle demands: no crash, no abort, no hang (a watchdog aborts a call
 //! that runs for a minute); every status is an `fmi2Status` (never Pending or
@@ -56,7 +58,10 @@ use fmi_sys::fmi2 as sys;
 use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 
-use crate::{DISCARD, ERROR, Fmu, LogRecord, LogSink, OK, State, WARNING, allowed_in};
+use crate::{DISCARD, ERROR, Fmu, Interface, LogRecord, LogSink, OK, State, WARNING, allowed};
+
+/// The fuzzer's Model Exchange calls.
+mod model_exchange;
 
 const FATAL: sys::fmi2Status = sys::fmi2Status_fmi2Fatal;
 const STATUS_NAMES: [&str; 5] = ["OK", "Warning", "Discard", "Error", "Fatal"];
@@ -121,8 +126,12 @@ pub struct FuzzReport {
     pub states_restored: u64,
     pub corrupted_states_refused: u64,
     pub forged_states_accepted: u64,
-    /// Calls made on an instance in each state (Instantiated .. Error).
-    pub calls_in_state: [u64; 5],
+    /// Calls made on an instance in each state (`State::ALL` order).
+    pub calls_in_state: [u64; 7],
+    /// Instances made for Model Exchange.
+    pub model_exchange_instances: u64,
+    /// Model Exchange integrator steps completed.
+    pub integrator_steps: u64,
     pub by_function: BTreeMap<&'static str, [u64; 5]>,
     pub elapsed: Duration,
 }
@@ -155,6 +164,11 @@ impl fmt::Display for FuzzReport {
             self.instantiations_refused,
             self.illegal_in_state,
             self.foreign_instance_calls
+        )?;
+        writeln!(
+            f,
+            "  model-exchange instances {}, integrator steps {}",
+            self.model_exchange_instances, self.integrator_steps
         )?;
         writeln!(
             f,
@@ -192,12 +206,24 @@ pub fn assert_rules_hold(fmu: &Fmu, foreign: &Fmu, default_calls: u64, default_s
     assert!(report.calls >= config.calls, "{report}");
     // Every state was visited and every status-returning function called: a
     // generator that stopped reaching a state would pass without testing it.
-    assert!(report.calls_in_state.iter().all(|n| *n > 0), "{report}");
-    assert_eq!(report.by_function.len(), 30, "{report}");
+    let model_exchange = fmu.offers_model_exchange();
+    for (state, n) in State::ALL.iter().zip(report.calls_in_state) {
+        let reachable = State::CO_SIMULATION.contains(state)
+            || (model_exchange && State::MODEL_EXCHANGE.contains(state));
+        assert_eq!(n > 0, reachable, "calls in {state:?}\n{report}");
+    }
+    let functions = 30 + if model_exchange { 10 } else { 0 };
+    assert_eq!(report.by_function.len(), functions, "{report}");
     assert!(
         report.steps_completed > 0 && report.states_restored > 0,
         "{report}"
     );
+    if model_exchange {
+        assert!(
+            report.model_exchange_instances > 0 && report.integrator_steps > 0,
+            "{report}"
+        );
+    }
 }
 
 /// Runs `config.calls` calls on `fmu`; `foreign`, another FMU built with the
@@ -251,7 +277,16 @@ struct Shadow {
     /// Integer and Boolean as f64), `None` where not settable.
     values: Vec<Option<f64>>,
     time: f64,
-    initialized: bool,
+    /// The `startTime` of the last successful `fmi2SetupExperiment`.
+    start_time: f64,
+    /// In an FMU state: the machine state it was taken in and the interface of
+    /// its instance (restoring it puts the instance there). In a live
+    /// instance: the interface; the machine state is `Live::state`.
+    machine: State,
+    interface: Interface,
+    /// Model Exchange: continuous states were set to values the fuzzer chose
+    /// (not integrated), so the model may refuse to go on from them.
+    wild_states: bool,
     /// Restored from a forged state: values and time are unknown.
     tainted: bool,
     /// A step failed with fmi2Error: the FMU reported that its model could
@@ -267,7 +302,6 @@ struct Live {
     has_logger: bool,
     state: State,
     model: Shadow,
-    start_time: f64,
 }
 
 /// An FMU state the fuzzer got from the FMU and has not freed.
@@ -369,8 +403,8 @@ const FUNCTIONS: &[(&str, u32)] = &[
     ("fmi2FreeInstance", 1),
 ];
 
-fn legal(function: &str, state: State) -> bool {
-    function == "fmi2FreeInstance" || allowed_in(function, state)
+fn legal(interface: Interface, function: &str, state: State) -> bool {
+    function == "fmi2FreeInstance" || allowed(interface, function, state)
 }
 
 struct Fuzzer<'a> {
@@ -478,7 +512,10 @@ impl<'a> Fuzzer<'a> {
             fresh: Shadow {
                 values,
                 time: 0.0,
-                initialized: false,
+                start_time: 0.0,
+                machine: State::Instantiated,
+                interface: Interface::CoSimulation,
+                wild_states: false,
                 tainted: false,
                 failed: false,
             },
@@ -654,12 +691,13 @@ impl<'a> Fuzzer<'a> {
             .map(|(v, value)| format!("{} = {:e}", v.name, value.unwrap()))
             .collect();
         format!(
-            "slot {slot} ({}): {:?}, time {:e}, start time {:e}, initialized {}, tainted {}, failed {}, set: {}",
+            "slot {slot} ({}): {:?} {:?}, time {:e}, start time {:e}, wild states {}, tainted {}, failed {}, set: {}",
             live.name,
+            live.model.interface,
             live.state,
             live.model.time,
-            live.start_time,
-            live.model.initialized,
+            live.model.start_time,
+            live.model.wild_states,
             live.model.tainted,
             live.model.failed,
             changed.join(", ")
@@ -668,12 +706,6 @@ impl<'a> Fuzzer<'a> {
 
     fn live(&self, slot: usize) -> &Live {
         self.slots[slot].as_ref().expect("a live instance")
-    }
-
-    /// The instance pointer and FMI state of the instance in `slot`.
-    fn at(&self, slot: usize) -> (sys::fmi2Component, State) {
-        let live = self.live(slot);
-        (live.c, live.state)
     }
 
     fn live_mut(&mut self, slot: usize) -> &mut Live {
@@ -690,12 +722,11 @@ impl<'a> Fuzzer<'a> {
         items[self.rng.random_range(0..items.len())]
     }
 
-    fn pick_function(&mut self, state: State) -> &'static str {
+    fn pick_function(&mut self, interface: Interface, state: State) -> &'static str {
         let only_legal = self.chance(0.75);
-        let candidates: Vec<(&'static str, u32)> = FUNCTIONS
-            .iter()
-            .copied()
-            .filter(|(f, _)| !only_legal || legal(f, state))
+        let candidates: Vec<(&'static str, u32)> = self
+            .functions()
+            .filter(|(f, _)| !only_legal || legal(interface, f, state))
             .collect();
         let total: u32 = candidates.iter().map(|(_, w)| w).sum();
         let mut x = self.rng.random_range(0..total);
@@ -856,9 +887,27 @@ impl<'a> Fuzzer<'a> {
             45..48 => return self.platform_and_version(),
             _ => {}
         }
-        let state = self.live(slot).state;
-        let function = self.pick_function(state);
+        let (state, interface) = (self.live(slot).state, self.live(slot).model.interface);
+        let function = self.pick_function(interface, state);
         self.call(slot, function, false);
+    }
+
+    /// The functions this FMU's binary exports, with their weights: the Model
+    /// Exchange ones only when it offers Model Exchange.
+    fn functions(&self) -> impl Iterator<Item = (&'static str, u32)> + use<> {
+        let model_exchange = self.fmu.offers_model_exchange();
+        FUNCTIONS.iter().copied().chain(
+            model_exchange::FUNCTIONS
+                .iter()
+                .copied()
+                .filter(move |_| model_exchange),
+        )
+    }
+
+    /// Whether `function` is legal on the instance in `slot` now.
+    fn legal_now(&self, slot: usize, function: &str) -> bool {
+        let live = self.live(slot);
+        legal(live.model.interface, function, live.state)
     }
 
     fn call(&mut self, slot: usize, function: &'static str, benign: bool) {
@@ -890,13 +939,16 @@ impl<'a> Fuzzer<'a> {
             | "fmi2GetBooleanStatus"
             | "fmi2GetStringStatus" => self.status_query(slot, function, benign),
             "fmi2FreeInstance" => self.free_instance(slot),
-            other => unreachable!("no call for {other}"),
+            other => self.call_model_exchange(slot, other, benign),
         }
     }
 
     /// A run of legal calls that drives the instance to StepComplete and steps
     /// it many times with plausible inputs: random walks alone rarely get deep.
     fn burst(&mut self, slot: usize) {
+        if self.live(slot).model.interface == Interface::ModelExchange {
+            return self.burst_model_exchange(slot);
+        }
         let path: &[&'static str] = match self.live(slot).state {
             State::Instantiated => &[
                 "fmi2SetupExperiment",
@@ -911,6 +963,9 @@ impl<'a> Fuzzer<'a> {
                 "fmi2EnterInitializationMode",
                 "fmi2ExitInitializationMode",
             ],
+            State::EventMode | State::ContinuousTimeMode => {
+                unreachable!("a co-simulation instance")
+            }
         };
         for function in path {
             self.call(slot, function, true);
@@ -965,9 +1020,14 @@ impl<'a> Fuzzer<'a> {
         };
         let null_name = self.chance(0.04);
         let fmu_type = match self.rng.random_range(0..20) {
-            0 => sys::fmi2Type_fmi2ModelExchange,
-            1 => self.rng.random_range(2..1000),
+            0..8 => sys::fmi2Type_fmi2ModelExchange,
+            8 => self.rng.random_range(2..1000),
             _ => sys::fmi2Type_fmi2CoSimulation,
+        };
+        let interface = if fmu_type == sys::fmi2Type_fmi2ModelExchange {
+            Interface::ModelExchange
+        } else {
+            Interface::CoSimulation
         };
         let own_guid = self.fmu.guid.clone();
         let guid = match self.rng.random_range(0..40) {
@@ -1024,9 +1084,11 @@ impl<'a> Fuzzer<'a> {
                 logging_on,
             )
         };
+        let type_offered = fmu_type == sys::fmi2Type_fmi2CoSimulation
+            || (fmu_type == sys::fmi2Type_fmi2ModelExchange && self.fmu.offers_model_exchange());
         let acceptable = !null_name
             && !null_functions
-            && fmu_type == sys::fmi2Type_fmi2CoSimulation
+            && type_offered
             && guid.as_deref() == Some(own_guid.as_str());
         let log = sink.take();
         self.others_silent(None);
@@ -1058,6 +1120,11 @@ impl<'a> Fuzzer<'a> {
             self.fail(format!("fmi2Instantiate accepted {}", describe()));
         }
         self.report.instantiated += 1;
+        if interface == Interface::ModelExchange {
+            self.report.model_exchange_instances += 1;
+        }
+        let mut model = self.fresh.clone();
+        model.interface = interface;
         self.slots[slot] = Some(Live {
             c,
             sink,
@@ -1065,8 +1132,7 @@ impl<'a> Fuzzer<'a> {
             name,
             has_logger,
             state: State::Instantiated,
-            model: self.fresh.clone(),
-            start_time: 0.0,
+            model,
         });
     }
 
@@ -1154,7 +1220,8 @@ impl<'a> Fuzzer<'a> {
 
     fn call_on_foreign_pointer(&mut self) {
         let (kind, c) = self.not_an_instance();
-        let function = self.pick(FUNCTIONS).0;
+        let functions: Vec<(&'static str, u32)> = self.functions().collect();
+        let function = self.pick(&functions).0;
         self.report.foreign_instance_calls += 1;
         self.begin(function, None);
         let b = &self.fmu.binding;
@@ -1261,7 +1328,7 @@ impl<'a> Fuzzer<'a> {
                     self.check_foreign_alive(kind);
                     return;
                 }
-                other => unreachable!("no call for {other}"),
+                other => model_exchange::call_on_pointer(b, other, c),
             }
         };
         self.count_status(function, status);
@@ -1316,8 +1383,7 @@ impl<'a> Fuzzer<'a> {
 
     /// Functions without arguments: Enter, Terminate, Reset, CancelStep.
     fn simple(&mut self, slot: usize, function: &'static str) {
-        let state = self.live(slot).state;
-        let is_legal = legal(function, state);
+        let is_legal = self.legal_now(slot, function);
         let c = self.live(slot).c;
         let b = &self.fmu.binding;
         self.begin(function, Some(slot));
@@ -1342,8 +1408,10 @@ impl<'a> Fuzzer<'a> {
             "fmi2Terminate" => live.state = State::Terminated,
             "fmi2Reset" => {
                 live.state = State::Instantiated;
-                live.model = fresh;
-                live.start_time = 0.0;
+                live.model = Shadow {
+                    interface: live.model.interface,
+                    ..fresh
+                };
             }
             _ => unreachable!("fmi2CancelStep is never legal here"),
         }
@@ -1373,8 +1441,7 @@ impl<'a> Fuzzer<'a> {
         };
         let tolerance_defined = self.rng.random_range(0..2);
         let tolerance = self.pick(&[1e-6, 0.0, -1.0, f64::NAN]);
-        let state = self.live(slot).state;
-        let is_legal = legal("fmi2SetupExperiment", state);
+        let is_legal = self.legal_now(slot, "fmi2SetupExperiment");
         let valid = start.is_finite() && (!stop_defined || (!stop.is_nan() && stop >= start));
         self.begin("fmi2SetupExperiment", Some(slot));
         let status = unsafe {
@@ -1398,14 +1465,14 @@ impl<'a> Fuzzer<'a> {
         );
         if status == OK {
             let live = self.live_mut(slot);
-            live.start_time = start;
+            live.model.start_time = start;
             live.model.time = start;
         }
     }
 
     fn exit_initialization_mode(&mut self, slot: usize) {
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2ExitInitializationMode", fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2ExitInitializationMode");
         // A parameter outside its declared range must be refused; other
         // changed parameters are for the model to judge.
         let mut out_of_range = None;
@@ -1451,11 +1518,14 @@ impl<'a> Fuzzer<'a> {
         );
         if status == OK {
             let live = self.live_mut(slot);
-            live.state = State::StepComplete;
-            live.model.initialized = true;
+            live.state = match live.model.interface {
+                Interface::CoSimulation => State::StepComplete,
+                Interface::ModelExchange => State::EventMode,
+            };
             // The model is built anew from its parameters.
             live.model.failed = false;
-            live.model.time = live.start_time;
+            live.model.wild_states = false;
+            live.model.time = live.model.start_time;
         }
     }
 
@@ -1500,8 +1570,8 @@ impl<'a> Fuzzer<'a> {
             pointers.len()
         };
         let logging_on = self.pick(&[0, 1, 1, 2]);
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2SetDebugLogging", fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2SetDebugLogging");
         let allowed = if !is_legal || null_array || null_entry {
             [ERROR]
         } else if unknown {
@@ -1547,8 +1617,8 @@ impl<'a> Fuzzer<'a> {
         } else {
             vrs.len()
         };
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal(function, fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, function);
         let resolved = self.resolve(&vrs, kind);
         let valid = n == 0 || (!null_vr && !null_values && resolved.is_ok());
         let vr_ptr = if null_vr { ptr::null() } else { vrs.as_ptr() };
@@ -1602,8 +1672,20 @@ impl<'a> Fuzzer<'a> {
                 ),
             }
         };
-        let allowed = if is_legal && valid { [OK] } else { [ERROR] };
-        self.check(slot, function, status, &allowed, !is_legal, || {
+        // A state derivative is computed when read: from states or
+        // parameters the fuzzer chose it may overflow, which the layer refuses
+        // as fmi2GetDerivatives does.
+        let reads_derivative = resolved
+            .as_ref()
+            .is_ok_and(|indices| indices.iter().any(|i| self.fmu.is_derivative(*i)));
+        let allowed: &[sys::fmi2Status] = if !is_legal || !valid {
+            &[ERROR]
+        } else if reads_derivative && !self.pristine_model_exchange(slot) {
+            &[OK, ERROR]
+        } else {
+            &[OK]
+        };
+        self.check(slot, function, status, allowed, !is_legal, || {
             format!(
                 "vr {vrs:?} (n {n}, NULL vr {null_vr}, NULL values {null_values}): {:?}",
                 resolved.as_ref().err()
@@ -1614,12 +1696,15 @@ impl<'a> Fuzzer<'a> {
         }
         let live = self.live(slot);
         let tainted = live.model.tainted;
-        let unreliable = tainted || live.model.failed;
+        let unreliable = tainted || live.model.failed || live.model.wild_states;
         for (i, index) in resolved.expect("valid").into_iter().enumerate() {
             let var = &self.fmu.variables[index];
             let expected = live.model.values[index];
             let problem = match kind {
-                "Real" if !unreliable && !reals[i].is_finite() => {
+                // The layer never hands out a non-finite derivative.
+                "Real"
+                    if (!unreliable || self.fmu.is_derivative(index)) && !reals[i].is_finite() =>
+                {
                     Some(format!("{} is {}", var.name, reals[i]))
                 }
                 "Real"
@@ -1705,9 +1790,9 @@ impl<'a> Fuzzer<'a> {
         let strings: Vec<sys::fmi2String> = vec![c"text".as_ptr(); vrs.len().max(1)];
 
         // What the standard and the modelDescription say of each value.
+        let is_legal = self.legal_now(slot, function);
         let live = self.live(slot);
         let state = live.state;
-        let is_legal = legal(function, state);
         let mut refusal: Option<String> = None;
         let mut warning_certain = false;
         let mut ambiguous = false;
@@ -1732,7 +1817,15 @@ impl<'a> Fuzzer<'a> {
                     refusal = Some(format!("{} has causality {:?}", var.name, var.causality));
                     break;
                 }
-                if state == State::StepComplete
+                if state == State::ContinuousTimeMode
+                    && !(var.causality == Causality::Input
+                        && var.variability.is_none_or(|v| v == Variability::Continuous))
+                {
+                    // FMI 2.0.4 §3.2.3: between events only continuous inputs.
+                    refusal = Some(format!("{} set in continuous-time mode", var.name));
+                    break;
+                }
+                if matches!(state, State::StepComplete | State::EventMode)
                     && var.causality == Causality::Parameter
                     && var.variability != Some(Variability::Tunable)
                 {
@@ -1888,8 +1981,8 @@ impl<'a> Fuzzer<'a> {
             }
         };
         let no_prior = self.rng.random_range(0..2);
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2DoStep", fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2DoStep");
         let miss = (t - time).abs();
         let tainted = self.live(slot).model.tainted;
         // A step must be positive and finite, start at a finite point and end
@@ -1926,8 +2019,8 @@ impl<'a> Fuzzer<'a> {
     }
 
     fn not_offered(&mut self, slot: usize, function: &'static str) {
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal(function, fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, function);
         let vrs = [0u32; 2];
         let mut reals = [0.0f64; 2];
         let orders = [1i32; 2];
@@ -1980,8 +2073,8 @@ impl<'a> Fuzzer<'a> {
             self.pick(&[4, 1000, u32::MAX])
         };
         let null_value = !benign && self.chance(0.05);
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal(function, fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, function);
         let mut real = f64::NAN;
         let mut int = i32::MIN;
         let mut status_value = u32::MAX;
@@ -2106,8 +2199,8 @@ impl<'a> Fuzzer<'a> {
             Target::Foreign => before.is_null(),
             Target::Null => false,
         };
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2GetFMUstate", fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2GetFMUstate");
         self.begin("fmi2GetFMUstate", Some(slot));
         let status = unsafe {
             self.fmu.binding.fmi2GetFMUstate(
@@ -2129,7 +2222,8 @@ impl<'a> Fuzzer<'a> {
             }
             return;
         }
-        let model = self.live(slot).model.clone();
+        let mut model = self.live(slot).model.clone();
+        model.machine = self.live(slot).state;
         match target {
             Target::Reuse(i) => {
                 if state_slot != before {
@@ -2150,37 +2244,57 @@ impl<'a> Fuzzer<'a> {
         }
     }
 
+    /// `fmi2SetFMUstate`: a state of this FMU restores the values and the
+    /// machine state it was taken in, from whatever state the instance is in
+    /// (error state included); a state of the other interface is refused.
     fn set_fmu_state(&mut self, slot: usize, benign: bool) {
         let (own, state) = self.state_argument(if benign { 1.0 } else { 0.85 });
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2SetFMUstate", fmi_state);
-        let matches_initialization = own.is_some_and(|i| {
-            self.handles[i].model.initialized == self.live(slot).model.initialized
-        });
-        // A forged state may say anything about its initialization, and so
-        // may an instance restored from one.
-        let forged =
-            own.is_some_and(|i| self.handles[i].model.tainted) || self.live(slot).model.tainted;
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2SetFMUstate");
+        let interface = self.live(slot).model.interface;
+        let same_interface = own.is_some_and(|i| self.handles[i].model.interface == interface);
+        // A forged state may claim anything, its interface and machine state
+        // included.
+        let forged = own.is_some_and(|i| self.handles[i].model.tainted);
         let allowed: &[sys::fmi2Status] = if !is_legal || own.is_none() {
             &[ERROR]
         } else if forged {
             &[OK, ERROR]
-        } else if matches_initialization {
+        } else if same_interface {
             &[OK]
         } else {
             &[ERROR]
         };
         self.begin("fmi2SetFMUstate", Some(slot));
         let status = unsafe { self.fmu.binding.fmi2SetFMUstate(c, state) };
-        self.check(slot, "fmi2SetFMUstate", status, allowed, !is_legal, || {
-            format!("own state {own:?}, initialized as the instance {matches_initialization}")
+        let log = self.check(slot, "fmi2SetFMUstate", status, allowed, !is_legal, || {
+            format!("own state {own:?}, same interface {same_interface}, forged {forged}")
         });
+        if status != OK && is_legal && own.is_some() && !forged && !same_interface {
+            let live = self.live(slot);
+            if live.has_logger && !log.iter().any(|r| r.message.contains("interface")) {
+                self.fail(format!(
+                    "a state of the other interface refused without saying so: {log:#?}"
+                ));
+            }
+        }
         if status == OK {
             self.report.states_restored += 1;
             let model = self.handles[own.expect("only own states restore")]
                 .model
                 .clone();
-            self.live_mut(slot).model = model;
+            let live = self.live_mut(slot);
+            live.state = model.machine;
+            // The interface is the instance's: a forged state may claim the
+            // other one and still be accepted.
+            let interface = live.model.interface;
+            live.model = model;
+            live.model.interface = interface;
+            if forged {
+                // The machine state a forged state put the instance in is
+                // unknown: a reset brings it back to a known one.
+                self.simple(slot, "fmi2Reset");
+            }
         }
     }
 
@@ -2190,8 +2304,8 @@ impl<'a> Fuzzer<'a> {
         } else {
             self.rng.random_range(0..10)
         };
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2FreeFMUstate", fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2FreeFMUstate");
         match choice {
             0..6 if !self.handles.is_empty() => {
                 let index = self.rng.random_range(0..self.handles.len());
@@ -2264,8 +2378,8 @@ impl<'a> Fuzzer<'a> {
     fn serialized_size(&mut self, slot: usize, benign: bool) {
         let (own, state) = self.state_argument(if benign { 1.0 } else { 0.85 });
         let null_size = !benign && self.chance(0.05);
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2SerializedFMUstateSize", fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2SerializedFMUstateSize");
         let mut size = usize::MAX;
         self.begin("fmi2SerializedFMUstateSize", Some(slot));
         let status = unsafe {
@@ -2301,8 +2415,8 @@ impl<'a> Fuzzer<'a> {
     /// or a wrong one.
     fn serialize(&mut self, slot: usize, benign: bool) {
         let (own, state) = self.state_argument(if benign { 1.0 } else { 0.9 });
-        let (c, fmi_state) = self.at(slot);
-        let state_legal = legal("fmi2SerializeFMUstate", fmi_state);
+        let c = self.live(slot).c;
+        let state_legal = self.legal_now(slot, "fmi2SerializeFMUstate");
         let mut needed = 0usize;
         if own.is_some() && state_legal {
             self.begin("fmi2SerializedFMUstateSize", Some(slot));
@@ -2498,8 +2612,8 @@ impl<'a> Fuzzer<'a> {
             Source::NullEmpty => (ptr::null(), 0),
             _ => (bytes.as_ptr().cast(), bytes.len()),
         };
-        let (c, fmi_state) = self.at(slot);
-        let is_legal = legal("fmi2DeSerializeFMUstate", fmi_state);
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, "fmi2DeSerializeFMUstate");
         let allowed: &[sys::fmi2Status] = if !is_legal || !out_valid {
             &[ERROR]
         } else {

@@ -1,4 +1,4 @@
-//! Conformance harness for FMI 2.0 co-simulation binaries.
+//! Conformance harness for FMI 2.0 binaries (co-simulation and Model Exchange).
 //!
 //! It loads an FMU as an importer does (the importer is `fmi2-import`, whose
 //! items are re-exported here so that the checks and the FMU crates' tests
@@ -6,13 +6,15 @@
 //! function that panics with a reason; an FMU crate runs them all with
 //! [`conformance_tests!`]. [`fuzz`] makes random call sequences.
 //!
-//! The legality table in [`allowed_in`] is written from the standard (FMI 2.0.4,
-//! section 4.2.4), independently of the layer under test.
+//! The legality tables in [`allowed_in`] and
+//! [`model_exchange::allowed_in_model_exchange`] are written from the standard
+//! (FMI 2.0.4, sections 4.2.4 and 3.2.3), independently of the layer under test.
 
 pub use fmi2_import::*;
 
 pub mod checks;
 pub mod fuzz;
+pub mod model_exchange;
 pub mod table;
 
 /// The states the harness drives an instance into.
@@ -23,16 +25,56 @@ pub enum State {
     StepComplete,
     Terminated,
     Error,
+    /// Model Exchange only.
+    EventMode,
+    /// Model Exchange only.
+    ContinuousTimeMode,
 }
 
 impl State {
-    pub const ALL: [State; 5] = [
+    pub const ALL: [State; 7] = [
+        State::Instantiated,
+        State::InitializationMode,
+        State::StepComplete,
+        State::Terminated,
+        State::Error,
+        State::EventMode,
+        State::ContinuousTimeMode,
+    ];
+    /// The states a co-simulation slave reaches (FMI 2.0.4 §4.2.4, without
+    /// the asynchronous ones).
+    pub const CO_SIMULATION: [State; 5] = [
         State::Instantiated,
         State::InitializationMode,
         State::StepComplete,
         State::Terminated,
         State::Error,
     ];
+    /// The states a model-exchange model reaches (FMI 2.0.4 §3.2.3).
+    pub const MODEL_EXCHANGE: [State; 6] = [
+        State::Instantiated,
+        State::InitializationMode,
+        State::EventMode,
+        State::ContinuousTimeMode,
+        State::Terminated,
+        State::Error,
+    ];
+}
+
+/// The states of each interface's state machine that the harness drives an
+/// instance into ([`Interface`] is the importer's; the states are the
+/// harness's).
+pub trait InterfaceStates {
+    fn states(self) -> &'static [State];
+}
+
+impl InterfaceStates for Interface {
+    fn states(self) -> &'static [State] {
+        match self {
+            Interface::ModelExchange => &State::MODEL_EXCHANGE,
+            Interface::CoSimulation => &State::CO_SIMULATION,
+        }
+    }
 }
 
 /// What the checks ask of the FMU under test beyond what an importer needs.
@@ -77,7 +119,22 @@ impl DriveTo for Instance<'_> {
                 assert_eq!(self.setup(0.0), OK);
                 assert_eq!(self.enter_init(), OK);
             }
-            State::StepComplete => self.initialize(),
+            State::StepComplete | State::EventMode => {
+                assert_eq!(
+                    self.interface,
+                    if state == State::EventMode {
+                        Interface::ModelExchange
+                    } else {
+                        Interface::CoSimulation
+                    },
+                    "{state:?} belongs to the other interface"
+                );
+                self.initialize();
+            }
+            State::ContinuousTimeMode => {
+                self.initialize();
+                assert_eq!(self.enter_continuous_time_mode(), OK);
+            }
             State::Terminated => {
                 self.initialize();
                 assert_eq!(self.terminate(), OK);
@@ -92,10 +149,23 @@ impl DriveTo for Instance<'_> {
     }
 }
 
+/// Whether the standard allows `function` on an instance of `interface` in
+/// `state`.
+pub fn allowed(interface: Interface, function: &str, state: State) -> bool {
+    match interface {
+        Interface::CoSimulation => allowed_in(function, state),
+        Interface::ModelExchange => model_exchange::allowed_in_model_exchange(function, state),
+    }
+}
+
 /// Whether the standard allows `function` in `state` (FMI 2.0.4, co-simulation
 /// state machine). Written from the standard, not from the layer under test.
 pub fn allowed_in(function: &str, state: State) -> bool {
     use State::*;
+    if model_exchange::MODEL_EXCHANGE_FUNCTIONS.contains(&function) {
+        // Not a function of a co-simulation slave in any state.
+        return false;
+    }
     let states: &[State] = match function {
         "fmi2SetDebugLogging"
         | "fmi2Reset"

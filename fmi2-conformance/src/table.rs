@@ -75,6 +75,39 @@ pub fn parsed_description_matches_the_table<M: CoSimModel>() {
     }
 }
 
+/// The `derivative` attributes the XML carries are the table's state
+/// derivatives, pointing at their states; `<ModelExchange>` is there exactly
+/// when the model declares it, with `numberOfEventIndicators` as declared.
+pub fn derivatives_match_the_table<M: CoSimModel>() {
+    let md = Fmi2ModelDescription::deserialize(&generated::<M>()).expect("fmi-schema parses it");
+    let table = M::variables();
+    for (parsed, var) in md.model_variables.variables.iter().zip(table) {
+        let parsed_state = match &parsed.elem {
+            ScalarVariableElement::Real(r) => r.derivative,
+            _ => None,
+        };
+        let table_state = var.derivative_of.map(|state| {
+            table
+                .iter()
+                .position(|v| v.name == state)
+                .expect("checked by the layer") as u32
+                + 1
+        });
+        assert_eq!(
+            parsed_state, table_state,
+            "derivative attribute of {}",
+            var.name
+        );
+    }
+    let derivatives = table.iter().filter(|v| v.derivative_of.is_some()).count();
+    assert_eq!(md.model_structure.derivatives.unknowns.len(), derivatives);
+    assert_eq!(md.model_exchange.is_some(), M::MODEL_EXCHANGE.is_some());
+    assert_eq!(
+        md.number_of_event_indicators.unwrap_or(0) as usize,
+        M::MODEL_EXCHANGE.map_or(0, |me| me.number_of_event_indicators)
+    );
+}
+
 /// Inputs and outputs have flat names: a '.' in a port name becomes a bus in
 /// Simulink, and '[' an array in some importers.
 pub fn ports_have_flat_names<M: CoSimModel>() {
@@ -139,6 +172,10 @@ macro_rules! table_tests {
         #[test]
         fn parsed_description_matches_the_table() {
             $crate::table::parsed_description_matches_the_table::<$model>();
+        }
+        #[test]
+        fn derivatives_match_the_table() {
+            $crate::table::derivatives_match_the_table::<$model>();
         }
         #[test]
         fn ports_have_flat_names() {

@@ -8,6 +8,7 @@
 //! `fmi2Error`. With `n == 0`, array pointers may be NULL.
 
 use std::ffi::{CStr, CString, c_char};
+use std::fmt;
 use std::panic::{self, AssertUnwindSafe};
 use std::ptr;
 
@@ -19,7 +20,9 @@ use crate::logging::{LogCategory, Logger};
 use crate::model::CoSimModel;
 use crate::model_description;
 use crate::resources;
-use crate::status::{FmiFunction, Status};
+use crate::status::{FmiFunction, Interface, Status};
+
+pub mod model_exchange;
 
 const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
 
@@ -56,34 +59,29 @@ unsafe fn instance<'a, M: CoSimModel>(c: sys::fmi2Component) -> Option<&'a mut I
 }
 
 /// Runs `body` on the instance if `function` is legal in its state. With
-/// `logFmiCalls` on, the call is traced with `arguments` (formatted lazily, so
-/// tracing costs nothing while it is off).
+/// `logFmiCalls` on, the call is traced with `arguments`, which writes them;
+/// it only runs then, so that tracing costs nothing while it is off (not even
+/// the stores of building a `fmt::Arguments`).
 ///
 /// # Safety
 /// As for [`instance`].
-unsafe fn call<M, F>(
+unsafe fn call<M, A, F>(
     c: sys::fmi2Component,
     function: FmiFunction,
-    arguments: std::fmt::Arguments<'_>,
+    arguments: A,
     body: F,
 ) -> sys::fmi2Status
 where
     M: CoSimModel,
+    A: Fn(&mut fmt::Formatter<'_>) -> fmt::Result,
     F: FnOnce(&mut Instance<M>) -> Status,
 {
     let Some(inst) = (unsafe { instance::<M>(c) }) else {
         return ERROR;
     };
     trace(inst, function, arguments);
-    if !function.allowed_states().contains(inst.state) {
-        inst.logger.error(
-            function.name(),
-            format_args!(
-                "illegal call sequence: not allowed in state {}",
-                inst.state.name()
-            ),
-        );
-        inst.enter_error_state(Status::Error);
+    if !function.allowed(inst.interface, inst.state) {
+        refuse_sequence(inst, function);
         return ERROR;
     }
     let outcome = panic::catch_unwind(AssertUnwindSafe(|| body(&mut *inst)));
@@ -99,6 +97,32 @@ where
     };
     inst.enter_error_state(status);
     status.to_raw()
+}
+
+/// Logs why `function` is not allowed now and moves the instance to its error
+/// state. Kept out of line: the check that leads here is on every call's path.
+#[cold]
+#[inline(never)]
+fn refuse_sequence<M: CoSimModel>(inst: &mut Instance<M>, function: FmiFunction) {
+    match function.interface() {
+        Some(own) if own != inst.interface => inst.logger.error(
+            function.name(),
+            format_args!(
+                "illegal call sequence: a {} function, and this instance was instantiated \
+                 for {}",
+                own.name(),
+                inst.interface.name()
+            ),
+        ),
+        _ => inst.logger.error(
+            function.name(),
+            format_args!(
+                "illegal call sequence: not allowed in state {}",
+                inst.state.name()
+            ),
+        ),
+    }
+    inst.enter_error_state(Status::Error);
 }
 
 /// A C string argument as `&str` (lossy on invalid UTF-8).
@@ -137,14 +161,28 @@ unsafe fn arrays<'a, T>(
     Ok((unsafe { std::slice::from_raw_parts(vr, n) }, values))
 }
 
+/// The arguments of a traced call, written only when the trace is.
+struct Arguments<A>(A);
+
+impl<A: Fn(&mut fmt::Formatter<'_>) -> fmt::Result> fmt::Display for Arguments<A> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        (self.0)(f)
+    }
+}
+
 /// Traces a call as `fmi2X: (arguments)` when `logFmiCalls` is on.
-fn trace<M: CoSimModel>(inst: &Instance<M>, function: FmiFunction, args: std::fmt::Arguments<'_>) {
+#[inline]
+fn trace<M, A>(inst: &Instance<M>, function: FmiFunction, arguments: A)
+where
+    M: CoSimModel,
+    A: Fn(&mut fmt::Formatter<'_>) -> fmt::Result,
+{
     if inst.logger.is_enabled(LogCategory::FmiCalls) {
         inst.logger.log_in(
             function.name(),
             Status::Ok,
             LogCategory::FmiCalls,
-            format_args!("({args})"),
+            format_args!("({})", Arguments(arguments)),
         );
     }
 }
@@ -208,16 +246,30 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         logger.error(NAME, format_args!("instanceName is NULL"));
         return ptr::null_mut();
     }
-    if fmu_type != sys::fmi2Type_fmi2CoSimulation {
-        logger.error(
-            NAME,
-            format_args!(
-                "{} implements FMI 2.0 co-simulation only; fmuType {fmu_type} was requested",
-                M::INFO.model_identifier
-            ),
-        );
-        return ptr::null_mut();
-    }
+    let interface = match fmu_type {
+        sys::fmi2Type_fmi2CoSimulation => Interface::CoSimulation,
+        sys::fmi2Type_fmi2ModelExchange if M::MODEL_EXCHANGE.is_some() => Interface::ModelExchange,
+        sys::fmi2Type_fmi2ModelExchange => {
+            logger.error(
+                NAME,
+                format_args!(
+                    "{} implements FMI 2.0 co-simulation only (modelDescription has no \
+                     <ModelExchange>); fmuType fmi2ModelExchange was requested",
+                    M::INFO.model_identifier
+                ),
+            );
+            return ptr::null_mut();
+        }
+        other => {
+            logger.error(
+                NAME,
+                format_args!(
+                    "fmuType {other} is neither fmi2ModelExchange (0) nor fmi2CoSimulation (1)"
+                ),
+            );
+            return ptr::null_mut();
+        }
+    };
     let guid = match model_description::cached_guid::<M>() {
         Ok(guid) => guid,
         Err(e) => {
@@ -253,14 +305,15 @@ unsafe fn instantiate_checked<M: CoSimModel>(
             None
         }
     };
-    let instance = Instance::<M>::new(logger, resource_dir, guid);
+    let instance = Instance::<M>::new(logger, interface, resource_dir, guid);
     if instance.logger.is_enabled(LogCategory::FmiCalls) {
         instance.logger.log_in(
             NAME,
             Status::Ok,
             LogCategory::FmiCalls,
             format_args!(
-                "(instanceName = {:?}, fmuResourceLocation = {:?}, loggingOn = {logging_on})",
+                "(instanceName = {:?}, fmuType = {fmu_type}, fmuResourceLocation = {:?}, \
+                 loggingOn = {logging_on})",
                 name.as_deref().unwrap_or_default(),
                 location.as_deref()
             ),
@@ -270,7 +323,11 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         NAME,
         Status::Ok,
         LogCategory::Events,
-        format_args!("instantiated {}", M::INFO.model_identifier),
+        format_args!(
+            "instantiated {} for {}",
+            M::INFO.model_identifier,
+            interface.name()
+        ),
     );
     Box::into_raw(Box::new(instance)).cast()
 }
@@ -281,7 +338,7 @@ pub unsafe fn free_instance<M: CoSimModel>(c: sys::fmi2Component) {
     let Some(inst) = (unsafe { instance::<M>(c) }) else {
         return;
     };
-    trace(inst, FmiFunction::FreeInstance, format_args!(""));
+    trace(inst, FmiFunction::FreeInstance, |_| Ok(()));
     // The FMU states it made that the importer did not free.
     for state in std::mem::take(&mut inst.fmu_states) {
         unsafe { free_snapshot::<M>(state) };
@@ -303,10 +360,10 @@ pub unsafe fn set_debug_logging<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetDebugLogging;
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             function,
-            format_args!("loggingOn = {logging_on}, nCategories = {n_categories}"),
+            |f| write!(f, "loggingOn = {logging_on}, nCategories = {n_categories}"),
             |inst| {
                 if n_categories > 0 && categories.is_null() {
                     return inst.error(
@@ -346,12 +403,15 @@ pub unsafe fn setup_experiment<M: CoSimModel>(
     // The tolerance is not used: the models integrate their linear parts exactly
     // and bound the rest by their own solver parameters.
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             FmiFunction::SetupExperiment,
-            format_args!(
-                "startTime = {start_time}, stopTimeDefined = {stop_time_defined}, stopTime = {stop_time}"
-            ),
+            |f| {
+                write!(
+                    f,
+                    "startTime = {start_time}, stopTimeDefined = {stop_time_defined}, stopTime = {stop_time}"
+                )
+            },
             |inst| inst.setup_experiment(start_time, (stop_time_defined != 0).then_some(stop_time)),
         )
     }
@@ -361,10 +421,10 @@ pub unsafe fn setup_experiment<M: CoSimModel>(
 /// `c` as for every FMI function.
 pub unsafe fn enter_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             FmiFunction::EnterInitializationMode,
-            format_args!(""),
+            |_| Ok(()),
             |i| i.enter_initialization_mode(),
         )
     }
@@ -374,10 +434,10 @@ pub unsafe fn enter_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) ->
 /// `c` as for every FMI function.
 pub unsafe fn exit_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             FmiFunction::ExitInitializationMode,
-            format_args!(""),
+            |_| Ok(()),
             |i| i.exit_initialization_mode(),
         )
     }
@@ -386,17 +446,13 @@ pub unsafe fn exit_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> 
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn terminate<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
-    unsafe {
-        call::<M, _>(c, FmiFunction::Terminate, format_args!(""), |i| {
-            i.terminate()
-        })
-    }
+    unsafe { call::<M, _, _>(c, FmiFunction::Terminate, |_| Ok(()), |i| i.terminate()) }
 }
 
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn reset<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
-    unsafe { call::<M, _>(c, FmiFunction::Reset, format_args!(""), |i| i.reset()) }
+    unsafe { call::<M, _, _>(c, FmiFunction::Reset, |_| Ok(()), |i| i.reset()) }
 }
 
 /// # Safety
@@ -411,19 +467,24 @@ unsafe fn get<M: CoSimModel, T: FmiValue, C>(
     to_c: fn(T) -> C,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, format_args!("nvr = {nvr}"), |inst| {
-            let (vrs, values) = match arrays(inst, function, vr, nvr, values.cast_const(), "value")
-            {
-                Ok(v) => v,
-                Err(status) => return status,
-            };
-            let out: &mut [C] = if nvr == 0 {
-                &mut []
-            } else {
-                std::slice::from_raw_parts_mut(values.cast_mut(), nvr)
-            };
-            inst.get_values(function, vrs, |i, value: T| out[i] = to_c(value))
-        })
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "nvr = {nvr}"),
+            |inst| {
+                let (vrs, values) =
+                    match arrays(inst, function, vr, nvr, values.cast_const(), "value") {
+                        Ok(v) => v,
+                        Err(status) => return status,
+                    };
+                let out: &mut [C] = if nvr == 0 {
+                    &mut []
+                } else {
+                    std::slice::from_raw_parts_mut(values.cast_mut(), nvr)
+                };
+                inst.get_values(function, vrs, |i, value: T| out[i] = to_c(value))
+            },
+        )
     }
 }
 
@@ -439,18 +500,23 @@ unsafe fn set<M: CoSimModel, T: FmiValue, C: Copy>(
     from_c: fn(C) -> T,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, format_args!("nvr = {nvr}"), |inst| {
-            let (vrs, values) = match arrays(inst, function, vr, nvr, values, "value") {
-                Ok(v) => v,
-                Err(status) => return status,
-            };
-            let raw: &[C] = if nvr == 0 {
-                &[]
-            } else {
-                std::slice::from_raw_parts(values, nvr)
-            };
-            inst.set_values(function, vrs, |i| from_c(raw[i]))
-        })
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "nvr = {nvr}"),
+            |inst| {
+                let (vrs, values) = match arrays(inst, function, vr, nvr, values, "value") {
+                    Ok(v) => v,
+                    Err(status) => return status,
+                };
+                let raw: &[C] = if nvr == 0 {
+                    &[]
+                } else {
+                    std::slice::from_raw_parts(values, nvr)
+                };
+                inst.set_values(function, vrs, |i| from_c(raw[i]))
+            },
+        )
     }
 }
 
@@ -641,13 +707,18 @@ pub unsafe fn get_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetFmuState;
     unsafe {
-        call::<M, _>(c, function, format_args!("FMUstate = {state:?}"), |inst| {
-            if state.is_null() {
-                return inst.error(function, format_args!("FMUstate is NULL"));
-            }
-            let data = inst.snapshot();
-            store_snapshot(inst, function, state, data)
-        })
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "FMUstate = {state:?}"),
+            |inst| {
+                if state.is_null() {
+                    return inst.error(function, format_args!("FMUstate is NULL"));
+                }
+                let data = inst.snapshot();
+                store_snapshot(inst, function, state, data)
+            },
+        )
     }
 }
 
@@ -659,10 +730,10 @@ pub unsafe fn set_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetFmuState;
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             function,
-            format_args!("FMUstate = {state:?}"),
+            |f| write!(f, "FMUstate = {state:?}"),
             |inst| match snapshot::<M>(state) {
                 Some(snapshot) => inst.restore(function, &snapshot.data),
                 None => inst.error(
@@ -682,35 +753,40 @@ pub unsafe fn free_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::FreeFmuState;
     unsafe {
-        call::<M, _>(c, function, format_args!("FMUstate = {state:?}"), |inst| {
-            if state.is_null() {
-                return inst.error(function, format_args!("FMUstate is NULL"));
-            }
-            let current = *state;
-            if current.is_null() {
-                return Status::Ok;
-            }
-            match snapshot::<M>(current) {
-                Some(snapshot) => {
-                    // The instance that made it (maybe another one than this:
-                    // states of one instance may be used with another) no
-                    // longer has to free it.
-                    let owner = snapshot.owner as *mut Instance<M>;
-                    if ptr::eq(owner, &*inst) {
-                        inst.fmu_states.retain(|s| *s != current);
-                    } else if let Some(owner) = instance::<M>(owner.cast()) {
-                        owner.fmu_states.retain(|s| *s != current);
-                    }
-                    free_snapshot::<M>(current);
-                    *state = ptr::null_mut();
-                    Status::Ok
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "FMUstate = {state:?}"),
+            |inst| {
+                if state.is_null() {
+                    return inst.error(function, format_args!("FMUstate is NULL"));
                 }
-                None => inst.error(
-                    function,
-                    format_args!("*FMUstate is not a state of this FMU"),
-                ),
-            }
-        })
+                let current = *state;
+                if current.is_null() {
+                    return Status::Ok;
+                }
+                match snapshot::<M>(current) {
+                    Some(snapshot) => {
+                        // The instance that made it (maybe another one than this:
+                        // states of one instance may be used with another) no
+                        // longer has to free it.
+                        let owner = snapshot.owner as *mut Instance<M>;
+                        if ptr::eq(owner, &*inst) {
+                            inst.fmu_states.retain(|s| *s != current);
+                        } else if let Some(owner) = instance::<M>(owner.cast()) {
+                            owner.fmu_states.retain(|s| *s != current);
+                        }
+                        free_snapshot::<M>(current);
+                        *state = ptr::null_mut();
+                        Status::Ok
+                    }
+                    None => inst.error(
+                        function,
+                        format_args!("*FMUstate is not a state of this FMU"),
+                    ),
+                }
+            },
+        )
     }
 }
 
@@ -738,24 +814,29 @@ pub unsafe fn serialized_fmu_state_size<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SerializedFmuStateSize;
     unsafe {
-        call::<M, _>(c, function, format_args!("FMUstate = {state:?}"), |inst| {
-            if size.is_null() {
-                return inst.error(function, format_args!("size is NULL"));
-            }
-            let Some(snapshot) = snapshot::<M>(state) else {
-                return inst.error(
-                    function,
-                    format_args!("FMUstate is NULL or not a state of this FMU"),
-                );
-            };
-            match encoded(inst, function, snapshot) {
-                Ok(bytes) => {
-                    *size = bytes.len();
-                    Status::Ok
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "FMUstate = {state:?}"),
+            |inst| {
+                if size.is_null() {
+                    return inst.error(function, format_args!("size is NULL"));
                 }
-                Err(status) => status,
-            }
-        })
+                let Some(snapshot) = snapshot::<M>(state) else {
+                    return inst.error(
+                        function,
+                        format_args!("FMUstate is NULL or not a state of this FMU"),
+                    );
+                };
+                match encoded(inst, function, snapshot) {
+                    Ok(bytes) => {
+                        *size = bytes.len();
+                        Status::Ok
+                    }
+                    Err(status) => status,
+                }
+            },
+        )
     }
 }
 
@@ -769,10 +850,10 @@ pub unsafe fn serialize_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::SerializeFmuState;
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             function,
-            format_args!("FMUstate = {state:?}, size = {size}"),
+            |f| write!(f, "FMUstate = {state:?}, size = {size}"),
             |inst| {
                 let Some(snapshot) = snapshot::<M>(state) else {
                     return inst.error(
@@ -813,26 +894,31 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::DeSerializeFmuState;
     unsafe {
-        call::<M, _>(c, function, format_args!("size = {size}"), |inst| {
-            if state.is_null() {
-                return inst.error(function, format_args!("FMUstate is NULL"));
-            }
-            if serialized.is_null() && size > 0 {
-                return inst.error(
-                    function,
-                    format_args!("serializedState is NULL but size = {size}"),
-                );
-            }
-            let bytes: &[u8] = if size == 0 {
-                &[]
-            } else {
-                std::slice::from_raw_parts(serialized.cast::<u8>(), size)
-            };
-            match fmu_state::decode::<M>(bytes, &inst.guid) {
-                Ok(data) => store_snapshot(inst, function, state, data),
-                Err(reason) => inst.error(function, format_args!("refused: {reason}")),
-            }
-        })
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "size = {size}"),
+            |inst| {
+                if state.is_null() {
+                    return inst.error(function, format_args!("FMUstate is NULL"));
+                }
+                if serialized.is_null() && size > 0 {
+                    return inst.error(
+                        function,
+                        format_args!("serializedState is NULL but size = {size}"),
+                    );
+                }
+                let bytes: &[u8] = if size == 0 {
+                    &[]
+                } else {
+                    std::slice::from_raw_parts(serialized.cast::<u8>(), size)
+                };
+                match fmu_state::decode::<M>(bytes, &inst.guid) {
+                    Ok(data) => store_snapshot(inst, function, state, data),
+                    Err(reason) => inst.error(function, format_args!("refused: {reason}")),
+                }
+            },
+        )
     }
 }
 
@@ -847,12 +933,19 @@ unsafe fn not_offered<M: CoSimModel>(
     capability: &'static str,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, format_args!(""), |inst| {
-            inst.error(
-                function,
-                format_args!("not offered by this FMU (modelDescription declares {capability})"),
-            )
-        })
+        call::<M, _, _>(
+            c,
+            function,
+            |_| Ok(()),
+            |inst| {
+                inst.error(
+                    function,
+                    format_args!(
+                        "not offered by this FMU (modelDescription declares {capability})"
+                    ),
+                )
+            },
+        )
     }
 }
 
@@ -915,12 +1008,15 @@ pub unsafe fn do_step<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::DoStep;
     unsafe {
-        call::<M, _>(
+        call::<M, _, _>(
             c,
             function,
-            format_args!(
-                "currentCommunicationPoint = {current_communication_point}, communicationStepSize = {communication_step_size}"
-            ),
+            |f| {
+                write!(
+                    f,
+                    "currentCommunicationPoint = {current_communication_point}, communicationStepSize = {communication_step_size}"
+                )
+            },
             |inst| inst.do_step(current_communication_point, communication_step_size),
         )
     }
@@ -940,29 +1036,34 @@ unsafe fn status_query<M: CoSimModel, T>(
     answer: impl FnOnce(&Instance<M>, sys::fmi2StatusKind) -> Option<T>,
 ) -> sys::fmi2Status {
     unsafe {
-        call::<M, _>(c, function, format_args!("status kind {kind}"), |inst| {
-            if value.is_null() {
-                return inst.error(function, format_args!("value is NULL"));
-            }
-            match answer(inst, kind) {
-                Some(v) => {
-                    *value = v;
-                    Status::Ok
+        call::<M, _, _>(
+            c,
+            function,
+            |f| write!(f, "status kind {kind}"),
+            |inst| {
+                if value.is_null() {
+                    return inst.error(function, format_args!("value is NULL"));
                 }
-                None => {
-                    inst.logger.log_in(
-                        function.name(),
-                        Status::Discard,
-                        LogCategory::StatusDiscard,
-                        format_args!(
-                            "status kind {kind} is not available here: this FMU never runs \
+                match answer(inst, kind) {
+                    Some(v) => {
+                        *value = v;
+                        Status::Ok
+                    }
+                    None => {
+                        inst.logger.log_in(
+                            function.name(),
+                            Status::Discard,
+                            LogCategory::StatusDiscard,
+                            format_args!(
+                                "status kind {kind} is not available here: this FMU never runs \
                              asynchronous steps"
-                        ),
-                    );
-                    Status::Discard
+                            ),
+                        );
+                        Status::Discard
+                    }
                 }
-            }
-        })
+            },
+        )
     }
 }
 

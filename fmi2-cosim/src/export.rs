@@ -2,14 +2,39 @@
 
 /// Exports every FMI 2.0 common and co-simulation function for `$model`
 /// (a type implementing [`CoSimModel`](crate::model::CoSimModel)) under its
-/// standard, unprefixed name, as a binary FMU needs.
+/// standard, unprefixed name, as a binary FMU needs; with `model_exchange`,
+/// the Model Exchange functions too, for a model that also implements
+/// [`ModelExchange`](crate::model_exchange::ModelExchange) (one binary serves
+/// both interfaces, as the Reference FMUs do).
 ///
 /// Each exported function is also checked at compile time against the
 /// corresponding typedef of the official `fmi2FunctionTypes.h` (through
 /// fmi-sys's bindings): a signature that drifts from the standard does not
-/// compile. Use it once per cdylib.
+/// compile; and the model's `MODEL_EXCHANGE` declaration must agree with the
+/// form used. Use it once per cdylib.
 #[macro_export]
 macro_rules! export_fmi2 {
+    ($model:ty) => {
+        $crate::__export_fmi2_common!($model);
+        const _: () = assert!(
+            <$model as $crate::CoSimModel>::MODEL_EXCHANGE.is_none(),
+            "the model declares Model Exchange: export it with export_fmi2!(Model, model_exchange)"
+        );
+    };
+    ($model:ty, model_exchange) => {
+        $crate::__export_fmi2_common!($model);
+        $crate::__export_fmi2_model_exchange!($model);
+        const _: () = assert!(
+            <$model as $crate::CoSimModel>::MODEL_EXCHANGE.is_some(),
+            "export_fmi2!(Model, model_exchange) needs CoSimModel::MODEL_EXCHANGE = Some(..)"
+        );
+    };
+}
+
+/// The common and co-simulation exports of [`export_fmi2!`].
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __export_fmi2_common {
     ($model:ty) => {
         mod __fmi2_exports {
             #![allow(non_snake_case)]
@@ -361,7 +386,130 @@ macro_rules! export_fmi2 {
     };
 }
 
-/// Names of every function [`export_fmi2!`] exports (for export-table checks).
+/// The Model Exchange exports of [`export_fmi2!`].
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __export_fmi2_model_exchange {
+    ($model:ty) => {
+        mod __fmi2_model_exchange_exports {
+            #![allow(non_snake_case)]
+            use super::*;
+            use $crate::abi::model_exchange as me;
+            use $crate::fmi_sys::fmi2::*;
+
+            type Model = $model;
+
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2EnterEventMode(c: fmi2Component) -> fmi2Status {
+                unsafe { me::enter_event_mode::<Model>(c) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2NewDiscreteStates(
+                c: fmi2Component,
+                fmi2eventInfo: *mut fmi2EventInfo,
+            ) -> fmi2Status {
+                unsafe { me::new_discrete_states::<Model>(c, fmi2eventInfo) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2EnterContinuousTimeMode(c: fmi2Component) -> fmi2Status {
+                unsafe { me::enter_continuous_time_mode::<Model>(c) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2CompletedIntegratorStep(
+                c: fmi2Component,
+                noSetFMUStatePriorToCurrentPoint: fmi2Boolean,
+                enterEventMode: *mut fmi2Boolean,
+                terminateSimulation: *mut fmi2Boolean,
+            ) -> fmi2Status {
+                unsafe {
+                    me::completed_integrator_step::<Model>(
+                        c,
+                        noSetFMUStatePriorToCurrentPoint,
+                        enterEventMode,
+                        terminateSimulation,
+                    )
+                }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2SetTime(c: fmi2Component, time: fmi2Real) -> fmi2Status {
+                unsafe { me::set_time::<Model>(c, time) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2SetContinuousStates(
+                c: fmi2Component,
+                x: *const fmi2Real,
+                nx: usize,
+            ) -> fmi2Status {
+                unsafe { me::set_continuous_states::<Model>(c, x, nx) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetDerivatives(
+                c: fmi2Component,
+                derivatives: *mut fmi2Real,
+                nx: usize,
+            ) -> fmi2Status {
+                unsafe { me::get_derivatives::<Model>(c, derivatives, nx) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetEventIndicators(
+                c: fmi2Component,
+                eventIndicators: *mut fmi2Real,
+                ni: usize,
+            ) -> fmi2Status {
+                unsafe { me::get_event_indicators::<Model>(c, eventIndicators, ni) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetContinuousStates(
+                c: fmi2Component,
+                x: *mut fmi2Real,
+                nx: usize,
+            ) -> fmi2Status {
+                unsafe { me::get_continuous_states::<Model>(c, x, nx) }
+            }
+            #[unsafe(no_mangle)]
+            pub unsafe extern "C" fn fmi2GetNominalsOfContinuousStates(
+                c: fmi2Component,
+                x_nominal: *mut fmi2Real,
+                nx: usize,
+            ) -> fmi2Status {
+                unsafe { me::get_nominals_of_continuous_states::<Model>(c, x_nominal, nx) }
+            }
+
+            // Every export has exactly the type of the official typedef.
+            const _: () = {
+                let _: fmi2EnterEventModeTYPE = Some(fmi2EnterEventMode);
+                let _: fmi2NewDiscreteStatesTYPE = Some(fmi2NewDiscreteStates);
+                let _: fmi2EnterContinuousTimeModeTYPE = Some(fmi2EnterContinuousTimeMode);
+                let _: fmi2CompletedIntegratorStepTYPE = Some(fmi2CompletedIntegratorStep);
+                let _: fmi2SetTimeTYPE = Some(fmi2SetTime);
+                let _: fmi2SetContinuousStatesTYPE = Some(fmi2SetContinuousStates);
+                let _: fmi2GetDerivativesTYPE = Some(fmi2GetDerivatives);
+                let _: fmi2GetEventIndicatorsTYPE = Some(fmi2GetEventIndicators);
+                let _: fmi2GetContinuousStatesTYPE = Some(fmi2GetContinuousStates);
+                let _: fmi2GetNominalsOfContinuousStatesTYPE =
+                    Some(fmi2GetNominalsOfContinuousStates);
+            };
+        }
+    };
+}
+
+/// Names of the Model Exchange functions that `export_fmi2!(Model,
+/// model_exchange)` exports besides [`EXPORTED_FUNCTIONS`].
+pub const MODEL_EXCHANGE_FUNCTIONS: [&str; 10] = [
+    "fmi2EnterEventMode",
+    "fmi2NewDiscreteStates",
+    "fmi2EnterContinuousTimeMode",
+    "fmi2CompletedIntegratorStep",
+    "fmi2SetTime",
+    "fmi2SetContinuousStates",
+    "fmi2GetDerivatives",
+    "fmi2GetEventIndicators",
+    "fmi2GetContinuousStates",
+    "fmi2GetNominalsOfContinuousStates",
+];
+
+/// Names of every common and co-simulation function [`export_fmi2!`] exports
+/// (for export-table checks).
 pub const EXPORTED_FUNCTIONS: [&str; 34] = [
     "fmi2GetTypesPlatform",
     "fmi2GetVersion",

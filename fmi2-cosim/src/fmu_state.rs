@@ -1,8 +1,11 @@
 //! FMU state: snapshots of an instance (`fmi2GetFMUstate`) and their byte form
 //! (`fmi2SerializeFMUstate`).
 //!
-//! A snapshot holds values, never pointers: the model value (serde), the time and
-//! whether the instance was initialized. The byte form is
+//! A snapshot holds values, never pointers: the model value (serde), the time,
+//! the start time, the interface and the state of the FMI state machine the
+//! instance was in. Restoring it restores all of them: an instance restarts
+//! where the snapshot was taken, state machine included (see
+//! `Instance::restore`). The byte form is
 //!
 //! ```text
 //! magic "FMI2RSST" | format version u32 LE | GUID (38 ASCII bytes)
@@ -14,8 +17,12 @@
 
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
 
+use crate::status::{FmiState, Interface};
+
 const FILE_MAGIC: &[u8; 8] = b"FMI2RSST";
-const FORMAT_VERSION: u32 = 1;
+/// 2: the snapshot carries the start time, the interface and the machine
+/// state (version 1 carried an "initialized" flag instead).
+const FORMAT_VERSION: u32 = 2;
 const GUID_LEN: usize = 38;
 const HEADER_LEN: usize = FILE_MAGIC.len() + 4 + GUID_LEN + 8;
 const CRC_LEN: usize = 4;
@@ -25,8 +32,12 @@ const CRC_LEN: usize = 4;
 pub struct SnapshotData<M> {
     pub model: M,
     pub time: f64,
-    /// False for a state taken before `fmi2ExitInitializationMode`.
-    pub initialized: bool,
+    /// The `startTime` of `fmi2SetupExperiment` (0 until it is called).
+    pub start_time: f64,
+    /// The interface of the instance it was taken from.
+    pub interface: Interface,
+    /// The state of the FMI state machine it was taken in.
+    pub state: FmiState,
 }
 
 /// What `fmi2FMUstate` points to; `repr(C)` with the magic number first (see
@@ -132,7 +143,9 @@ mod tests {
         SnapshotData {
             model: vec![1.0, -0.1, f64::MIN_POSITIVE, 1e300],
             time: 0.123,
-            initialized: true,
+            start_time: -2.5,
+            interface: Interface::ModelExchange,
+            state: FmiState::ContinuousTimeMode,
         }
     }
 

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use crate::fmu_state::SnapshotData;
 use crate::logging::{LogCategory, Logger};
 use crate::model::{CoSimModel, Context};
-use crate::status::{FmiFunction, FmiState, Status};
+use crate::status::{FmiFunction, FmiState, Interface, Status};
 use crate::variables::{Causality, Value, Variability, Variable};
 
 /// Marks a live instance allocated by this layer (checked before use), before
@@ -61,9 +61,9 @@ pub struct Instance<M: CoSimModel> {
     pub(crate) magic: u64,
     pub(crate) logger: Logger,
     pub(crate) state: FmiState,
+    pub(crate) interface: Interface,
     pub(crate) time: f64,
     pub(crate) start_time: f64,
-    pub(crate) initialized: bool,
     pub(crate) model: M,
     pub(crate) resource_dir: Option<PathBuf>,
     pub(crate) guid: String,
@@ -151,14 +151,19 @@ impl FmiValue for bool {
 }
 
 impl<M: CoSimModel> Instance<M> {
-    pub(crate) fn new(logger: Logger, resource_dir: Option<PathBuf>, guid: String) -> Self {
+    pub(crate) fn new(
+        logger: Logger,
+        interface: Interface,
+        resource_dir: Option<PathBuf>,
+        guid: String,
+    ) -> Self {
         Instance {
             magic: Magic::<M>::INSTANCE,
             logger,
             state: FmiState::Instantiated,
+            interface,
             time: 0.0,
             start_time: 0.0,
-            initialized: false,
             model: M::new(),
             resource_dir,
             guid,
@@ -168,6 +173,19 @@ impl<M: CoSimModel> Instance<M> {
 
     pub fn state(&self) -> FmiState {
         self.state
+    }
+
+    pub fn interface(&self) -> Interface {
+        self.interface
+    }
+
+    /// Whether the instance is past initialization and simulating: the
+    /// states in which fixed parameters are frozen.
+    fn simulating(&self) -> bool {
+        matches!(
+            self.state,
+            FmiState::StepComplete | FmiState::EventMode | FmiState::ContinuousTimeMode
+        )
     }
 
     pub fn model(&self) -> &M {
@@ -313,7 +331,8 @@ impl<M: CoSimModel> Instance<M> {
         let mut ctx = Context {
             logger: &self.logger,
             function: function.name(),
-            resource_dir: self.resource_dir.as_deref(),
+            resource_dir: &self.resource_dir,
+            interface: self.interface,
         };
         if let Err(e) = self
             .model
@@ -322,8 +341,10 @@ impl<M: CoSimModel> Instance<M> {
             return self.error(function, format_args!("{e}"));
         }
         self.time = self.start_time;
-        self.initialized = true;
-        self.state = FmiState::StepComplete;
+        self.state = match self.interface {
+            Interface::CoSimulation => FmiState::StepComplete,
+            Interface::ModelExchange => FmiState::EventMode,
+        };
         self.event(
             function,
             format_args!("initialized at t = {}", self.start_time),
@@ -347,12 +368,14 @@ impl<M: CoSimModel> Instance<M> {
         self.state = FmiState::Instantiated;
         self.time = 0.0;
         self.start_time = 0.0;
-        self.initialized = false;
         self.event(FmiFunction::Reset, format_args!("reset to start values"));
         Status::Ok
     }
 
-    /// Reads `vrs` and hands the i-th value to `store(i, value)`.
+    /// Reads `vrs` and hands the i-th value to `store(i, value)`. A state
+    /// derivative that is not finite is refused as `fmi2GetDerivatives`
+    /// refuses it: the importer sets the states and parameters of Model
+    /// Exchange, and the rates of some may overflow.
     pub(crate) fn get_values<T: FmiValue>(
         &self,
         function: FmiFunction,
@@ -375,7 +398,22 @@ impl<M: CoSimModel> Instance<M> {
                     ),
                 );
             };
-            store(i, get(&self.model));
+            let value = get(&self.model);
+            // Folds away in a model without Model Exchange (no derivatives).
+            if M::MODEL_EXCHANGE.is_some()
+                && var.derivative_of.is_some()
+                && let Some(reason) = value.invalid()
+            {
+                return self.error(
+                    function,
+                    format_args!(
+                        "at t = {}: {} is {reason}; the states or inputs are outside the \
+                         model's domain",
+                        self.time, var.name
+                    ),
+                );
+            }
+            store(i, value);
         }
         Status::Ok
     }
@@ -419,16 +457,32 @@ impl<M: CoSimModel> Instance<M> {
         }
         match self.state {
             FmiState::Instantiated | FmiState::InitializationMode => Ok(SetAction::Apply),
-            FmiState::StepComplete => match (var.causality, var.variability) {
-                (Causality::Input, _) | (Causality::Parameter, Variability::Tunable) => {
+            // FMI 2.0.4 §3.2.3: between events only continuous inputs move.
+            FmiState::ContinuousTimeMode => {
+                if var.causality == Causality::Input && var.variability == Variability::Continuous {
                     Ok(SetAction::Apply)
+                } else {
+                    Err(self.error(
+                        function,
+                        format_args!(
+                            "{} cannot be set in continuous-time mode (only continuous inputs \
+                             can); set it in event mode",
+                            var.name
+                        ),
+                    ))
                 }
-                (Causality::Parameter, Variability::Fixed) => {
-                    let current = get(&self.model);
-                    if current == value {
-                        Ok(SetAction::KeepSameValue)
-                    } else {
-                        Err(self.error(
+            }
+            FmiState::StepComplete | FmiState::EventMode => {
+                match (var.causality, var.variability) {
+                    (Causality::Input, _) | (Causality::Parameter, Variability::Tunable) => {
+                        Ok(SetAction::Apply)
+                    }
+                    (Causality::Parameter, Variability::Fixed) => {
+                        let current = get(&self.model);
+                        if current == value {
+                            Ok(SetAction::KeepSameValue)
+                        } else {
+                            Err(self.error(
                             function,
                             format_args!(
                                 "{} is a fixed parameter: it cannot change after initialization \
@@ -436,13 +490,14 @@ impl<M: CoSimModel> Instance<M> {
                                 var.name
                             ),
                         ))
+                        }
                     }
+                    _ => Err(self.error(
+                        function,
+                        format_args!("{} cannot be set after initialization", var.name),
+                    )),
                 }
-                _ => Err(self.error(
-                    function,
-                    format_args!("{} cannot be set after initialization", var.name),
-                )),
-            },
+            }
             other => Err(self.error(
                 function,
                 format_args!("values cannot be set in state {}", other.name()),
@@ -483,7 +538,7 @@ impl<M: CoSimModel> Instance<M> {
         }
         for (i, vr) in vrs.iter().enumerate() {
             let var = &M::variables()[*vr as usize];
-            if self.state == FmiState::StepComplete
+            if self.simulating()
                 && var.causality == Causality::Parameter
                 && var.variability == Variability::Fixed
             {
@@ -495,52 +550,31 @@ impl<M: CoSimModel> Instance<M> {
         status
     }
 
+    #[inline]
     pub(crate) fn do_step(&mut self, current_time: f64, step_size: f64) -> Status {
         let function = FmiFunction::DoStep;
-        if !step_size.is_finite() || step_size <= 0.0 {
-            return self.error(
-                function,
-                format_args!("communicationStepSize must be positive and finite (got {step_size})"),
-            );
-        }
-        if !current_time.is_finite() {
-            return self.error(
-                function,
-                format_args!("currentCommunicationPoint must be finite (got {current_time})"),
-            );
-        }
-        // The FMU's time after the step is the next communication point, which
-        // must be finite too, or no step could follow.
-        if !(current_time + step_size).is_finite() {
-            return self.error(
-                function,
-                format_args!(
-                    "the step from {current_time} by {step_size} ends beyond the largest \
-                     representable time"
-                ),
-            );
-        }
-        // Importers that keep time in integer nanoseconds (libcosim) or sum steps
-        // in floating point land a rounding error away from the FMU's time.
-        let tolerance = (1e-9 * current_time.abs().max(1.0)).min(0.5 * step_size);
-        if (current_time - self.time).abs() > tolerance {
-            return self.error(
-                function,
-                format_args!(
-                    "currentCommunicationPoint {current_time} does not continue from the FMU's time {} \
-                     (tolerance {tolerance:e}); to go back, restore a state with fmi2SetFMUstate",
-                    self.time
-                ),
-            );
+        let end = current_time + step_size;
+        // The step is positive and finite, starts at a finite point and ends
+        // at one (the next communication point: no step could follow an
+        // infinite one), and starts at the FMU's time (most importers pass it
+        // exactly). One test of all of it on the way; the reason is worked out
+        // only when it fails. A NaN fails every compare.
+        let sound = step_size > 0.0
+            && (current_time.abs() < f64::INFINITY)
+                & (end.abs() < f64::INFINITY)
+                & (current_time == self.time);
+        if !sound && let Err(status) = self.check_step(current_time, step_size) {
+            return status;
         }
         let mut ctx = Context {
             logger: &self.logger,
             function: function.name(),
-            resource_dir: self.resource_dir.as_deref(),
+            resource_dir: &self.resource_dir,
+            interface: self.interface,
         };
         match self.model.do_step(&mut ctx, current_time, step_size) {
             Ok(status) => {
-                self.time = current_time + step_size;
+                self.time = end;
                 status
             }
             Err(e) => {
@@ -550,35 +584,115 @@ impl<M: CoSimModel> Instance<M> {
         }
     }
 
+    /// Why the step of `step_size` from `current_time` cannot be made, if it
+    /// cannot. Importers that keep time in integer nanoseconds (libcosim) or
+    /// sum steps in floating point land a rounding error away from the FMU's
+    /// time: a point within 1e-9 relative (at least 1e-9 absolute, at most
+    /// half the step) of it is accepted, anything further refused.
+    #[cold]
+    #[inline(never)]
+    fn check_step(&self, current_time: f64, step_size: f64) -> Result<(), Status> {
+        let function = FmiFunction::DoStep;
+        if !(step_size > 0.0 && step_size < f64::INFINITY) {
+            return Err(self.error(
+                function,
+                format_args!("communicationStepSize must be positive and finite (got {step_size})"),
+            ));
+        }
+        if !current_time.is_finite() {
+            return Err(self.error(
+                function,
+                format_args!("currentCommunicationPoint must be finite (got {current_time})"),
+            ));
+        }
+        if !(current_time + step_size).is_finite() {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "the step from {current_time} by {step_size} ends beyond the largest \
+                     representable time"
+                ),
+            ));
+        }
+        let tolerance = (1e-9 * current_time.abs().max(1.0)).min(0.5 * step_size);
+        if (current_time - self.time).abs() > tolerance {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "currentCommunicationPoint {current_time} does not continue from the FMU's time {} \
+                     (tolerance {tolerance:e}); to go back, restore a state with fmi2SetFMUstate",
+                    self.time
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     pub(crate) fn snapshot(&self) -> SnapshotData<M> {
         SnapshotData {
             model: self.model.clone(),
             time: self.time,
-            initialized: self.initialized,
+            start_time: self.start_time,
+            interface: self.interface,
+            state: self.state,
         }
     }
 
-    /// Restores model and time; the FMI state of the instance stays as it is.
+    /// Restores everything a snapshot holds: the model, the time, the start
+    /// time and the state machine. The instance continues as the one the
+    /// snapshot was taken from, from the state it was in then, whatever its
+    /// own state now (FMI 2.0.4 §2.1.8 allows `fmi2SetFMUstate` in every state
+    /// but the fatal one; after `fmi2Error` this is how an importer recovers,
+    /// §2.1.3). Refused: a snapshot of the other interface, or one claiming a
+    /// state no instance of this interface can be saved in (forged bytes).
     pub(crate) fn restore(&mut self, function: FmiFunction, data: &SnapshotData<M>) -> Status {
-        if data.initialized != self.initialized {
-            let (taken, now) = if data.initialized {
-                ("after", "before")
-            } else {
-                ("before", "after")
-            };
+        if data.interface != self.interface {
             return self.error(
                 function,
                 format_args!(
-                    "the state was taken {taken} initialization and cannot be restored {now} it"
+                    "the state was taken from a {} instance and this instance is {}; \
+                     restore it into an instance of the same interface",
+                    data.interface.name(),
+                    self.interface.name()
+                ),
+            );
+        }
+        if !can_be_saved_in(self.interface, data.state) {
+            return self.error(
+                function,
+                format_args!(
+                    "the state claims the machine state {}, which a {} instance is never \
+                     saved in",
+                    data.state.name(),
+                    self.interface.name()
                 ),
             );
         }
         self.model = data.model.clone();
         self.time = data.time;
+        self.start_time = data.start_time;
+        self.state = data.state;
         self.event(
             function,
-            format_args!("state restored at t = {}", data.time),
+            format_args!(
+                "state restored at t = {}, in {}",
+                data.time,
+                data.state.name()
+            ),
         );
         Status::Ok
+    }
+}
+
+/// The states `fmi2GetFMUstate` can be called in (every live state) that an
+/// instance of `interface` can reach.
+fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
+    use FmiState::*;
+    match state {
+        Instantiated | InitializationMode | Terminated | Error => true,
+        StepComplete => interface == Interface::CoSimulation,
+        EventMode | ContinuousTimeMode => interface == Interface::ModelExchange,
+        // Asynchronous steps are never offered; a failed step ends in Error.
+        StepInProgress | StepFailed | StepCanceled | Fatal => false,
     }
 }

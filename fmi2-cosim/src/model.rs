@@ -6,7 +6,7 @@ use std::fmt;
 use std::path::Path;
 
 use crate::logging::{LogCategory, Logger};
-use crate::status::Status;
+use crate::status::{Interface, Status};
 use crate::variables::Variable;
 
 /// `DefaultExperiment` of modelDescription.
@@ -90,6 +90,18 @@ impl fmt::Display for ModelError {
 
 impl std::error::Error for ModelError {}
 
+/// What modelDescription's `<ModelExchange>` element and
+/// `numberOfEventIndicators` say of a model that implements
+/// [`ModelExchange`](crate::model_exchange::ModelExchange) as well.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ModelExchangeInfo {
+    /// Length of the continuous-state vector: the number of state derivatives
+    /// in the variable table (checked when the description is generated).
+    pub number_of_continuous_states: usize,
+    /// Length of the event-indicator vector (`fmi2GetEventIndicators`).
+    pub number_of_event_indicators: usize,
+}
+
 /// A model served by the FMI layer. The model knows nothing of C, pointers or
 /// the state machine: the layer calls these methods only in legal states, with
 /// validated arguments.
@@ -99,6 +111,11 @@ impl std::error::Error for ModelError {}
 pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
     const INFO: ModelInfo;
     const UNITS: &'static [UnitDefinition];
+    /// `Some` for a model that can also be instantiated for Model Exchange:
+    /// it implements [`ModelExchange`](crate::model_exchange::ModelExchange)
+    /// and is exported with `export_fmi2!(Model, model_exchange)`, which checks
+    /// that the two agree. Co-simulation only by default.
+    const MODEL_EXCHANGE: Option<ModelExchangeInfo> = None;
 
     /// The variable table; a variable's value reference is its index.
     fn variables() -> &'static [Variable<Self>];
@@ -131,7 +148,10 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
 pub struct Context<'a> {
     pub(crate) logger: &'a Logger,
     pub(crate) function: &'static str,
-    pub(crate) resource_dir: Option<&'a Path>,
+    /// The instance's own field, dereferenced only when asked for: building a
+    /// context is on every step's path.
+    pub(crate) resource_dir: &'a Option<std::path::PathBuf>,
+    pub(crate) interface: Interface,
 }
 
 impl Context<'_> {
@@ -151,6 +171,11 @@ impl Context<'_> {
 
     /// The FMU's `resources` folder, when the importer gave its location.
     pub fn resource_dir(&self) -> Option<&Path> {
-        self.resource_dir
+        self.resource_dir.as_deref()
+    }
+
+    /// The interface the instance was instantiated for.
+    pub fn interface(&self) -> Interface {
+        self.interface
     }
 }

@@ -20,7 +20,7 @@ use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, BytesText, Event};
 
 use crate::logging::LogCategory;
 use crate::model::CoSimModel;
-use crate::variables::{Causality, Value, Variable, check_table};
+use crate::variables::{Causality, Initial, Value, Variable, check_table, continuous_states};
 
 /// Namespace of the name-based GUIDs of this layer's FMUs.
 const GUID_NAMESPACE: uuid::Uuid = uuid::uuid!("5d2b8a6e-3f4c-4e1a-9b7d-2c6f0e8a1d34");
@@ -114,9 +114,30 @@ impl Xml {
     }
 }
 
+/// Checks that the model's Model Exchange declaration agrees with its table.
+fn check_model_exchange<M: CoSimModel>() -> Result<(), String> {
+    let states = continuous_states(M::variables()).len();
+    match M::MODEL_EXCHANGE {
+        Some(me) if me.number_of_continuous_states != states => Err(format!(
+            "{} declares {} continuous states but its table has {states} state derivatives",
+            M::INFO.model_identifier,
+            me.number_of_continuous_states
+        )),
+        None if states > 0 => Err(format!(
+            "{} is co-simulation only but its table declares {states} state derivatives",
+            M::INFO.model_identifier
+        )),
+        _ => Ok(()),
+    }
+}
+
 fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
     let table = M::variables();
     check_table(table, M::UNITS)?;
+    check_model_exchange::<M>()?;
+    let event_indicators = M::MODEL_EXCHANGE
+        .map_or(0, |me| me.number_of_event_indicators)
+        .to_string();
     let info = M::INFO;
     let start_model = M::new();
     let mut xml = Xml::new();
@@ -144,9 +165,27 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
             ("license", info.license),
             ("generationTool", generation_tool),
             ("variableNamingConvention", structured),
-            ("numberOfEventIndicators", "0"),
+            ("numberOfEventIndicators", &event_indicators),
         ],
     )?;
+    if M::MODEL_EXCHANGE.is_some() {
+        // The same binary serves both interfaces (as the Reference FMUs
+        // ship): one modelIdentifier.
+        xml.empty(
+            "ModelExchange",
+            &[
+                ("modelIdentifier", info.model_identifier),
+                ("needsExecutionTool", "false"),
+                // The model checks its state after every accepted step.
+                ("completedIntegratorStepNotNeeded", "false"),
+                ("canBeInstantiatedOnlyOncePerProcess", "false"),
+                ("canNotUseMemoryManagementFunctions", "true"),
+                ("canGetAndSetFMUstate", "true"),
+                ("canSerializeFMUstate", "true"),
+                ("providesDirectionalDerivative", "false"),
+            ],
+        )?;
+    }
     xml.empty(
         "CoSimulation",
         &[
@@ -234,6 +273,13 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
     )?;
 
     xml.open("ModelVariables", &[])?;
+    let index_of = |name: &str| {
+        table
+            .iter()
+            .position(|v| v.name == name)
+            .map(|i| (i + 1).to_string())
+            .expect("states were checked by check_table")
+    };
     for (vr, var) in table.iter().enumerate() {
         xml.comment(&format!(" index {} ", vr + 1))?;
         let vr_text = vr.to_string();
@@ -277,6 +323,9 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
         if let Some(start) = start {
             typed.push(("start", start));
         }
+        if let Some(state) = var.derivative_of {
+            typed.push(("derivative", index_of(state)));
+        }
         let attributes: Vec<(&str, &str)> = typed.iter().map(|(k, v)| (*k, v.as_str())).collect();
         xml.empty(var.value.type_name(), &attributes)?;
         xml.close("ScalarVariable")?;
@@ -298,22 +347,45 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
         }
         xml.close("Outputs")?;
     }
+    let derivatives: Vec<(usize, &Variable<M>)> = table
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.derivative_of.is_some())
+        .collect();
+    if !derivatives.is_empty() {
+        xml.open("Derivatives", &[])?;
+        for (i, var) in &derivatives {
+            let index = (i + 1).to_string();
+            let deps = index_list(table, var.output_dependencies);
+            xml.empty("Unknown", &[("index", &index), ("dependencies", &deps)])?;
+        }
+        xml.close("Derivatives")?;
+    }
+    // FMI 2.0.4 §2.2.8: the outputs, calculated parameters, and the states and
+    // state derivatives that are not exact, in index order.
+    let states: Vec<usize> = continuous_states(table).iter().map(|(s, _)| *s).collect();
     let initial_unknowns: Vec<(usize, &Variable<M>)> = table
         .iter()
         .enumerate()
-        .filter(|(_, v)| {
+        .filter(|(i, v)| {
+            let computed = v.initial() != Some(Initial::Exact);
             matches!(
                 v.causality,
                 Causality::Output | Causality::CalculatedParameter
-            )
+            ) || (computed && (v.derivative_of.is_some() || states.contains(i)))
         })
         .collect();
     if !initial_unknowns.is_empty() {
         xml.open("InitialUnknowns", &[])?;
         for (i, var) in &initial_unknowns {
             let index = (i + 1).to_string();
-            let deps = index_list(table, var.initial_dependencies);
-            xml.empty("Unknown", &[("index", &index), ("dependencies", &deps)])?;
+            match var.initial_dependencies {
+                Some(knowns) => {
+                    let deps = index_list(table, knowns);
+                    xml.empty("Unknown", &[("index", &index), ("dependencies", &deps)])?;
+                }
+                None => xml.empty("Unknown", &[("index", &index)])?,
+            }
         }
         xml.close("InitialUnknowns")?;
     }

@@ -1,9 +1,14 @@
-//! Return statuses and the FMI 2.0 co-simulation state machine as data.
+//! Return statuses and the FMI 2.0 state machines as data.
 //!
 //! Every entry point names an [`FmiFunction`]; each function carries the mask of
-//! [`FmiState`]s in which the standard allows it (FMI 2.0.4, section 4.2.4,
-//! state machine of a co-simulation slave). One check at the top of every entry
-//! point compares the instance state with that mask.
+//! [`FmiState`]s in which the standard allows it (FMI 2.0.4, section 3.2.3 for
+//! Model Exchange, section 4.2.4 for Co-Simulation) and the interface it
+//! belongs to. The two machines share their first and last states
+//! (Instantiated, InitializationMode, Terminated, Error, Fatal) and agree on
+//! every common function there, so one mask per function serves both; a
+//! function of one interface called on an instance of the other is refused by
+//! [`FmiFunction::interface`]. One check at the top of every entry point
+//! compares the instance state with that mask.
 
 use fmi_sys::fmi2 as sys;
 
@@ -45,10 +50,28 @@ impl Status {
     }
 }
 
-/// States of a co-simulation slave (FMI 2.0.4 Fig. 10). `StepInProgress` and
-/// `StepCanceled` only occur with asynchronous steps, which this layer does not
-/// offer, but they stay in the table so that the masks read like the standard.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// The interface an instance was instantiated for (`fmuType` of
+/// `fmi2Instantiate`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Interface {
+    ModelExchange,
+    CoSimulation,
+}
+
+impl Interface {
+    pub fn name(self) -> &'static str {
+        match self {
+            Interface::ModelExchange => "Model Exchange",
+            Interface::CoSimulation => "Co-Simulation",
+        }
+    }
+}
+
+/// States of a co-simulation slave (FMI 2.0.4 Fig. 10) and of a model-exchange
+/// model (Fig. 6). `StepInProgress` and `StepCanceled` only occur with
+/// asynchronous steps, which this layer does not offer, but they stay in the
+/// table so that the masks read like the standard.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum FmiState {
     Instantiated,
     InitializationMode,
@@ -59,9 +82,14 @@ pub enum FmiState {
     Terminated,
     Error,
     Fatal,
+    /// Model Exchange: discrete states and events are handled here.
+    EventMode,
+    /// Model Exchange: the importer's integrator advances the continuous states.
+    ContinuousTimeMode,
 }
 
 impl FmiState {
+    #[inline(always)]
     const fn bit(self) -> u16 {
         1 << (self as u16)
     }
@@ -77,6 +105,8 @@ impl FmiState {
             FmiState::Terminated => "Terminated",
             FmiState::Error => "Error",
             FmiState::Fatal => "Fatal",
+            FmiState::EventMode => "EventMode",
+            FmiState::ContinuousTimeMode => "ContinuousTimeMode",
         }
     }
 }
@@ -96,6 +126,7 @@ impl StateMask {
         StateMask(bits)
     }
 
+    #[inline(always)]
     pub const fn contains(self, state: FmiState) -> bool {
         self.0 & state.bit() != 0
     }
@@ -103,8 +134,8 @@ impl StateMask {
 
 use FmiState::*;
 
-/// Everything but the slave's start and the fatal state: where freeing,
-/// resetting and FMU-state handling are allowed.
+/// Everything but the start and the fatal state: where freeing, resetting and
+/// FMU-state handling are allowed.
 const ANY_LIVE: StateMask = StateMask::of(&[
     Instantiated,
     InitializationMode,
@@ -114,6 +145,8 @@ const ANY_LIVE: StateMask = StateMask::of(&[
     StepCanceled,
     Terminated,
     Error,
+    EventMode,
+    ContinuousTimeMode,
 ]);
 const AFTER_INSTANTIATION: StateMask = StateMask::of(&[
     InitializationMode,
@@ -122,10 +155,33 @@ const AFTER_INSTANTIATION: StateMask = StateMask::of(&[
     StepCanceled,
     Terminated,
     Error,
+    EventMode,
+    ContinuousTimeMode,
 ]);
-const SETTABLE: StateMask = StateMask::of(&[Instantiated, InitializationMode, StepComplete]);
+/// fmi2SetReal: inputs in continuous-time mode too (the instance checks
+/// which variables).
+const REAL_SETTABLE: StateMask = StateMask::of(&[
+    Instantiated,
+    InitializationMode,
+    StepComplete,
+    EventMode,
+    ContinuousTimeMode,
+]);
+/// fmi2SetInteger/Boolean/String: discrete values change at events only.
+const DISCRETE_SETTABLE: StateMask =
+    StateMask::of(&[Instantiated, InitializationMode, StepComplete, EventMode]);
+const CS_SETTABLE: StateMask = StateMask::of(&[Instantiated, InitializationMode, StepComplete]);
 const STATUS_QUERY: StateMask =
     StateMask::of(&[StepComplete, StepInProgress, StepFailed, Terminated]);
+/// Where a model-exchange model's continuous states and event indicators can be
+/// read (FMI 2.0.4 §3.2.3).
+const ME_READABLE: StateMask = StateMask::of(&[
+    InitializationMode,
+    EventMode,
+    ContinuousTimeMode,
+    Terminated,
+    Error,
+]);
 
 /// The FMI 2.0 functions that take an instance, each with its allowed states.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -161,6 +217,16 @@ pub enum FmiFunction {
     GetIntegerStatus,
     GetBooleanStatus,
     GetStringStatus,
+    EnterEventMode,
+    NewDiscreteStates,
+    EnterContinuousTimeMode,
+    CompletedIntegratorStep,
+    SetTime,
+    SetContinuousStates,
+    GetDerivatives,
+    GetEventIndicators,
+    GetContinuousStates,
+    GetNominalsOfContinuousStates,
 }
 
 impl FmiFunction {
@@ -198,11 +264,63 @@ impl FmiFunction {
             GetIntegerStatus => "fmi2GetIntegerStatus",
             GetBooleanStatus => "fmi2GetBooleanStatus",
             GetStringStatus => "fmi2GetStringStatus",
+            EnterEventMode => "fmi2EnterEventMode",
+            NewDiscreteStates => "fmi2NewDiscreteStates",
+            EnterContinuousTimeMode => "fmi2EnterContinuousTimeMode",
+            CompletedIntegratorStep => "fmi2CompletedIntegratorStep",
+            SetTime => "fmi2SetTime",
+            SetContinuousStates => "fmi2SetContinuousStates",
+            GetDerivatives => "fmi2GetDerivatives",
+            GetEventIndicators => "fmi2GetEventIndicators",
+            GetContinuousStates => "fmi2GetContinuousStates",
+            GetNominalsOfContinuousStates => "fmi2GetNominalsOfContinuousStates",
         }
+    }
+
+    /// The interface the function belongs to; `None` for the functions common
+    /// to both.
+    #[inline(always)]
+    pub const fn interface(self) -> Option<Interface> {
+        use FmiFunction::*;
+        match self {
+            SetRealInputDerivatives
+            | GetRealOutputDerivatives
+            | DoStep
+            | CancelStep
+            | GetStatus
+            | GetRealStatus
+            | GetIntegerStatus
+            | GetBooleanStatus
+            | GetStringStatus => Some(Interface::CoSimulation),
+            EnterEventMode
+            | NewDiscreteStates
+            | EnterContinuousTimeMode
+            | CompletedIntegratorStep
+            | SetTime
+            | SetContinuousStates
+            | GetDerivatives
+            | GetEventIndicators
+            | GetContinuousStates
+            | GetNominalsOfContinuousStates => Some(Interface::ModelExchange),
+            _ => None,
+        }
+    }
+
+    /// Whether the function may be called on an instance of `interface` in
+    /// `state`. Inlined into every entry point, where the function is a
+    /// constant: the check folds to one mask test and one compare.
+    #[inline(always)]
+    pub fn allowed(self, interface: Interface, state: FmiState) -> bool {
+        self.allowed_states().contains(state)
+            && match self.interface() {
+                None => true,
+                Some(own) => own == interface,
+            }
     }
 
     /// States in which the standard allows the call. `fmi2FreeInstance` is also
     /// accepted in the fatal state: releasing memory never makes things worse.
+    #[inline(always)]
     pub fn allowed_states(self) -> StateMask {
         use FmiFunction::*;
         match self {
@@ -210,10 +328,11 @@ impl FmiFunction {
             FreeInstance => StateMask(ANY_LIVE.0 | Fatal.bit()),
             SetupExperiment | EnterInitializationMode => StateMask::of(&[Instantiated]),
             ExitInitializationMode => StateMask::of(&[InitializationMode]),
-            Terminate => StateMask::of(&[StepComplete, StepFailed]),
+            Terminate => StateMask::of(&[StepComplete, StepFailed, EventMode, ContinuousTimeMode]),
             Reset => ANY_LIVE,
             GetReal | GetInteger | GetBoolean | GetString => AFTER_INSTANTIATION,
-            SetReal | SetInteger | SetBoolean | SetString => SETTABLE,
+            SetReal => REAL_SETTABLE,
+            SetInteger | SetBoolean | SetString => DISCRETE_SETTABLE,
             GetFmuState
             | SetFmuState
             | FreeFmuState
@@ -221,7 +340,7 @@ impl FmiFunction {
             | SerializeFmuState
             | DeSerializeFmuState => ANY_LIVE,
             GetDirectionalDerivative => AFTER_INSTANTIATION,
-            SetRealInputDerivatives => SETTABLE,
+            SetRealInputDerivatives => CS_SETTABLE,
             GetRealOutputDerivatives => {
                 StateMask::of(&[StepComplete, StepFailed, StepCanceled, Terminated, Error])
             }
@@ -230,6 +349,19 @@ impl FmiFunction {
             GetStatus | GetRealStatus | GetIntegerStatus | GetBooleanStatus | GetStringStatus => {
                 STATUS_QUERY
             }
+            EnterEventMode => StateMask::of(&[EventMode, ContinuousTimeMode]),
+            NewDiscreteStates | EnterContinuousTimeMode => StateMask::of(&[EventMode]),
+            CompletedIntegratorStep | SetContinuousStates => StateMask::of(&[ContinuousTimeMode]),
+            SetTime => StateMask::of(&[EventMode, ContinuousTimeMode]),
+            GetEventIndicators | GetContinuousStates => ME_READABLE,
+            GetDerivatives => StateMask::of(&[EventMode, ContinuousTimeMode, Terminated, Error]),
+            GetNominalsOfContinuousStates => StateMask::of(&[
+                Instantiated,
+                EventMode,
+                ContinuousTimeMode,
+                Terminated,
+                Error,
+            ]),
         }
     }
 }
@@ -261,6 +393,22 @@ mod tests {
         ] {
             assert!(mask.contains(s), "{s:?}");
         }
+    }
+
+    /// A function of one interface is refused on an instance of the other,
+    /// also in the states the two machines share.
+    #[test]
+    fn interface_functions_stay_with_their_interface() {
+        use FmiFunction::*;
+        assert!(!GetRealStatus.allowed(Interface::ModelExchange, Terminated));
+        assert!(GetRealStatus.allowed(Interface::CoSimulation, Terminated));
+        assert!(!GetContinuousStates.allowed(Interface::CoSimulation, InitializationMode));
+        assert!(GetContinuousStates.allowed(Interface::ModelExchange, InitializationMode));
+        assert!(!GetNominalsOfContinuousStates.allowed(Interface::CoSimulation, Instantiated));
+        assert!(Terminate.allowed(Interface::ModelExchange, ContinuousTimeMode));
+        assert!(!SetInteger.allowed(Interface::ModelExchange, ContinuousTimeMode));
+        assert!(SetReal.allowed(Interface::ModelExchange, ContinuousTimeMode));
+        assert!(!DoStep.allowed(Interface::ModelExchange, EventMode));
     }
 
     #[test]

@@ -185,11 +185,20 @@ pub struct Variable<M> {
     pub variability: Variability,
     pub value: Value<M>,
     /// For outputs: the inputs (by name) that reach this output within one
-    /// communication point, i.e. direct feedthrough. Empty means none.
+    /// communication point, i.e. direct feedthrough, and, in a model that
+    /// offers Model Exchange, the continuous states it is computed from (an
+    /// output that is itself a state lists none). For state derivatives: the
+    /// inputs and states the derivative is computed from. Empty means none.
     pub output_dependencies: &'static [&'static str],
-    /// For outputs: the inputs and exact parameters (by name) that the value
-    /// after `fmi2ExitInitializationMode` depends on. Empty means none.
-    pub initial_dependencies: &'static [&'static str],
+    /// For outputs, states and derivatives: the inputs and exact parameters
+    /// (by name) that the value after `fmi2ExitInitializationMode` depends
+    /// on. Empty means none; `None` means every known (the `dependencies`
+    /// attribute is left out), the default of state derivatives.
+    pub initial_dependencies: Option<&'static [&'static str]>,
+    /// For a state derivative: the name of its state (the `derivative`
+    /// attribute). The order of the derivatives in the table is the order of
+    /// the continuous-state vector of Model Exchange.
+    pub derivative_of: Option<&'static str>,
     /// Where the model keeps the value in its own parameter structure (e.g. the
     /// path in a JSON preset), so that the model's own messages can be mapped to
     /// the FMI name and the documentation can show both.
@@ -211,7 +220,8 @@ impl<M> Variable<M> {
             variability,
             value,
             output_dependencies: &[],
-            initial_dependencies: &[],
+            initial_dependencies: Some(&[]),
+            derivative_of: None,
             model_path: None,
         }
     }
@@ -398,7 +408,23 @@ impl<M> Variable<M> {
     /// What an output depends on after initialization (inputs and exact
     /// parameters by name).
     pub const fn initially_depends_on(mut self, knowns: &'static [&'static str]) -> Self {
-        self.initial_dependencies = knowns;
+        self.initial_dependencies = Some(knowns);
+        self
+    }
+
+    /// Marks a continuous Real variable as the time derivative of the state
+    /// `state` (by name), and declares what it is computed from (inputs and
+    /// states by name, for ModelStructure/Derivatives). After initialization
+    /// it depends on every known unless [`Variable::initially_depends_on`]
+    /// says otherwise.
+    pub const fn derivative_of(
+        mut self,
+        state: &'static str,
+        dependencies: &'static [&'static str],
+    ) -> Self {
+        self.derivative_of = Some(state);
+        self.output_dependencies = dependencies;
+        self.initial_dependencies = None;
         self
     }
 
@@ -426,9 +452,30 @@ impl<M> Variable<M> {
     }
 }
 
-/// Checks that names are unique, that dependencies name existing inputs or
-/// parameters, that settable variables have setters, and that display units
-/// belong to declared units. Used by modelDescription generation and by tests.
+/// Whether the variable called `name` is a continuous state (some variable is
+/// its derivative).
+pub fn is_state<M>(table: &[Variable<M>], name: &str) -> bool {
+    table.iter().any(|v| v.derivative_of == Some(name))
+}
+
+/// The continuous states in state-vector order: (index of the state, index of
+/// its derivative) in the table, ordered by the derivative's index.
+pub fn continuous_states<M>(table: &[Variable<M>]) -> Vec<(usize, usize)> {
+    table
+        .iter()
+        .enumerate()
+        .filter_map(|(derivative, v)| {
+            let state = v.derivative_of?;
+            let state = table.iter().position(|s| s.name == state)?;
+            Some((state, derivative))
+        })
+        .collect()
+}
+
+/// Checks that names are unique, that dependencies name existing inputs,
+/// states or parameters, that state derivatives name continuous Real states
+/// (one derivative per state), that settable variables have setters, and that
+/// display units belong to declared units. Used by modelDescription generation and by tests.
 pub fn check_table<M>(
     table: &[Variable<M>],
     units: &[crate::model::UnitDefinition],
@@ -462,24 +509,70 @@ pub fn check_table<M>(
             }
         }
         let is_output = var.causality == Causality::Output;
-        if !is_output
-            && (!var.output_dependencies.is_empty() || !var.initial_dependencies.is_empty())
+        let carries_dependencies = is_output || var.derivative_of.is_some();
+        if !carries_dependencies && !var.output_dependencies.is_empty() {
+            return Err(format!(
+                "{}: only outputs and state derivatives carry dependencies",
+                var.name
+            ));
+        }
+        if !carries_dependencies
+            && !is_state(table, var.name)
+            && var.initial_dependencies != Some(&[])
         {
-            return Err(format!("{}: only outputs carry dependencies", var.name));
+            return Err(format!(
+                "{}: only outputs, states and state derivatives carry initial dependencies",
+                var.name
+            ));
+        }
+        if let Some(state) = var.derivative_of {
+            let Value::Real(_) = var.value else {
+                return Err(format!("{}: a state derivative must be Real", var.name));
+            };
+            if var.variability != Variability::Continuous
+                || !matches!(var.causality, Causality::Local | Causality::Output)
+            {
+                return Err(format!(
+                    "{}: a state derivative must be a continuous local or output",
+                    var.name
+                ));
+            }
+            match table.iter().find(|v| v.name == state) {
+                Some(v)
+                    if matches!(v.value, Value::Real(_))
+                        && v.variability == Variability::Continuous
+                        && matches!(v.causality, Causality::Local | Causality::Output) => {}
+                Some(_) => {
+                    return Err(format!(
+                        "{}: its state {state} must be a continuous Real local or output",
+                        var.name
+                    ));
+                }
+                None => return Err(format!("{}: unknown state {state}", var.name)),
+            }
+            if table
+                .iter()
+                .filter(|v| v.derivative_of == Some(state))
+                .count()
+                > 1
+            {
+                return Err(format!("state {state} has more than one derivative"));
+            }
         }
         for dep in var.output_dependencies {
             match table.iter().find(|v| v.name == *dep) {
                 Some(v) if v.causality == Causality::Input => {}
+                Some(v) if is_state(table, v.name) => {}
                 Some(_) => {
                     return Err(format!(
-                        "{}: output dependency {dep} is not an input",
+                        "{}: dependency {dep} is neither an input nor a continuous state",
                         var.name
                     ));
                 }
                 None => return Err(format!("{}: unknown dependency {dep}", var.name)),
             }
         }
-        for dep in var.initial_dependencies {
+        for dep in var.initial_dependencies.unwrap_or(&[]) {
             match table.iter().find(|v| v.name == *dep) {
                 Some(v) if matches!(v.causality, Causality::Input | Causality::Parameter) => {}
                 Some(_) => {

@@ -1,12 +1,14 @@
-//! The importer side of FMI 2.0 co-simulation: what every tool that loads an
-//! FMU binary needs, and nothing that judges the FMU.
+//! The importer side of FMI 2.0 co-simulation and Model Exchange: what every
+//! tool that loads an FMU binary needs, and nothing that judges the FMU.
 //!
 //! `dlopen` of the built library with every symbol resolved through the
 //! official typedefs of `fmi2FunctionTypes.h` (fmi-sys's bindgen output, so a
 //! signature drift is a type error here), the modelDescription parsed with
 //! fmi-schema, an instance handle that frees itself, and a logger that formats
 //! messages the way printf-style importers do. [`archive`] opens a `.fmu`
-//! (or its unpacked folder) and finds this platform's binary.
+//! (or its unpacked folder) and finds this platform's binary;
+//! [`model_exchange`] adds the Model Exchange calls, instantiation for Model
+//! Exchange and a fixed-step integrator that drives an instance.
 //!
 //! The conformance harness (`fmi2-conformance`), the identification command
 //! (`piezo-identify`), the benchmarks (`fmu-bench`) and the co-simulation
@@ -27,6 +29,7 @@ use fmi_sys::fmi2 as sys;
 use fmi_sys::fmi2::Fmi2Binding;
 
 pub mod archive;
+pub mod model_exchange;
 
 pub use archive::{FmuArchive, OpenError};
 /// The variable attributes an importer sorts by (fmi-schema's types).
@@ -213,6 +216,24 @@ impl Fmu {
         resource_location: Option<&str>,
         logging_on: bool,
     ) -> Result<Instance<'_>, Vec<LogRecord>> {
+        self.try_instantiate_as(
+            Interface::CoSimulation,
+            name,
+            guid,
+            resource_location,
+            logging_on,
+        )
+    }
+
+    /// [`Fmu::try_instantiate`] for either interface.
+    pub fn try_instantiate_as(
+        &self,
+        interface: Interface,
+        name: &str,
+        guid: &str,
+        resource_location: Option<&str>,
+        logging_on: bool,
+    ) -> Result<Instance<'_>, Vec<LogRecord>> {
         let sink = Box::new(LogSink::default());
         let callbacks = Box::new(callbacks_for(&sink));
         let name_c = CString::new(name).expect("no NUL");
@@ -221,7 +242,7 @@ impl Fmu {
         let c = unsafe {
             self.binding.fmi2Instantiate(
                 name_c.as_ptr(),
-                sys::fmi2Type_fmi2CoSimulation,
+                interface.fmu_type(),
                 guid_c.as_ptr(),
                 location_c.as_ref().map_or(ptr::null(), |l| l.as_ptr()),
                 &*callbacks,
@@ -238,6 +259,7 @@ impl Fmu {
             sink,
             _callbacks: callbacks,
             time: 0.0,
+            interface,
         })
     }
 }
@@ -313,8 +335,27 @@ pub struct Instance<'a> {
     pub c: sys::fmi2Component,
     sink: Box<LogSink>,
     _callbacks: Box<sys::fmi2CallbackFunctions>,
-    /// The communication point the next [`Instance::do_step`] starts from.
+    /// The communication point the next [`Instance::do_step`] starts from
+    /// (Model Exchange: the time the integrator has reached).
     pub time: f64,
+    /// The interface it was instantiated for.
+    pub interface: Interface,
+}
+
+/// The interface an instance is instantiated for (`fmuType`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interface {
+    ModelExchange,
+    CoSimulation,
+}
+
+impl Interface {
+    pub fn fmu_type(self) -> sys::fmi2Type {
+        match self {
+            Interface::ModelExchange => sys::fmi2Type_fmi2ModelExchange,
+            Interface::CoSimulation => sys::fmi2Type_fmi2CoSimulation,
+        }
+    }
 }
 
 impl Instance<'_> {

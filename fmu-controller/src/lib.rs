@@ -413,19 +413,19 @@ const PORTS: [Variable<PiezoControllerFmu>; 22] = [
     ),
     output!(
         "u1",
-        "Command of the PZT1 amplifier channel (y), 0..10 V (wire to FlexureStage.u1)",
+        "Command of the PZT1 amplifier channel (y), within command_min..command_max (wire to FlexureStage.u1)",
         "V",
         u[0]
     ),
     output!(
         "u2",
-        "Command of the PZT2 amplifier channel (x pair), 0..10 V (wire to FlexureStage.u2)",
+        "Command of the PZT2 amplifier channel (x pair), within command_min..command_max (wire to FlexureStage.u2)",
         "V",
         u[1]
     ),
     output!(
         "u3",
-        "Command of the PZT3 amplifier channel (x pair), 0..10 V (wire to FlexureStage.u3)",
+        "Command of the PZT3 amplifier channel (x pair), within command_min..command_max (wire to FlexureStage.u3)",
         "V",
         u[2]
     ),
@@ -543,10 +543,10 @@ const SETTINGS: [Variable<PiezoControllerFmu>; 12] = [
         "Distance between the x sensors s2 and s3 (and PZT2, PZT3): theta_z = (s2 − s3)/L",
         "mm", [Some(0.0), None], sensor_spacing_mm),
     parameter!(fixed "command_min",
-        "Lowest command of every channel (0 V: the actuators cannot retract)",
+        "Lowest command of every channel (PI's recommended E-505 input: -2 V, -20 V at the stack)",
         "V", [None, None], command_min),
     parameter!(fixed "command_max",
-        "Highest command of every channel (10 V: 100 V after the amplifier)",
+        "Highest command of every channel (PI's recommended E-505 input: 12 V, 120 V at the stack)",
         "V", [None, None], command_max),
 ];
 
@@ -572,34 +572,62 @@ const DECOUPLING: [Variable<PiezoControllerFmu>; 16] = fmi2_cosim::variables::co
         "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
 ]);
 
+/// The rest the models start from, added after the first release: appended
+/// so that the value references of everything above stay as they were.
+const RESTS: [Variable<PiezoControllerFmu>; 3] = [
+    parameter!(fixed "x.rest_cycle",
+        "Inverse P-I model of the x pair: its memories start where a demand 0 → rest_cycle → 0 leaves them, the loop an operated actuator rests on (0: eq. 1's zero memories)",
+        "um", [Some(0.0), None], x_model.rest_cycle),
+    parameter!(fixed "y.rest_cycle",
+        "Inverse P-I model of y: its memories start where a demand 0 → rest_cycle → 0 leaves them (0: eq. 1's zero memories)",
+        "um", [Some(0.0), None], y_model.rest_cycle),
+    parameter!(fixed "bouc_wen.rest_cycle",
+        "Seed 001's Bouc-Wen models start at the 0 V end of their loop between 0 and this command, where an operated actuator rests (0: h = 0)",
+        "V", [Some(0.0), None], bouc_wen.rest_cycle),
+];
+
 /// Every variable, in value-reference order.
-static VARIABLES: [Variable<PiezoControllerFmu>; 144] = fmi2_cosim::variables::concat(&[
+static VARIABLES: [Variable<PiezoControllerFmu>; 147] = fmi2_cosim::variables::concat(&[
     &PORTS,
     &SETTINGS,
     &X_MODEL,
     &Y_MODEL,
     &DECOUPLING,
     &SEED_001,
+    &RESTS,
 ]);
+
+/// Whether every value is finite. A fold without early exit, so that the
+/// compiler checks them with vector compares and no branch per value: this
+/// runs at every step.
+#[inline]
+fn all_finite<const N: usize>(values: [f64; N]) -> bool {
+    values.iter().fold(true, |ok, v| ok & v.is_finite())
+}
 
 /// Whether every output of a controller sample is finite (the fast check of
 /// each step; [`PiezoControllerFmu::non_finite_output`] names the culprit).
+#[inline]
 fn sample_is_finite(out: &ControllerOutput) -> bool {
     let d = &out.decoupled;
-    out.u
-        .iter()
-        .chain(&out.feedforward)
-        .chain(&out.feedback)
-        .chain([
-            &out.e_x,
-            &out.e_y,
-            &out.e_theta,
-            &d.x_r2,
-            &d.x_r3,
-            &d.y_rx,
-            &d.y_rtheta,
-        ])
-        .all(|v| v.is_finite())
+    all_finite([
+        out.u[0],
+        out.u[1],
+        out.u[2],
+        out.feedforward[0],
+        out.feedforward[1],
+        out.feedforward[2],
+        out.feedback[0],
+        out.feedback[1],
+        out.feedback[2],
+        out.e_x,
+        out.e_y,
+        out.e_theta,
+        d.x_r2,
+        d.x_r3,
+        d.y_rx,
+        d.y_rtheta,
+    ])
 }
 
 impl PiezoControllerFmu {
@@ -633,7 +661,8 @@ impl CoSimModel for PiezoControllerFmu {
         description: "Controller of the 3-DOF piezo flexure stage: modified inverse \
                       Prandtl-Ishlinskii (seed 000) or inverse Bouc-Wen (seed 001) \
                       feedforward, PI feedback, piecewise-linear (seed 000) or model-based \
-                      (seed 001) decoupling",
+                      (seed 001) decoupling; Co-Simulation only: a sampled controller has no \
+                      continuous states for an importer's integrator",
         author: "piezo-fmu project",
         version: env!("CARGO_PKG_VERSION"),
         license: "MIT OR Apache-2.0",
@@ -703,19 +732,20 @@ impl CoSimModel for PiezoControllerFmu {
         Ok(())
     }
 
+    // Inlined into the FMI entry point: one call less on every sample.
+    #[inline]
     fn do_step(
         &mut self,
         ctx: &mut Context<'_>,
         current_time: f64,
         step_size: f64,
     ) -> Result<Status, ModelError> {
-        let [x_ref, y_ref, theta_ref] = self.references;
-        if !(self.references.iter().chain(&self.sensors)).all(|v| v.is_finite()) {
-            return Err(ModelError(format!(
-                "t = {current_time}: non-finite input (references {:?}, sensors {:?})",
-                self.references, self.sensors
-            )));
+        // fmi2SetReal refuses non-finite inputs; this also covers a state
+        // restored from bytes that carry one.
+        if !(all_finite(self.references) & all_finite(self.sensors)) {
+            return Err(self.non_finite_input(current_time));
         }
+        let [x_ref, y_ref, theta_ref] = self.references;
         let out = self
             .controller
             .step(x_ref, y_ref, theta_ref, self.sensors, step_size);
@@ -723,29 +753,57 @@ impl CoSimModel for PiezoControllerFmu {
         // overflows the PI integrators. Such a step fails instead of handing
         // NaN or infinite commands to the stage.
         if !sample_is_finite(&out) {
-            let (name, value) = self.non_finite_output().unwrap_or(("an output", f64::NAN));
-            return Err(ModelError(format!(
-                "t = {current_time}: {name} became {value} in a step of {step_size} s: the \
-                 control law cannot be computed over this step (restore an FMU state or reset)"
-            )));
+            return Err(self.non_finite_step(current_time, step_size));
         }
         // Limiting is part of normal operation (a demand of 0 µm asks for a
         // slightly negative voltage; anti-windup handles it), so it is an
         // event, logged once per channel, not a warning.
-        for channel in 0..3 {
-            let demanded = out.feedforward[channel] + out.feedback[channel];
-            if demanded != out.u[channel] && !self.saturation_reported[channel] {
-                self.saturation_reported[channel] = true;
-                ctx.event(format_args!(
-                    "t = {current_time}: u{} demanded {demanded} V, outside {}..{} V; the \
-                     command is limited and the integrators hold (reported once per channel)",
-                    channel + 1,
-                    self.params.command_min,
-                    self.params.command_max
-                ));
-            }
+        let limited = self.controller.limited();
+        let newly_limited: [bool; 3] =
+            std::array::from_fn(|c| (limited[c] != 0) & !self.saturation_reported[c]);
+        if newly_limited.iter().any(|limited| *limited) {
+            self.report_limiting(ctx, current_time, newly_limited);
         }
         Ok(Status::Ok)
+    }
+}
+
+impl PiezoControllerFmu {
+    #[cold]
+    #[inline(never)]
+    fn non_finite_input(&self, current_time: f64) -> ModelError {
+        ModelError(format!(
+            "t = {current_time}: non-finite input (references {:?}, sensors {:?})",
+            self.references, self.sensors
+        ))
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn non_finite_step(&self, current_time: f64, step_size: f64) -> ModelError {
+        let (name, value) = self.non_finite_output().unwrap_or(("an output", f64::NAN));
+        ModelError(format!(
+            "t = {current_time}: {name} became {value} in a step of {step_size} s: the \
+             control law cannot be computed over this step (restore an FMU state or reset)"
+        ))
+    }
+
+    /// Logs each channel in `newly_limited` once (out of the step's line).
+    #[cold]
+    #[inline(never)]
+    fn report_limiting(&mut self, ctx: &Context<'_>, current_time: f64, newly_limited: [bool; 3]) {
+        let out = *self.controller.output();
+        for channel in (0..3).filter(|c| newly_limited[*c]) {
+            self.saturation_reported[channel] = true;
+            let demanded = out.feedforward[channel] + out.feedback[channel];
+            ctx.event(format_args!(
+                "t = {current_time}: u{} demanded {demanded} V, outside {}..{} V; the \
+                 command is limited and the integrators hold (reported once per channel)",
+                channel + 1,
+                self.params.command_min,
+                self.params.command_max
+            ));
+        }
     }
 }
 

@@ -31,7 +31,7 @@ fmi2_conformance::conformance_tests!(
     communication_points_must_continue,
     fmu_state_restores_bit_for_bit,
     corrupted_states_are_refused,
-    states_do_not_cross_initialization,
+    fmu_state_restores_every_machine_state,
     status_queries,
     reset_restores_start_values,
     logging_follows_debug_logging,

@@ -1,15 +1,19 @@
 //! FlexureStage FMU: seed 000's 3-DOF piezo flexure stage (x, y, θz; three
 //! PZTs; first mode 790 Hz in θz), each actuator an asymmetric Bouc-Wen model
-//! with seed 001's coupled hysteresis, as an FMI 2.0 co-simulation slave.
+//! with seed 001's coupled hysteresis, as an FMI 2.0 co-simulation slave and
+//! model-exchange model (one binary, one modelDescription).
 //!
 //! This crate is the thin join of `fmi2-cosim` (which knows nothing of piezos)
-//! and `piezo-models` (which knows nothing of FMI): a variable table, units, and a
-//! `CoSimModel` implementation that forwards to [`FlexureStage`].
+//! and `piezo-models` (which knows nothing of FMI): a variable table, units, and
+//! `CoSimModel` and `ModelExchange` implementations that forward to
+//! [`FlexureStage`] (its step, and its ODE form `piezo_models::flexure_stage::ode`).
 
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
-    UnitDefinition, Variability, Variable, units,
+    BaseUnit, CoSimModel, Context, DefaultExperiment, EventUpdate, Interface, ModelError,
+    ModelExchange, ModelExchangeInfo, ModelInfo, Status, UnitDefinition, Variability, Variable,
+    units,
 };
+use piezo_models::flexure_stage::ode::{self, NUMBER_OF_STATES};
 use piezo_models::{FlexureStage, FlexureStageParams};
 use serde::{Deserialize, Serialize};
 
@@ -44,6 +48,59 @@ impl FlexureStageFmu {
     pub fn stage(&self) -> &FlexureStage {
         &self.stage
     }
+
+    /// The state derivatives at the current state and commands, in
+    /// `piezo_models::flexure_stage::ode::STATES` order.
+    fn derivatives(&self) -> [f64; NUMBER_OF_STATES] {
+        self.stage.derivatives(self.commands)
+    }
+
+    /// Logs, once per channel, a command that the amplifier limits clip.
+    fn report_clipping(&mut self, ctx: &Context<'_>, time: f64, clipped: [bool; 3]) -> Status {
+        let mut status = Status::Ok;
+        for (channel, clipped) in clipped.iter().enumerate() {
+            if *clipped && !self.clip_reported[channel] {
+                self.clip_reported[channel] = true;
+                let amp = &self.params.amplifier;
+                ctx.warning(format_args!(
+                    "t = {time}: PZT{} command u{} = {} V asks the amplifier for {} V, \
+                     outside its input range {}..{} V or output range {}..{} V; the output is \
+                     clipped (reported once per channel)",
+                    channel + 1,
+                    channel + 1,
+                    self.commands[channel],
+                    amp.gain * self.commands[channel],
+                    amp.input_min,
+                    amp.input_max,
+                    amp.v_min,
+                    amp.v_max
+                ));
+                status = Status::Warning;
+            }
+        }
+        status
+    }
+
+    /// Model Exchange, after an accepted integrator step or at an event: a
+    /// state that left the physical domain ends the simulation; clipping is
+    /// reported as in a co-simulation step.
+    fn supervise(&mut self, ctx: &Context<'_>, time: f64) -> Result<Status, ModelError> {
+        if let Some(fault) = self.stage.check_state() {
+            return Err(ModelError(format!(
+                "the stage diverged: {} = {} (non-finite, or beyond {} um / {} rad) with \
+                 commands u1..u3 = {:?} V; check the hysteresis parameters (a Bouc-Wen model \
+                 with beta + gamma < 0 grows without bound)",
+                fault.variable,
+                fault.value,
+                piezo_models::flexure_stage::DIVERGED_DISPLACEMENT_UM,
+                piezo_models::flexure_stage::DIVERGED_ROTATION_RAD,
+                self.commands
+            )));
+        }
+        let amplifier = self.params.amplifier;
+        let clipped = self.commands.map(|u| amplifier.target(u).1);
+        Ok(self.report_clipping(ctx, time, clipped))
+    }
 }
 
 const UNITS: &[UnitDefinition] = &[
@@ -62,6 +119,56 @@ const UNITS: &[UnitDefinition] = &[
             s: 3,
             a: 1,
             factor: 1e-6,
+            ..BaseUnit::NONE
+        },
+        display_units: &[],
+    },
+    // Rates of the continuous states (Model Exchange).
+    UnitDefinition {
+        name: "V/s",
+        base: BaseUnit {
+            kg: 1,
+            m: 2,
+            s: -4,
+            a: -1,
+            ..BaseUnit::NONE
+        },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "um/s",
+        base: BaseUnit {
+            m: 1,
+            s: -1,
+            factor: 1e-6,
+            ..BaseUnit::NONE
+        },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "um/s2",
+        base: BaseUnit {
+            m: 1,
+            s: -2,
+            factor: 1e-6,
+            ..BaseUnit::NONE
+        },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "rad/s",
+        base: BaseUnit {
+            s: -1,
+            rad: 1,
+            ..BaseUnit::NONE
+        },
+        display_units: &[],
+    },
+    UnitDefinition {
+        name: "rad/s2",
+        base: BaseUnit {
+            s: -2,
+            rad: 1,
             ..BaseUnit::NONE
         },
         display_units: &[],
@@ -131,34 +238,48 @@ macro_rules! bouc_wen_parameters {
 const PORTS: [Variable<FlexureStageFmu>; 12] = [
     Variable::real_input(
         "u1",
-        "Command voltage of the PZT1 amplifier channel (drives y), nominal 0..10 V",
+        "Command voltage of the PZT1 amplifier channel (drives y), 0..10 V for 0..100 V (-3..13 V accepted)",
         "V",
         |m| m.commands[0],
         |m, v| m.commands[0] = v,
     ),
     Variable::real_input(
         "u2",
-        "Command voltage of the PZT2 amplifier channel (x pair), nominal 0..10 V",
+        "Command voltage of the PZT2 amplifier channel (x pair), 0..10 V for 0..100 V (-3..13 V accepted)",
         "V",
         |m| m.commands[1],
         |m, v| m.commands[1] = v,
     ),
     Variable::real_input(
         "u3",
-        "Command voltage of the PZT3 amplifier channel (x pair), nominal 0..10 V",
+        "Command voltage of the PZT3 amplifier channel (x pair), 0..10 V for 0..100 V (-3..13 V accepted)",
         "V",
         |m| m.commands[2],
         |m, v| m.commands[2] = v,
     ),
-    Variable::real_output("s1", "Laser sensor s1: y displacement", "um", |m| {
-        m.stage.sensors()[0]
-    }),
-    Variable::real_output("s2", "Laser sensor s2: x + theta_z·L/2", "um", |m| {
-        m.stage.sensors()[1]
-    }),
-    Variable::real_output("s3", "Laser sensor s3: x − theta_z·L/2", "um", |m| {
-        m.stage.sensors()[2]
-    }),
+    // No direct feedthrough from u1..u3; in Model Exchange the sensors are
+    // computed from the pose states (x, y, theta_z are states themselves).
+    Variable::real_output(
+        "s1",
+        "Laser sensor s1: y displacement",
+        "um",
+        |m: &FlexureStageFmu| m.stage.sensors()[0],
+    )
+    .depends_on(&["y"]),
+    Variable::real_output(
+        "s2",
+        "Laser sensor s2: x + theta_z·L/2",
+        "um",
+        |m: &FlexureStageFmu| m.stage.sensors()[1],
+    )
+    .depends_on(&["x", "theta_z"]),
+    Variable::real_output(
+        "s3",
+        "Laser sensor s3: x − theta_z·L/2",
+        "um",
+        |m: &FlexureStageFmu| m.stage.sensors()[2],
+    )
+    .depends_on(&["x", "theta_z"]),
     Variable::real_output("x", "True platform x (no sensor noise)", "um", |m| {
         m.stage.pose().x_um
     }),
@@ -209,14 +330,14 @@ const AMPLIFIER: [Variable<FlexureStageFmu>; 4] = [
     ),
     parameter!(
         "amplifier.v_min",
-        "Lowest actuator voltage (the PZTs cannot retract)",
+        "Lowest amplifier output voltage (PI E-505: -30 V)",
         "V",
         [None, None],
         amplifier.v_min
     ),
     parameter!(
         "amplifier.v_max",
-        "Highest actuator voltage",
+        "Highest amplifier output voltage (PI E-505: 130 V)",
         "V",
         [None, None],
         amplifier.v_max
@@ -367,7 +488,7 @@ const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
     .model_path("noise.enabled"),
     parameter!(
         "noise.rms",
-        "Sensor noise RMS (Keyence LK-H050 class laser sensor)",
+        "Sensor noise RMS per reading (Keyence LK-H050: repeatability 0.025 um as a 99 % band)",
         "um",
         [Some(0.0), None],
         noise.rms_um
@@ -390,8 +511,271 @@ const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
     ),
 ];
 
+/// The amplifier's input range and the actuators' rest, added after the
+/// first release: appended so that the value references of everything above
+/// stay as they were.
+const APPENDED: [Variable<FlexureStageFmu>; 3] = [
+    parameter!(
+        "amplifier.input_min",
+        "Lowest control input the amplifier follows (PI E-505: -3 V)",
+        "V",
+        [None, None],
+        amplifier.input_min
+    ),
+    parameter!(
+        "amplifier.input_max",
+        "Highest control input the amplifier follows (PI E-505: 13 V)",
+        "V",
+        [None, None],
+        amplifier.input_max
+    ),
+    parameter!(
+        "rest_cycle_voltage",
+        "Working loop of the stacks that sets the rest the stage starts from: each hysteresis \
+         model starts at the 0 V end of its loop to this voltage, readings zeroed there (0: virgin \
+         state)",
+        "V",
+        [Some(0.0), None],
+        rest_cycle_voltage
+    ),
+];
+
+/// The continuous states that are not ports, amplifier voltages or velocities
+/// (Model Exchange integrates them; Co-Simulation shows them as diagnostics).
+const STATES: [Variable<FlexureStageFmu>; 10] = [
+    Variable::real_local(
+        "pzt[1].h",
+        "PZT1 hysteretic state h (seed 001 eq. 3)",
+        "um",
+        |m| m.stage.continuous_states()[3],
+    ),
+    Variable::real_local(
+        "pzt[2].h",
+        "PZT2 hysteretic state h (seed 001 eq. 3)",
+        "um",
+        |m| m.stage.continuous_states()[4],
+    ),
+    Variable::real_local(
+        "pzt[3].h",
+        "PZT3 hysteretic state h (seed 001 eq. 3)",
+        "um",
+        |m| m.stage.continuous_states()[5],
+    ),
+    Variable::real_local(
+        "coupling.x_from_pzt1.h",
+        "Hysteretic state of the coupling PZT1 voltage -> x",
+        "um",
+        |m| m.stage.continuous_states()[6],
+    ),
+    Variable::real_local(
+        "coupling.rot_from_pzt1.h",
+        "Hysteretic state of the coupling PZT1 voltage -> s2 − s3",
+        "um",
+        |m| m.stage.continuous_states()[7],
+    ),
+    Variable::real_local(
+        "coupling.y_from_pzt2.h",
+        "Hysteretic state of the coupling PZT2 voltage -> y",
+        "um",
+        |m| m.stage.continuous_states()[8],
+    ),
+    Variable::real_local(
+        "coupling.y_from_pzt3.h",
+        "Hysteretic state of the coupling PZT3 voltage -> y",
+        "um",
+        |m| m.stage.continuous_states()[9],
+    ),
+    Variable::real_local("pzt[1].creep", "PZT1 creep displacement", "um", |m| {
+        m.stage.continuous_states()[10]
+    }),
+    Variable::real_local("pzt[2].creep", "PZT2 creep displacement", "um", |m| {
+        m.stage.continuous_states()[11]
+    }),
+    Variable::real_local("pzt[3].creep", "PZT3 creep displacement", "um", |m| {
+        m.stage.continuous_states()[12]
+    }),
+];
+
+/// A state derivative of Model Exchange: the `$k`-th entry of the stage's
+/// right-hand side.
+macro_rules! derivative {
+    ($state:literal, $unit:literal, $k:literal, [$($dependency:literal),* $(,)?]) => {
+        Variable::real_local(
+            concat!("der(", $state, ")"),
+            concat!("Time derivative of ", $state),
+            $unit,
+            |m: &FlexureStageFmu| m.derivatives()[$k],
+        )
+        .derivative_of($state, &[$($dependency),*])
+    };
+}
+
+/// The state derivatives, in the order of the state vector
+/// (`piezo_models::flexure_stage::ode::STATES`): the table order of the
+/// derivatives is the order of Model Exchange's state vector. The velocities
+/// are states and the derivatives of x, y, theta_z (which start at rest, as
+/// every state does). Dependencies: what each rate is computed from
+/// (MODEL.md §2), checked numerically by the ABI tests.
+const DERIVATIVES: [Variable<FlexureStageFmu>; 19] = [
+    derivative!(
+        "amplifier.voltage[1]",
+        "V/s",
+        0,
+        ["u1", "amplifier.voltage[1]"]
+    ),
+    derivative!(
+        "amplifier.voltage[2]",
+        "V/s",
+        1,
+        ["u2", "amplifier.voltage[2]"]
+    ),
+    derivative!(
+        "amplifier.voltage[3]",
+        "V/s",
+        2,
+        ["u3", "amplifier.voltage[3]"]
+    ),
+    derivative!(
+        "pzt[1].h",
+        "um/s",
+        3,
+        ["u1", "amplifier.voltage[1]", "pzt[1].h"]
+    ),
+    derivative!(
+        "pzt[2].h",
+        "um/s",
+        4,
+        ["u2", "amplifier.voltage[2]", "pzt[2].h"]
+    ),
+    derivative!(
+        "pzt[3].h",
+        "um/s",
+        5,
+        ["u3", "amplifier.voltage[3]", "pzt[3].h"]
+    ),
+    derivative!(
+        "coupling.x_from_pzt1.h",
+        "um/s",
+        6,
+        ["u1", "amplifier.voltage[1]", "coupling.x_from_pzt1.h"]
+    ),
+    derivative!(
+        "coupling.rot_from_pzt1.h",
+        "um/s",
+        7,
+        ["u1", "amplifier.voltage[1]", "coupling.rot_from_pzt1.h"]
+    ),
+    derivative!(
+        "coupling.y_from_pzt2.h",
+        "um/s",
+        8,
+        ["u2", "amplifier.voltage[2]", "coupling.y_from_pzt2.h"]
+    ),
+    derivative!(
+        "coupling.y_from_pzt3.h",
+        "um/s",
+        9,
+        ["u3", "amplifier.voltage[3]", "coupling.y_from_pzt3.h"]
+    ),
+    derivative!(
+        "pzt[1].creep",
+        "um/s",
+        10,
+        ["amplifier.voltage[1]", "pzt[1].creep"]
+    ),
+    derivative!(
+        "pzt[2].creep",
+        "um/s",
+        11,
+        ["amplifier.voltage[2]", "pzt[2].creep"]
+    ),
+    derivative!(
+        "pzt[3].creep",
+        "um/s",
+        12,
+        ["amplifier.voltage[3]", "pzt[3].creep"]
+    ),
+    Variable::real_local(
+        "velocity.x",
+        "Platform x velocity: der(x)",
+        "um/s",
+        |m: &FlexureStageFmu| m.stage.continuous_states()[16],
+    )
+    .derivative_of("x", &["velocity.x"])
+    .initially_depends_on(&[]),
+    Variable::real_local(
+        "velocity.y",
+        "Platform y velocity: der(y)",
+        "um/s",
+        |m: &FlexureStageFmu| m.stage.continuous_states()[17],
+    )
+    .derivative_of("y", &["velocity.y"])
+    .initially_depends_on(&[]),
+    Variable::real_local(
+        "velocity.theta_z",
+        "Platform rotation rate: der(theta_z)",
+        "rad/s",
+        |m: &FlexureStageFmu| m.stage.continuous_states()[18],
+    )
+    .derivative_of("theta_z", &["velocity.theta_z"])
+    .initially_depends_on(&[]),
+    // x_qs = (e2 + e3)/2 + d_x1 (seed 000 §2).
+    derivative!(
+        "velocity.x",
+        "um/s2",
+        16,
+        [
+            "x",
+            "velocity.x",
+            "amplifier.voltage[1]",
+            "amplifier.voltage[2]",
+            "amplifier.voltage[3]",
+            "pzt[2].h",
+            "pzt[3].h",
+            "pzt[2].creep",
+            "pzt[3].creep",
+            "coupling.x_from_pzt1.h",
+        ]
+    ),
+    // y_qs = e1 + d_y2 + d_y3.
+    derivative!(
+        "velocity.y",
+        "um/s2",
+        17,
+        [
+            "y",
+            "velocity.y",
+            "amplifier.voltage[1]",
+            "amplifier.voltage[2]",
+            "amplifier.voltage[3]",
+            "pzt[1].h",
+            "pzt[1].creep",
+            "coupling.y_from_pzt2.h",
+            "coupling.y_from_pzt3.h",
+        ]
+    ),
+    // theta_qs = (e2 − e3 + d_rot1)/L.
+    derivative!(
+        "velocity.theta_z",
+        "rad/s2",
+        18,
+        [
+            "theta_z",
+            "velocity.theta_z",
+            "amplifier.voltage[1]",
+            "amplifier.voltage[2]",
+            "amplifier.voltage[3]",
+            "pzt[2].h",
+            "pzt[3].h",
+            "pzt[2].creep",
+            "pzt[3].creep",
+            "coupling.rot_from_pzt1.h",
+        ]
+    ),
+];
+
 /// Every variable, in value-reference order.
-static VARIABLES: [Variable<FlexureStageFmu>; 82] = fmi2_cosim::variables::concat(&[
+static VARIABLES: [Variable<FlexureStageFmu>; 114] = fmi2_cosim::variables::concat(&[
     &PORTS,
     &AMPLIFIER,
     &PZT1_HYSTERESIS,
@@ -405,6 +789,9 @@ static VARIABLES: [Variable<FlexureStageFmu>; 82] = fmi2_cosim::variables::conca
     &COUPLING_Y_FROM_PZT2_HYSTERESIS,
     &COUPLING_Y_FROM_PZT3_HYSTERESIS,
     &STRUCTURE_SENSORS_SOLVER,
+    &APPENDED,
+    &STATES,
+    &DERIVATIVES,
 ]);
 
 /// The FMI name of the parameter the model calls `path` (its serde path, as in
@@ -421,7 +808,8 @@ impl CoSimModel for FlexureStageFmu {
         model_identifier: "FlexureStage",
         model_name: "FlexureStage",
         description: "3-DOF piezo-driven flexure stage (x, y, theta_z; three PZTs with asymmetric \
-                      Bouc-Wen hysteresis and coupled hysteresis; first mode 790 Hz in theta_z)",
+                      Bouc-Wen hysteresis and coupled hysteresis; first mode 790 Hz in theta_z); \
+                      Co-Simulation and Model Exchange (19 continuous states, no events)",
         author: "piezo-fmu project",
         version: env!("CARGO_PKG_VERSION"),
         license: "MIT OR Apache-2.0",
@@ -432,6 +820,13 @@ impl CoSimModel for FlexureStageFmu {
         },
     };
     const UNITS: &'static [UnitDefinition] = UNITS;
+    const MODEL_EXCHANGE: Option<ModelExchangeInfo> = Some(ModelExchangeInfo {
+        number_of_continuous_states: NUMBER_OF_STATES,
+        // No state events: the amplifier clips its target G·u, a function of
+        // the inputs alone, and every rate is continuous in the states
+        // (piezo_models::flexure_stage::ode).
+        number_of_event_indicators: 0,
+    });
 
     fn variables() -> &'static [Variable<Self>] {
         &VARIABLES
@@ -447,6 +842,14 @@ impl CoSimModel for FlexureStageFmu {
         ctx: &mut Context<'_>,
         _start_time: f64,
     ) -> Result<(), ModelError> {
+        if ctx.interface() == Interface::ModelExchange && self.params.noise.enabled {
+            return Err(ModelError(
+                "noise.enabled = true: the sensor noise is one sample per communication step, \
+                 and Model Exchange has none; add the noise in the importer, or use \
+                 Co-Simulation"
+                    .to_owned(),
+            ));
+        }
         // The stage starts de-energized and at rest, whatever the inputs: the
         // actuators have no history before t0.
         self.stage = FlexureStage::new(self.params.clone()).map_err(|e| {
@@ -484,27 +887,45 @@ impl CoSimModel for FlexureStageFmu {
                 self.commands
             )));
         }
-        let mut status = Status::Ok;
-        for (channel, clipped) in report.clipped.iter().enumerate() {
-            if *clipped && !self.clip_reported[channel] {
-                self.clip_reported[channel] = true;
-                let amp = &self.params.amplifier;
-                ctx.warning(format_args!(
-                    "t = {current_time}: PZT{} command u{} = {} V asks the amplifier for {} V, \
-                     outside the actuator range {}..{} V; the output is clipped (reported once \
-                     per channel)",
-                    channel + 1,
-                    channel + 1,
-                    self.commands[channel],
-                    amp.gain * self.commands[channel],
-                    amp.v_min,
-                    amp.v_max
-                ));
-                status = Status::Warning;
-            }
-        }
-        Ok(status)
+        Ok(self.report_clipping(ctx, current_time, report.clipped))
     }
 }
 
-fmi2_cosim::export_fmi2!(FlexureStageFmu);
+impl ModelExchange for FlexureStageFmu {
+    fn continuous_states(&self, states: &mut [f64]) {
+        states.copy_from_slice(&self.stage.continuous_states());
+    }
+
+    fn set_continuous_states(&mut self, states: &[f64]) {
+        let states: &[f64; NUMBER_OF_STATES] =
+            states.try_into().expect("the layer checks the length");
+        self.stage.set_continuous_states(states);
+    }
+
+    fn derivatives(&self, _time: f64, derivatives: &mut [f64]) {
+        derivatives.copy_from_slice(&self.derivatives());
+    }
+
+    fn nominals(&self, nominals: &mut [f64]) {
+        nominals.copy_from_slice(&ode::state_nominals(&self.params));
+    }
+
+    fn update_discrete_states(
+        &mut self,
+        ctx: &mut Context<'_>,
+        time: f64,
+    ) -> Result<EventUpdate, ModelError> {
+        self.supervise(ctx, time)?;
+        Ok(EventUpdate::default())
+    }
+
+    fn completed_integrator_step(
+        &mut self,
+        ctx: &mut Context<'_>,
+        time: f64,
+    ) -> Result<Status, ModelError> {
+        self.supervise(ctx, time)
+    }
+}
+
+fmi2_cosim::export_fmi2!(FlexureStageFmu, model_exchange);

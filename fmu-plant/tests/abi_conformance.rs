@@ -1,6 +1,6 @@
 //! The FlexureStage binary, driven through the C ABI as an importer drives it
 //! (dlopen, official typedefs, printf-style logger): every state-machine and
-//! argument rule of the FMI layer.
+//! argument rule of the FMI layer, for Co-Simulation and Model Exchange.
 
 use fmu_plant::FlexureStageFmu;
 
@@ -31,7 +31,11 @@ fmi2_conformance::conformance_tests!(
     communication_points_must_continue,
     fmu_state_restores_bit_for_bit,
     corrupted_states_are_refused,
-    states_do_not_cross_initialization,
+    fmu_state_restores_every_machine_state,
+    model_exchange_vectors_match_the_variables,
+    model_exchange_arguments_are_checked,
+    non_finite_derivatives_are_refused,
+    derivative_dependencies_hold,
     status_queries,
     reset_restores_start_values,
     logging_follows_debug_logging,

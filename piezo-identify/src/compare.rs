@@ -8,11 +8,10 @@
 //! u = 5.5 + 3 sin(2πt − π/2) + sin(1.4πt − π/2) + 1.5 sin(0.4πt − π/2) [V],
 //! 10 s, applied to the y actuator (PZT1) of the simulated stage
 //! ([`piezo_models::FlexureStage`], the preset calibrated to seed 000) at its
-//! 10 kHz controller rate. eq. (6) peaks at 10.08 V (1.5 % of its samples
-//! exceed 10 V), above the 10 V that the amplifier (gain 10, 100 V limit)
-//! passes; the plant clips, and the recorded command is the one the amplifier
-//! applied, min(u, 10 V), since beyond it the displacement does not respond
-//! to u.
+//! 10 kHz controller rate. eq. (6) peaks at 10.08 V (100.8 V at the stack),
+//! inside the E-505's -30..130 V; the recorded command is the one the
+//! amplifier applies (clamped to its range, which eq. (6) never leaves), so
+//! that a stage with a narrower amplifier records what moved it.
 
 use std::hint::black_box;
 use std::time::Instant;

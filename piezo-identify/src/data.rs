@@ -1,17 +1,23 @@
 //! Reading a numeric voltage/displacement record from a text file.
 //!
 //! The format is the common one of measurement exports: one sample per line,
-//! columns separated by whitespace or by commas, an optional header row of
-//! column names, `#` starting a comment (whole line or trailing) and blank
-//! lines ignored. Options pick the input (voltage) and output (displacement)
-//! columns by 0-based index or by header name, and give the sampling either
-//! as a time column or as a sample rate.
+//! columns separated by tabs, commas, semicolons or spaces (whichever the
+//! first line has, in that order: [`Separator`]), an optional header row of
+//! column names (with a separator character, names may contain spaces), `#`
+//! starting a comment (whole line or trailing) and blank lines ignored.
+//! Options pick the input (voltage) and output (displacement) columns by
+//! 0-based index or by header name, and give the sampling either as a time
+//! column or as a sample rate. A header must have as many names as the rows
+//! have fields: a header split differently from its rows would silently
+//! shift every name onto another column.
 //!
-//! Every field of a data row must be a finite number, not only the selected
-//! ones: a numeric export with a stray word or a NaN in any column is more
-//! likely corrupt than intended, and refusing it early is cheaper than a fit
-//! on garbage. Errors name the file, the 1-based line and the problem
-//! (`file:line: problem`).
+//! Every non-empty field of a data row must be a finite number, not only the
+//! selected ones: a numeric export with a stray word or a NaN in any column
+//! is more likely corrupt than intended, and refusing it early is cheaper
+//! than a fit on garbage. Empty fields are accepted in columns that are not
+//! read (a pandas export's unnamed index column, a trailing separator).
+//! Errors name the file, the 1-based line and the problem (`file:line:
+//! problem`).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -92,14 +98,27 @@ pub enum Problem {
     NotANumber { field: usize, text: String },
     #[error("field {field} is {value}, not a finite number")]
     NotFinite { field: usize, value: f64 },
+    #[error("field {field} is empty, and it is the {role} column")]
+    EmptySelected { field: usize, role: &'static str },
     #[error("row has {found} columns, column {needed} (0-based) is needed")]
     TooFewColumns { found: usize, needed: usize },
     #[error("column \"{name}\" is not in the header (columns: {header})")]
     UnknownColumn { name: String, header: String },
+    #[error("column \"{name}\" is named twice in the header")]
+    DuplicateColumn { name: String },
     #[error("column \"{name}\" is named but the file has no header row")]
     NoHeader { name: String },
     #[error("header has fields that are numbers and fields that are not")]
     MixedHeader,
+    #[error(
+        "the header (line {header_line}) has {names} {separator}-separated names but this row has {fields} fields"
+    )]
+    HeaderWidth {
+        header_line: usize,
+        names: usize,
+        fields: usize,
+        separator: &'static str,
+    },
     #[error("time {time} s does not increase (previous row: {previous} s)")]
     TimeNotIncreasing { previous: f64, time: f64 },
     #[error(
@@ -126,6 +145,9 @@ pub enum DataError {
         line: usize,
         problem: Problem,
     },
+    /// Nothing but blank lines and comments (or nothing at all).
+    #[error("{}: the file is empty (no header and no data rows)", path.display())]
+    Empty { path: PathBuf },
     /// The sample rate given in the options (not the file) is unusable.
     #[error("sample rate {rate} Hz is not a positive finite number")]
     InvalidRate { rate: f64 },
@@ -135,23 +157,114 @@ impl DataError {
     /// The problem, when the file was readable.
     pub fn problem(&self) -> Option<&Problem> {
         match self {
-            DataError::Io { .. } | DataError::InvalidRate { .. } => None,
+            DataError::Io { .. } | DataError::Empty { .. } | DataError::InvalidRate { .. } => None,
             DataError::Malformed { problem, .. } => Some(problem),
         }
     }
 }
 
+/// How the fields of a line are separated, found on the file's first
+/// non-blank, non-comment line: a tab if it has one, else a comma, else a
+/// semicolon, else runs of spaces. With a separator character every field
+/// counts, empty ones included (an unnamed index column, a trailing
+/// separator), and a header name may contain spaces ("Moment (Nm)").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum Separator {
+    Tab,
+    Comma,
+    Semicolon,
+    Whitespace,
+}
+
+impl Separator {
+    fn of(line: &str) -> Separator {
+        if line.contains('\t') {
+            Separator::Tab
+        } else if line.contains(',') {
+            Separator::Comma
+        } else if line.contains(';') {
+            Separator::Semicolon
+        } else {
+            Separator::Whitespace
+        }
+    }
+
+    /// The name used in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            Separator::Tab => "tab",
+            Separator::Comma => "comma",
+            Separator::Semicolon => "semicolon",
+            Separator::Whitespace => "space",
+        }
+    }
+
+    fn split(self, content: &str) -> Vec<&str> {
+        let by = |c: char| content.split(c).map(|f| f.trim_matches(' ')).collect();
+        match self {
+            Separator::Tab => by('\t'),
+            Separator::Comma => by(','),
+            Separator::Semicolon => by(';'),
+            Separator::Whitespace => content.split_whitespace().collect(),
+        }
+    }
+}
+
+/// One column as it was used: its 0-based index and its header name.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct UsedColumn {
+    pub index: usize,
+    pub name: Option<String>,
+}
+
+impl fmt::Display for UsedColumn {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.name {
+            Some(name) => write!(f, "column {} \"{name}\"", self.index),
+            None => write!(f, "column {}", self.index),
+        }
+    }
+}
+
+/// The columns a record was read from, for the report.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ColumnsUsed {
+    pub input: UsedColumn,
+    pub output: UsedColumn,
+    pub time: Option<UsedColumn>,
+    pub separator: Separator,
+    /// Line of the header row, when there is one.
+    pub header_line: Option<usize>,
+}
+
 /// Reads a record from a file.
 pub fn read_record(path: &Path, options: &ReadOptions) -> Result<Record, DataError> {
+    read_record_with_columns(path, options).map(|(record, _)| record)
+}
+
+/// Reads a record from a file and says which columns it used.
+pub fn read_record_with_columns(
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<(Record, ColumnsUsed), DataError> {
     let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
         path: path.to_owned(),
         source,
     })?;
-    parse_record(&text, path, options)
+    parse_record_with_columns(&text, path, options)
 }
 
 /// Parses a record from text; `path` only names the source in errors.
 pub fn parse_record(text: &str, path: &Path, options: &ReadOptions) -> Result<Record, DataError> {
+    parse_record_with_columns(text, path, options).map(|(record, _)| record)
+}
+
+/// [`parse_record`], also saying which columns it used.
+pub fn parse_record_with_columns(
+    text: &str,
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<(Record, ColumnsUsed), DataError> {
     let malformed = |line: usize, problem: Problem| DataError::Malformed {
         path: path.to_owned(),
         line,
@@ -163,24 +276,31 @@ pub fn parse_record(text: &str, path: &Path, options: &ReadOptions) -> Result<Re
         return Err(DataError::InvalidRate { rate });
     }
 
+    let mut separator: Option<Separator> = None;
     let mut header: Option<(usize, Vec<String>)> = None;
     let mut resolved: Option<ResolvedColumns> = None;
     let mut input = Vec::new();
     let mut output = Vec::new();
     let mut times: Vec<(usize, f64)> = Vec::new();
     let mut last_line = 0;
-    let mut seen_content = false;
 
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         last_line = line;
-        let content = raw.split('#').next().unwrap_or("").trim();
-        if content.is_empty() {
+        // Only the line end and spaces are trimmed: a leading tab is an
+        // empty first field.
+        let content = raw
+            .split('#')
+            .next()
+            .unwrap_or("")
+            .trim_end_matches(['\r', ' '])
+            .trim_start_matches(' ');
+        if content.trim().is_empty() {
             continue;
         }
-        let fields = split_fields(content);
-        let first_content_row = !seen_content;
-        seen_content = true;
+        let first_content_row = separator.is_none();
+        let separator = *separator.get_or_insert_with(|| Separator::of(content));
+        let fields = separator.split(content);
         if first_content_row {
             let numeric = fields.iter().filter(|f| f.parse::<f64>().is_ok()).count();
             if numeric == 0 {
@@ -197,14 +317,48 @@ pub fn parse_record(text: &str, path: &Path, options: &ReadOptions) -> Result<Re
         let columns = match &resolved {
             Some(columns) => *columns,
             None => {
+                if let Some((header_line, names)) = &header
+                    && names.len() != fields.len()
+                {
+                    return Err(malformed(
+                        line,
+                        Problem::HeaderWidth {
+                            header_line: *header_line,
+                            names: names.len(),
+                            fields: fields.len(),
+                            separator: separator.name(),
+                        },
+                    ));
+                }
                 let columns = resolve_columns(options, header.as_ref())
                     .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
                 resolved = Some(columns);
                 columns
             }
         };
-        let mut values = Vec::with_capacity(fields.len());
+        let needed = columns.largest();
+        if fields.len() <= needed {
+            return Err(malformed(
+                line,
+                Problem::TooFewColumns {
+                    found: fields.len(),
+                    needed,
+                },
+            ));
+        }
+        let mut values = vec![f64::NAN; fields.len()];
         for (field, text) in fields.iter().enumerate() {
+            let role = columns.role(field);
+            if text.is_empty() {
+                // An empty field in a column nobody reads (an unnamed index
+                // column, a trailing separator) is no sign of corruption.
+                match role {
+                    Some(role) => {
+                        return Err(malformed(line, Problem::EmptySelected { field, role }));
+                    }
+                    None => continue,
+                }
+            }
             let value: f64 = text.parse().map_err(|_| {
                 malformed(
                     line,
@@ -217,17 +371,7 @@ pub fn parse_record(text: &str, path: &Path, options: &ReadOptions) -> Result<Re
             if !value.is_finite() {
                 return Err(malformed(line, Problem::NotFinite { field, value }));
             }
-            values.push(value);
-        }
-        let needed = columns.largest();
-        if values.len() <= needed {
-            return Err(malformed(
-                line,
-                Problem::TooFewColumns {
-                    found: values.len(),
-                    needed,
-                },
-            ));
+            values[field] = value;
         }
         input.push(values[columns.input]);
         output.push(values[columns.output]);
@@ -245,11 +389,17 @@ pub fn parse_record(text: &str, path: &Path, options: &ReadOptions) -> Result<Re
         }
     }
 
+    let Some(separator) = separator else {
+        return Err(DataError::Empty {
+            path: path.to_owned(),
+        });
+    };
     // Columns named in the options must exist even in a file without data.
-    if resolved.is_none() {
-        resolve_columns(options, header.as_ref())
-            .map_err(|(line, problem)| malformed(line.unwrap_or(last_line), problem))?;
-    }
+    let columns = match resolved {
+        Some(columns) => columns,
+        None => resolve_columns(options, header.as_ref())
+            .map_err(|(line, problem)| malformed(line.unwrap_or(last_line), problem))?,
+    };
     if input.len() < MINIMUM_ROWS {
         return Err(malformed(
             last_line,
@@ -263,21 +413,29 @@ pub fn parse_record(text: &str, path: &Path, options: &ReadOptions) -> Result<Re
         Sampling::Rate(rate) => 1.0 / rate,
         Sampling::TimeColumn(_) => uniform_period(&times).map_err(|(l, p)| malformed(l, p))?,
     };
-    Ok(Record {
-        input,
-        output,
-        sample_period,
-    })
-}
-
-/// Splits a line into fields: by commas when it has any (fields trimmed, an
-/// empty field kept so that it is reported), otherwise by whitespace.
-fn split_fields(content: &str) -> Vec<&str> {
-    if content.contains(',') {
-        content.split(',').map(str::trim).collect()
-    } else {
-        content.split_whitespace().collect()
-    }
+    let used = |index: usize| UsedColumn {
+        index,
+        name: header
+            .as_ref()
+            .and_then(|(_, names)| names.get(index))
+            .filter(|name| !name.is_empty())
+            .cloned(),
+    };
+    let columns_used = ColumnsUsed {
+        input: used(columns.input),
+        output: used(columns.output),
+        time: columns.time.map(used),
+        separator,
+        header_line: header.as_ref().map(|(line, _)| *line),
+    };
+    Ok((
+        Record {
+            input,
+            output,
+            sample_period,
+        },
+        columns_used,
+    ))
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -290,6 +448,19 @@ struct ResolvedColumns {
 impl ResolvedColumns {
     fn largest(&self) -> usize {
         self.input.max(self.output).max(self.time.unwrap_or(0))
+    }
+
+    /// What a column is read as, if anything.
+    fn role(&self, column: usize) -> Option<&'static str> {
+        if column == self.input {
+            Some("input")
+        } else if column == self.output {
+            Some("output")
+        } else if Some(column) == self.time {
+            Some("time")
+        } else {
+            None
+        }
     }
 }
 
@@ -304,15 +475,26 @@ fn resolve_columns(
             Column::Index(i) => Ok(*i),
             Column::Name(name) => match header {
                 None => Err((None, Problem::NoHeader { name: name.clone() })),
-                Some((line, names)) => names.iter().position(|n| n == name).ok_or_else(|| {
-                    (
-                        Some(*line),
-                        Problem::UnknownColumn {
-                            name: name.clone(),
-                            header: names.join(", "),
-                        },
-                    )
-                }),
+                Some((line, names)) => {
+                    let mut matches = names.iter().enumerate().filter(|(_, n)| *n == name);
+                    let found = matches.next().map(|(i, _)| i);
+                    if matches.next().is_some() {
+                        return Err((Some(*line), Problem::DuplicateColumn { name: name.clone() }));
+                    }
+                    found.ok_or_else(|| {
+                        (
+                            Some(*line),
+                            Problem::UnknownColumn {
+                                name: name.clone(),
+                                header: names
+                                    .iter()
+                                    .map(|n| format!("\"{n}\""))
+                                    .collect::<Vec<_>>()
+                                    .join(", "),
+                            },
+                        )
+                    })
+                }
             },
         }
     };
@@ -414,12 +596,103 @@ mod tests {
     }
 
     #[test]
-    fn refuses_an_empty_comma_field() {
+    fn refuses_an_empty_field_in_a_column_it_reads() {
         let text = "1,2\n3,,4\n";
         assert_eq!(
             message(text, &by_index()),
-            "data.txt:2: field 1 (\"\") is not a number"
+            "data.txt:2: field 1 is empty, and it is the output column"
         );
+    }
+
+    /// pandas' `to_csv` writes its index as an unnamed first column; with
+    /// `sep="\t"` the header starts with a tab. Read by name, the columns must
+    /// be the named ones, not shifted by the index.
+    #[test]
+    fn reads_a_pandas_export_with_an_unnamed_index_column() {
+        for separator in [",", "\t"] {
+            let mut text = format!("{separator}volts{separator}um\n");
+            for n in 0..40 {
+                text.push_str(&format!(
+                    "{n}{separator}{}{separator}{}\n",
+                    0.5 * n as f64,
+                    2 * n
+                ));
+            }
+            let options = options(
+                Column::Name("volts".into()),
+                Column::Name("um".into()),
+                Sampling::Rate(10.0),
+            );
+            let (record, used) =
+                parse_record_with_columns(&text, Path::new("pd.csv"), &options).unwrap();
+            assert_eq!(record.input[3], 1.5, "separator {separator:?}");
+            assert_eq!(record.output[3], 6.0);
+            assert_eq!(used.input.to_string(), "column 1 \"volts\"");
+            assert_eq!(used.output.index, 2);
+        }
+    }
+
+    /// An index column left empty in every row (",1.5,3" or "\t1.5\t3") is
+    /// not corruption: it is not read.
+    #[test]
+    fn accepts_an_empty_column_it_does_not_read() {
+        for separator in [",", "\t"] {
+            let mut text = String::new();
+            for n in 0..40 {
+                text.push_str(&format!("{separator}{}{separator}{}\n", n, 2 * n));
+            }
+            let options = options(Column::Index(1), Column::Index(2), Sampling::Rate(10.0));
+            let record = parse_record(&text, Path::new("e.csv"), &options).unwrap();
+            assert_eq!(record.output[5], 10.0, "separator {separator:?}");
+        }
+    }
+
+    /// A tab-separated export whose names contain spaces: the names are the
+    /// tab-separated ones, and a word of a name is not a column.
+    #[test]
+    fn tab_separated_names_may_contain_spaces() {
+        let mut text = String::from("Time (s)\tMoment (Nm)\tAngle (deg)\n");
+        for n in 0..40 {
+            text.push_str(&format!("{}\t{}\t{}\n", n as f64 * 0.01, n, 3 * n));
+        }
+        let by_name = |output: &str| {
+            options(
+                Column::Name("Angle (deg)".into()),
+                Column::Name(output.into()),
+                Sampling::TimeColumn(Column::Name("Time (s)".into())),
+            )
+        };
+        let (record, used) =
+            parse_record_with_columns(&text, Path::new("t.tsv"), &by_name("Moment (Nm)")).unwrap();
+        assert_eq!(record.output[4], 4.0);
+        assert_eq!(record.input[4], 12.0);
+        assert_eq!(used.separator, Separator::Tab);
+        assert_eq!(
+            message(&text, &by_name("Moment")),
+            "data.txt:1: column \"Moment\" is not in the header (columns: \"Time (s)\", \"Moment (Nm)\", \"Angle (deg)\")"
+        );
+    }
+
+    /// A header that splits into more names than the rows have fields (names
+    /// with spaces in a space-separated file) would put every name on the
+    /// wrong column: refused.
+    #[test]
+    fn refuses_a_header_wider_than_its_rows() {
+        let text = rows("time moment Nm angle\n", 40);
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:2: the header (line 1) has 4 space-separated names but this row has 2 fields"
+        );
+    }
+
+    #[test]
+    fn names_an_empty_file() {
+        for text in ["", "\n\n# only a comment\n"] {
+            assert_eq!(
+                message(text, &by_index()),
+                "data.txt: the file is empty (no header and no data rows)"
+            );
+        }
     }
 
     #[test]
@@ -460,7 +733,7 @@ mod tests {
         );
         assert_eq!(
             message(&text, &options),
-            "data.txt:2: column \"displacement\" is not in the header (columns: volts, um)"
+            "data.txt:2: column \"displacement\" is not in the header (columns: \"volts\", \"um\")"
         );
     }
 

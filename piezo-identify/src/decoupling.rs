@@ -60,6 +60,19 @@ impl Compensation {
         }
     }
 
+    /// The compensation that does nothing: D(f) = 0, both cutoffs unused.
+    pub fn none(no_cutoff: f64) -> Compensation {
+        Compensation {
+            dk: 0.0,
+            db: 0.0,
+            p: no_cutoff,
+            q: -no_cutoff,
+            residual_rms: 0.0,
+            residual_span: 0.0,
+            error_span: 0.0,
+        }
+    }
+
     /// D(f) = clamp(Δk·f + Δb, q, p), as `piezo_models::decouple` applies it.
     pub fn eval(&self, f: f64) -> f64 {
         (self.dk * f + self.db).max(self.q).min(self.p)
@@ -111,8 +124,20 @@ fn span(v: impl Iterator<Item = f64> + Clone) -> f64 {
     max - min
 }
 
-/// Fits one compensation to pairs (driving demand `f`, coupling error `e`).
+/// Fits one compensation to pairs (driving demand `f`, coupling error `e`),
+/// with Table 2's ±10 µm for an unused cutoff.
 pub fn fit_compensation(f: &[f64], e: &[f64]) -> Result<Compensation, DecouplingError> {
+    fit_compensation_with_cutoff(f, e, NO_CUTOFF)
+}
+
+/// [`fit_compensation`] on a stage of another size: `no_cutoff` [µm] is the
+/// value that marks an unused cutoff (Table 2's 10 µm on seed 000's 12 µm
+/// strokes; a cutoff must lie beyond any compensation the stage needs).
+pub fn fit_compensation_with_cutoff(
+    f: &[f64],
+    e: &[f64],
+    no_cutoff: f64,
+) -> Result<Compensation, DecouplingError> {
     if f.len() != e.len() {
         return Err(DecouplingError::LengthMismatch(f.len(), e.len()));
     }
@@ -136,7 +161,7 @@ pub fn fit_compensation(f: &[f64], e: &[f64]) -> Result<Compensation, Decoupling
     let e_max = e.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let e_min = e.iter().copied().fold(f64::INFINITY, f64::min);
     let problem = ClampedLine { f, e };
-    let line = vec![dk, db, NO_CUTOFF, -NO_CUTOFF];
+    let line = vec![dk, db, no_cutoff, -no_cutoff];
     let start = vec![dk, db, e_max, e_min];
     // A simplex around the start: each vertex moves one parameter by a step
     // of the size the data give it.
@@ -182,10 +207,10 @@ pub fn fit_compensation(f: &[f64], e: &[f64]) -> Result<Compensation, Decoupling
         best = line;
     } else {
         if !keep_upper {
-            best[2] = NO_CUTOFF;
+            best[2] = no_cutoff;
         }
         if !keep_lower {
-            best[3] = -NO_CUTOFF;
+            best[3] = -no_cutoff;
         }
     }
     // A cutoff beyond what the line reaches over the data does nothing.
@@ -195,10 +220,10 @@ pub fn fit_compensation(f: &[f64], e: &[f64]) -> Result<Compensation, Decoupling
         reach.fold(f64::INFINITY, f64::min),
     );
     if best[2] >= line_max || best[2] < best[3] {
-        best[2] = NO_CUTOFF.max(line_max);
+        best[2] = no_cutoff.max(line_max);
     }
     if best[3] <= line_min {
-        best[3] = (-NO_CUTOFF).min(line_min);
+        best[3] = (-no_cutoff).min(line_min);
     }
     let mut compensation = Compensation {
         dk: best[0],

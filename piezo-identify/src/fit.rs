@@ -57,15 +57,20 @@ use rand::{RngExt, SeedableRng};
 use rand_xoshiro::Xoshiro256PlusPlus;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::ops::Range;
 
-use crate::least_squares::{LinearSolution, solve_least_squares};
+use crate::least_squares::{
+    LinearSolution, NormalEquations, solve_least_squares_regularized,
+    solve_least_squares_with_intercept_regularized,
+};
 use crate::models::{
     ClassicalPi, ClassicalPiParams, InverseHysteresis, TraditionalInversePi,
     TraditionalInversePiParams, predict, u1max_for,
 };
 use crate::regressors::{
-    PROPOSED, RateDependentLayout, TRADITIONAL_SIX, TRADITIONAL_TEN, classical_regressors,
-    rate_dependent_regressors,
+    PROPOSED, RateDependentLayout, TRADITIONAL_SIX, TRADITIONAL_TEN, for_each_rate_dependent_row,
+    masked_classical_regressors, masked_rate_dependent_regressors, reversing_classical_operators,
+    reversing_operators,
 };
 
 /// Nelder-Mead stops when the standard deviation of the simplex's normalised
@@ -73,6 +78,9 @@ use crate::regressors::{
 const SIMPLEX_COST_TOLERANCE: f64 = 1e-14;
 /// Initial simplex edge in ln c and in each hyperspherical angle of w_s.
 const SIMPLEX_STEP: f64 = 0.2;
+/// Simplex edge of the fresh simplex a screened start continues from: a
+/// quarter of the first, about a point that is already in its basin.
+const POLISH_SIMPLEX_STEP: f64 = 0.05;
 /// Range of the random initial c, in units of y_max, drawn log-uniformly and
 /// stratified over the starts.
 const INITIAL_C_RANGE: (f64, f64) = (1e-3, 0.11);
@@ -97,9 +105,41 @@ pub struct FitOptions {
     /// The first samples run the operators but are not fitted nor scored (a
     /// start-up transient that no hysteresis model describes).
     pub warm_up_samples: usize,
+    /// Further samples that run the operators but are not fitted (rest
+    /// segments, the settling after a voltage step: `segments`).
+    pub excluded: Vec<Range<usize>>,
     /// Rate-dependent backlash weights w_h = k·ẏ + b (seed 000 eq. 4); false
     /// fits constant weights (k = 0) for the proposed and traditional models.
     pub rate_dependent: bool,
+    /// Successive halving of the starts (None: every start runs to
+    /// convergence, seed 000's best of N).
+    pub screening: Option<Screening>,
+    /// The final linear solve is regularised, allowing F to grow by this
+    /// fraction (`least_squares::solve_least_squares_regularized`; 0: plain
+    /// least squares).
+    pub rss_increase: f64,
+    /// Backlash operators that do not reverse over the fitted samples get no
+    /// weight (`regressors::reversing_operators` says why), in the search
+    /// and in the final solve.
+    pub reversing_operators_only: bool,
+}
+
+/// Every start first runs `iterations` Nelder-Mead iterations; only the
+/// `kept` best then continue, from a fresh simplex about their point, up to
+/// `FitOptions::max_iterations`. The starts that lead after a short run are
+/// nearly always those that end best (the basins of F in c are set early),
+/// and most of a start's iterations are spent creeping along a valley it
+/// will not leave: screening spends them only where they can matter.
+///
+/// The continued runs stop when the spread of the simplex's costs falls
+/// below `relative_tolerance` times the cost it continues from (or the
+/// absolute floor of an unscreened run, whichever is larger): digits of F
+/// beyond the data's own do not change the model.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Screening {
+    pub iterations: u64,
+    pub kept: usize,
+    pub relative_tolerance: f64,
 }
 
 impl Default for FitOptions {
@@ -110,8 +150,26 @@ impl Default for FitOptions {
             max_iterations: 2000,
             decimation: 1,
             warm_up_samples: 0,
+            excluded: Vec::new(),
             rate_dependent: true,
+            screening: None,
+            rss_increase: 0.0,
+            reversing_operators_only: false,
         }
+    }
+}
+
+impl FitOptions {
+    /// Which of `len` samples are fitted: those after the warm-up and outside
+    /// every excluded range.
+    pub fn fitted_samples(&self, len: usize) -> Vec<bool> {
+        let mut fitted: Vec<bool> = (0..len).map(|n| n >= self.warm_up_samples).collect();
+        for range in &self.excluded {
+            for flag in &mut fitted[range.start.min(len)..range.end.min(len)] {
+                *flag = false;
+            }
+        }
+        fitted
     }
 }
 
@@ -158,15 +216,23 @@ pub struct FitQuality {
 impl FitQuality {
     /// Scores a prediction against measured voltages from sample `scored_from`.
     pub fn of(prediction: &[f64], measured: &[f64], scored_from: usize) -> FitQuality {
+        let scored: Vec<bool> = (0..prediction.len()).map(|n| n >= scored_from).collect();
+        FitQuality::of_samples(prediction, measured, &scored)
+    }
+
+    /// Scores a prediction against measured values on the samples n where
+    /// `scored[n]`.
+    pub fn of_samples(prediction: &[f64], measured: &[f64], scored: &[bool]) -> FitQuality {
         let mut objective = 0.0;
         let mut max_abs: f64 = 0.0;
-        let mut max_abs_sample = scored_from;
+        let mut max_abs_sample = scored.iter().position(|s| *s).unwrap_or(0);
         let mut samples = 0;
-        for (n, (p, m)) in prediction
+        for (n, ((p, m), _)) in prediction
             .iter()
             .zip(measured)
+            .zip(scored)
             .enumerate()
-            .skip(scored_from)
+            .filter(|(_, (_, s))| **s)
         {
             let e = p - m;
             objective += e * e;
@@ -198,8 +264,12 @@ pub struct StartResult {
     pub ws: Vec<f64>,
     /// F on the samples the search used (decimated, after warm-up) [V²].
     pub objective: f64,
+    /// Iterations and cost evaluations of all its runs.
     pub iterations: u64,
     pub cost_evaluations: u64,
+    /// Whether it survived screening and ran to convergence (always, without
+    /// screening).
+    pub polished: bool,
 }
 
 /// A fitted model.
@@ -247,19 +317,76 @@ pub fn fit_modified_inverse_pi_with_progress(
         ws: std::array::from_fn::<f64, DEAD_ZONE_OPERATORS, _>(|j| fit.ws[j]),
         c: fit.c,
         u1max: fit.u1max,
+        rest_cycle: 0.0,
     };
-    let quality = score(
+    let quality = score_samples(
         &mut piezo_models::ModifiedInversePi::new(params),
         y,
         u,
         sample_period,
-        options.warm_up_samples,
+        &options.fitted_samples(y.len()),
     );
     Ok(Fit {
         params,
         quality,
         starts: fit.starts,
         best_start: Some(fit.best_start),
+    })
+}
+
+/// Seed 000's proposed model for given (c, w_s): only its linear part
+/// (a, k, b) fitted, on the samples and with the settings of `options`
+/// (the search settings are not used).
+pub fn modified_inverse_pi_for(
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    options: &FitOptions,
+    c: f64,
+    ws: &[f64],
+) -> Result<Fit<InversePiParams>, FitError> {
+    let layout = PROPOSED.with_rate_dependence(options.rate_dependent);
+    check_signals(y, u, sample_period, options, layout.parameter_count())?;
+    if ws.len() != DEAD_ZONE_OPERATORS {
+        return Err(FitError::InvalidOption("six dead-zone weights are needed"));
+    }
+    let fitted = options.fitted_samples(y.len());
+    let (_, y_max) = range_of(y, &fitted);
+    if y_max <= 0.0 {
+        return Err(FitError::NoPositiveDisplacement(y_max));
+    }
+    let mut problem = SeparableProblem::new(layout, y, u, &fitted, sample_period, y_max);
+    problem.reversing_only = options.reversing_operators_only;
+    let (u1max, solution) =
+        problem
+            .solve(c, ws, options.rss_increase)
+            .ok_or(FitError::Optimizer(format!(
+                "c = {c} and w_s = {ws:?} are unusable"
+            )))?;
+    let (a, k, b) = split_coefficients(layout, &solution.coefficients);
+    let params = InversePiParams {
+        a: std::array::from_fn(|i| a[i]),
+        k,
+        b,
+        ws: std::array::from_fn(|j| ws[j]),
+        c,
+        u1max,
+        // Memories from zero; a caller that knows the record's exercised
+        // rest sets it (`stage`).
+        rest_cycle: 0.0,
+    };
+    let quality = score_samples(
+        &mut piezo_models::ModifiedInversePi::new(params),
+        y,
+        u,
+        sample_period,
+        &fitted,
+    );
+    Ok(Fit {
+        params,
+        quality,
+        starts: Vec::new(),
+        best_start: None,
     })
 }
 
@@ -291,12 +418,12 @@ pub fn fit_traditional_inverse_pi<const D: usize>(
         c: fit.c,
         u1max: fit.u1max,
     };
-    let quality = score(
+    let quality = score_samples(
         &mut TraditionalInversePi::new(params),
         y,
         u,
         sample_period,
-        options.warm_up_samples,
+        &options.fitted_samples(y.len()),
     );
     Ok(Fit {
         params,
@@ -307,8 +434,8 @@ pub fn fit_traditional_inverse_pi<const D: usize>(
 }
 
 /// Fits the classical P-I model (see [`crate::models`]): thresholds evenly
-/// spaced over the range of `y`, weights and offset by linear least squares.
-/// Only `options.warm_up_samples` is used.
+/// spaced over the range of the fitted samples of `y`, weights and offset by
+/// linear least squares. The search settings are not used.
 pub fn fit_classical_pi(
     y: &[f64],
     u: &[f64],
@@ -326,33 +453,47 @@ pub fn fit_classical_pi(
         &linear_only,
         ClassicalPiParams::PARAMETER_COUNT,
     )?;
+    let fitted = options.fitted_samples(y.len());
     // The range of the fitted samples: a start-up transient in the warm-up is
     // not part of the working range.
-    let (low, high) = range(&y[options.warm_up_samples..]);
+    let (low, high) = range_of(y, &fitted);
     let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
-    let scored = &u[options.warm_up_samples..];
-    let solution = solve_least_squares(
-        classical_regressors(&thresholds, y, options.warm_up_samples),
-        scored,
+    let targets: Vec<f64> = selected(u, &fitted);
+    let mut x = masked_classical_regressors(&thresholds, y, &fitted);
+    if options.reversing_operators_only {
+        let reversing = reversing_classical_operators(&thresholds, y, &fitted);
+        for (column, _) in reversing.iter().enumerate().filter(|(_, r)| !**r) {
+            x.column_mut(column).fill(0.0);
+        }
+    }
+    let solution = solve_least_squares_with_intercept_regularized(
+        x,
+        &targets,
+        crate::models::CLASSICAL_OPERATORS,
+        options.rss_increase,
     );
     let params = ClassicalPiParams {
         weights: std::array::from_fn(|i| solution.coefficients[i]),
         thresholds,
         offset: solution.coefficients[crate::models::CLASSICAL_OPERATORS],
     };
-    let quality = score(
-        &mut ClassicalPi::new(params),
-        y,
-        u,
-        sample_period,
-        options.warm_up_samples,
-    );
+    let quality = score_samples(&mut ClassicalPi::new(params), y, u, sample_period, &fitted);
     Ok(Fit {
         params,
         quality,
         starts: Vec::new(),
         best_start: None,
     })
+}
+
+/// The values at the samples where `flags` is set.
+pub(crate) fn selected(values: &[f64], flags: &[bool]) -> Vec<f64> {
+    values
+        .iter()
+        .zip(flags)
+        .filter(|(_, f)| **f)
+        .map(|(v, _)| *v)
+        .collect()
 }
 
 /// The coefficient vector of a layout as (a, k, b); absent parts are zero.
@@ -385,6 +526,18 @@ pub fn score<M: InverseHysteresis>(
     FitQuality::of(&predict(model, y, sample_period), u, scored_from)
 }
 
+/// A model's quality on the samples n where `scored[n]`, run from the
+/// de-energized start through every sample.
+pub fn score_samples<M: InverseHysteresis>(
+    model: &mut M,
+    y: &[f64],
+    u: &[f64],
+    sample_period: f64,
+    scored: &[bool],
+) -> FitQuality {
+    FitQuality::of_samples(&predict(model, y, sample_period), u, scored)
+}
+
 /// The nonlinear and linear parameters of a fitted eq. (3)-(5) model.
 struct RateDependentFit {
     c: f64,
@@ -407,7 +560,16 @@ fn fit_rate_dependent(
     if options.starts == 0 {
         return Err(FitError::InvalidOption("starts must be at least 1"));
     }
-    let (_, y_max) = range(y);
+    if let Some(screening) = options.screening
+        && (screening.kept == 0 || screening.iterations == 0)
+    {
+        return Err(FitError::InvalidOption(
+            "screening must keep at least one start and run at least one iteration",
+        ));
+    }
+    let fitted = options.fitted_samples(y.len());
+    // The working range of eq. (5) is that of the fitted samples.
+    let (_, y_max) = range_of(y, &fitted);
     if y_max <= 0.0 {
         return Err(FitError::NoPositiveDisplacement(y_max));
     }
@@ -415,26 +577,18 @@ fn fit_rate_dependent(
     let m = options.decimation;
     let y_search: Vec<f64> = y.iter().step_by(m).copied().collect();
     let u_search: Vec<f64> = u.iter().step_by(m).copied().collect();
-    let search_warm_up = options.warm_up_samples.div_ceil(m);
-    let search = SeparableProblem::new(
+    let fitted_search: Vec<bool> = fitted.iter().step_by(m).copied().collect();
+    let mut search = SeparableProblem::new(
         layout,
         &y_search,
-        &u_search[search_warm_up..],
+        &u_search,
+        &fitted_search,
         sample_period * m as f64,
-        search_warm_up,
         y_max,
     );
+    search.reversing_only = options.reversing_operators_only;
 
-    let starts: Vec<StartResult> = (0..options.starts)
-        .into_par_iter()
-        .map(|start| {
-            let result = search.run_start(start, options);
-            if let Ok(result) = &result {
-                progress(result);
-            }
-            result
-        })
-        .collect::<Result<_, _>>()?;
+    let starts = run_starts(&search, options, progress)?;
     // Lowest F, ties to the lowest start index (`min_by` keeps the first).
     let best = starts
         .iter()
@@ -445,17 +599,13 @@ fn fit_rate_dependent(
     // The linear part on all samples for the chosen (c, w_s).
     let c = starts[best].c;
     let ws = starts[best].ws.clone();
-    let full = SeparableProblem::new(
-        layout,
-        y,
-        &u[options.warm_up_samples..],
-        sample_period,
-        options.warm_up_samples,
-        y_max,
-    );
-    let (u1max, solution) = full.solve(c, &ws).ok_or(FitError::Optimizer(format!(
-        "the best start (c = {c}) is unusable"
-    )))?;
+    let mut full = SeparableProblem::new(layout, y, u, &fitted, sample_period, y_max);
+    full.reversing_only = options.reversing_operators_only;
+    let (u1max, solution) = full
+        .solve(c, &ws, options.rss_increase)
+        .ok_or(FitError::Optimizer(format!(
+            "the best start (c = {c}) is unusable"
+        )))?;
     Ok(RateDependentFit {
         c,
         ws,
@@ -464,6 +614,97 @@ fn fit_rate_dependent(
         starts,
         best_start: best,
     })
+}
+
+/// Every start of the search, in start order (module comment and
+/// [`Screening`]).
+fn run_starts(
+    search: &SeparableProblem,
+    options: &FitOptions,
+    progress: Progress,
+) -> Result<Vec<StartResult>, FitError> {
+    let Some(screening) = options.screening else {
+        return (0..options.starts)
+            .into_par_iter()
+            .map(|start| {
+                let initial = search.initial_point(start, options.starts, options.seed);
+                let result = search.run(
+                    start,
+                    &initial,
+                    SIMPLEX_STEP,
+                    options.max_iterations,
+                    SIMPLEX_COST_TOLERANCE,
+                );
+                if let Ok(result) = &result {
+                    progress(result);
+                }
+                result
+            })
+            .collect();
+    };
+    let screening_iterations = screening.iterations.min(options.max_iterations);
+    let mut starts: Vec<StartResult> = (0..options.starts)
+        .into_par_iter()
+        .map(|start| {
+            let initial = search.initial_point(start, options.starts, options.seed);
+            let mut result = search.run(
+                start,
+                &initial,
+                SIMPLEX_STEP,
+                screening_iterations,
+                SIMPLEX_COST_TOLERANCE,
+            )?;
+            result.polished = false;
+            Ok(result)
+        })
+        .collect::<Result<_, FitError>>()?;
+    let mut ranking: Vec<usize> = (0..starts.len()).collect();
+    ranking.sort_by(|a, b| {
+        starts[*a]
+            .objective
+            .total_cmp(&starts[*b].objective)
+            .then(a.cmp(b))
+    });
+    for start in ranking.iter().skip(screening.kept) {
+        progress(&starts[*start]);
+    }
+    let remaining = options.max_iterations - screening_iterations;
+    let polished: Vec<StartResult> = ranking
+        .iter()
+        .take(screening.kept)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|&start| {
+            let screened = &starts[start];
+            let mut point = vec![screened.c.ln()];
+            point.extend(to_hyperspherical(&screened.ws));
+            let tolerance = (screening.relative_tolerance * screened.objective / search.reference)
+                .max(SIMPLEX_COST_TOLERANCE);
+            let mut result = if remaining > 0 {
+                search.run(start, &point, POLISH_SIMPLEX_STEP, remaining, tolerance)?
+            } else {
+                screened.clone()
+            };
+            // The polished run starts where screening stopped: never worse.
+            if result.objective > screened.objective {
+                result.c = screened.c;
+                result.ws.clone_from(&screened.ws);
+                result.objective = screened.objective;
+            }
+            result.initial_c = screened.initial_c;
+            result.initial_ws.clone_from(&screened.initial_ws);
+            result.iterations += screened.iterations;
+            result.cost_evaluations += screened.cost_evaluations;
+            result.polished = true;
+            progress(&result);
+            Ok(result)
+        })
+        .collect::<Result<_, FitError>>()?;
+    for result in polished {
+        let start = result.start;
+        starts[start] = result;
+    }
+    Ok(starts)
 }
 
 fn check_signals(
@@ -497,11 +738,12 @@ fn check_signals(
     // At least twice as many fitted samples as parameters, so that F measures
     // more than the freedom of the model.
     let minimum = 2 * parameters;
-    let m = options.decimation;
-    let fitted = y
-        .len()
-        .div_ceil(m)
-        .saturating_sub(options.warm_up_samples.div_ceil(m));
+    let fitted = options
+        .fitted_samples(y.len())
+        .iter()
+        .step_by(options.decimation)
+        .filter(|f| **f)
+        .count();
     if fitted < minimum {
         return Err(FitError::TooFewSamples {
             found: fitted,
@@ -519,43 +761,56 @@ fn range(values: &[f64]) -> (f64, f64) {
         })
 }
 
+/// (min, max) of the values at the samples where `flags` is set.
+pub(crate) fn range_of(values: &[f64], flags: &[bool]) -> (f64, f64) {
+    range(&selected(values, flags))
+}
+
 /// The search problem over (ln c, φ_1…φ_{m−1}) on one record.
 #[derive(Clone, Copy)]
 struct SeparableProblem<'a> {
     layout: RateDependentLayout,
-    /// Displacement, from the first (warm-up) sample on.
+    /// Displacement, every sample (the operators run through all).
     y: &'a [f64],
-    /// Voltage of the scored samples only.
-    u_scored: &'a [f64],
+    /// Voltage, every sample.
+    u: &'a [f64],
+    /// Which samples are fitted.
+    fitted: &'a [bool],
     sample_period: f64,
-    scored_from: usize,
     /// Upper end of the working range for u1max (eq. 5).
     y_max: f64,
-    /// F_0 = Σ (u − ū)² over the scored samples (the cost's unit).
+    /// F_0 = Σ (u − ū)² over the fitted samples (the cost's unit).
     reference: f64,
+    /// Number of fitted samples.
+    rows: usize,
+    /// Only operators that reverse get a weight.
+    reversing_only: bool,
 }
 
 impl<'a> SeparableProblem<'a> {
     fn new(
         layout: RateDependentLayout,
         y: &'a [f64],
-        u_scored: &'a [f64],
+        u: &'a [f64],
+        fitted: &'a [bool],
         sample_period: f64,
-        scored_from: usize,
         y_max: f64,
     ) -> Self {
-        let mean = u_scored.iter().sum::<f64>() / u_scored.len() as f64;
-        let spread: f64 = u_scored.iter().map(|u| (u - mean) * (u - mean)).sum();
+        let targets = selected(u, fitted);
+        let mean = targets.iter().sum::<f64>() / targets.len().max(1) as f64;
+        let spread: f64 = targets.iter().map(|u| (u - mean) * (u - mean)).sum();
         SeparableProblem {
             layout,
             y,
-            u_scored,
+            u,
+            fitted,
             sample_period,
-            scored_from,
             y_max,
             // A constant voltage would make every cost 0/0; any positive unit
             // keeps the minimiser.
             reference: if spread > 0.0 { spread } else { 1.0 },
+            rows: targets.len(),
+            reversing_only: false,
         }
     }
 
@@ -564,9 +819,9 @@ impl<'a> SeparableProblem<'a> {
         (theta[0].exp(), from_hyperspherical(&theta[1..]))
     }
 
-    /// u1max (eq. 5) and the linear least-squares solution for (c, w_s); None
-    /// when they are unusable.
-    fn solve(&self, c: f64, ws: &[f64]) -> Option<(f64, LinearSolution)> {
+    /// The dead-zone thresholds and u1max (eq. 5) of (c, w_s); None when they
+    /// are unusable.
+    fn thresholds(&self, c: f64, ws: &[f64]) -> Option<f64> {
         if !(c.is_finite() && c > 0.0) || ws.iter().any(|w| !w.is_finite()) {
             return None;
         }
@@ -577,29 +832,83 @@ impl<'a> SeparableProblem<'a> {
             .map(|p| p * c)
             .collect();
         let u1max = u1max_for(ws, &thresholds, self.y_max);
-        if !u1max.is_finite() {
-            return None;
-        }
-        let x: DMatrix<f64> = rate_dependent_regressors(
+        u1max.is_finite().then_some(u1max)
+    }
+
+    /// u1max (eq. 5) and the linear least-squares solution for (c, w_s) by
+    /// QR (the final, accurate solve), regularised by `rss_increase`; None
+    /// when they are unusable.
+    fn solve(&self, c: f64, ws: &[f64], rss_increase: f64) -> Option<(f64, LinearSolution)> {
+        let u1max = self.thresholds(c, ws)?;
+        let mut x: DMatrix<f64> = masked_rate_dependent_regressors(
             self.layout,
             c,
             ws,
             u1max,
             self.y,
             self.sample_period,
-            self.scored_from,
+            self.fitted,
         );
-        let solution = solve_least_squares(x, self.u_scored);
+        for column in self.inactive_columns(c, ws, u1max) {
+            x.column_mut(column).fill(0.0);
+        }
+        let targets = selected(self.u, self.fitted);
+        let solution = match self.layout.intercept_column() {
+            Some(intercept) => {
+                solve_least_squares_with_intercept_regularized(x, &targets, intercept, rss_increase)
+            }
+            None => solve_least_squares_regularized(x, &targets, rss_increase),
+        };
         solution
             .residual_sum_of_squares
             .is_finite()
             .then_some((u1max, solution))
     }
 
+    /// F for (c, w_s) by the normal equations and a direct sum of the
+    /// residuals (`least_squares::NormalEquations`): the search's cost,
+    /// several times cheaper than QR.
+    fn objective(&self, c: f64, ws: &[f64]) -> Option<f64> {
+        let u1max = self.thresholds(c, ws)?;
+        let mut normal = NormalEquations::new(self.layout.linear_columns(), self.rows);
+        for_each_rate_dependent_row(
+            self.layout,
+            c,
+            ws,
+            u1max,
+            self.y,
+            self.sample_period,
+            self.fitted,
+            |n, x| normal.add_row(x, self.u[n]),
+        );
+        let mut active = vec![true; self.layout.linear_columns()];
+        for column in self.inactive_columns(c, ws, u1max) {
+            active[column] = false;
+        }
+        let theta = normal.solve_with(&active)?;
+        let residual_sum_of_squares = normal.residual_sum_of_squares(&theta);
+        residual_sum_of_squares
+            .is_finite()
+            .then_some(residual_sum_of_squares)
+    }
+
+    /// The columns of the operators that get no weight (none unless
+    /// `reversing_only`).
+    fn inactive_columns(&self, c: f64, ws: &[f64], u1max: f64) -> Vec<usize> {
+        if !self.reversing_only {
+            return Vec::new();
+        }
+        let reversing = reversing_operators(self.layout, c, ws, u1max, self.y, self.fitted);
+        (0..BACKLASH_OPERATORS)
+            .filter(|&i| !reversing[i])
+            .flat_map(|i| self.layout.operator_columns(i))
+            .collect()
+    }
+
     fn normalised_cost(&self, theta: &[f64]) -> f64 {
         let (c, ws) = self.decode(theta);
-        match self.solve(c, &ws) {
-            Some((_, solution)) => solution.residual_sum_of_squares / self.reference,
+        match self.objective(c, &ws) {
+            Some(objective) => objective / self.reference,
             None => UNUSABLE_COST,
         }
     }
@@ -622,28 +931,37 @@ impl<'a> SeparableProblem<'a> {
         theta
     }
 
-    fn run_start(&self, start: usize, options: &FitOptions) -> Result<StartResult, FitError> {
-        let initial = self.initial_point(start, options.starts, options.seed);
-        let mut simplex = vec![initial.clone()];
+    /// Nelder-Mead from `initial` with simplex edge `step`, at most
+    /// `max_iterations` iterations, until the spread of the simplex's
+    /// normalised costs is below `tolerance`.
+    fn run(
+        &self,
+        start: usize,
+        initial: &[f64],
+        step: f64,
+        max_iterations: u64,
+        tolerance: f64,
+    ) -> Result<StartResult, FitError> {
+        let mut simplex = vec![initial.to_vec()];
         for i in 0..initial.len() {
-            let mut vertex = initial.clone();
-            vertex[i] += SIMPLEX_STEP;
+            let mut vertex = initial.to_vec();
+            vertex[i] += step;
             simplex.push(vertex);
         }
         let solver = NelderMead::new(simplex)
-            .with_sd_tolerance(SIMPLEX_COST_TOLERANCE)
+            .with_sd_tolerance(tolerance)
             .map_err(|e| FitError::Optimizer(e.to_string()))?;
         let result = Executor::new(*self, solver)
-            .configure(|state| state.max_iters(options.max_iterations))
+            .configure(|state| state.max_iters(max_iterations))
             .run()
             .map_err(|e| FitError::Optimizer(e.to_string()))?;
         let state = result.state();
         let best = state
             .get_best_param()
             .cloned()
-            .unwrap_or_else(|| initial.clone());
+            .unwrap_or_else(|| initial.to_vec());
         let (c, ws) = self.decode(&best);
-        let (initial_c, initial_ws) = self.decode(&initial);
+        let (initial_c, initial_ws) = self.decode(initial);
         Ok(StartResult {
             start,
             initial_c,
@@ -658,6 +976,7 @@ impl<'a> SeparableProblem<'a> {
                 .get("cost_count")
                 .copied()
                 .unwrap_or(0),
+            polished: true,
         })
     }
 }

@@ -124,6 +124,23 @@ impl Bounds {
     fn range(&self, i: usize) -> f64 {
         self.upper[i] - self.lower[i]
     }
+
+    /// Whether every coordinate of `point` lies in its interval.
+    pub fn contains(&self, point: &[f64]) -> bool {
+        point
+            .iter()
+            .zip(self.lower.iter().zip(&self.upper))
+            .all(|(v, (lo, hi))| *lo <= *v && *v <= *hi)
+    }
+
+    /// `point` with every coordinate moved into its interval.
+    pub fn clamp(&self, point: &[f64]) -> Vec<f64> {
+        point
+            .iter()
+            .zip(self.lower.iter().zip(&self.upper))
+            .map(|(v, (lo, hi))| v.clamp(*lo, *hi))
+            .collect()
+    }
 }
 
 /// The outcome of a search.

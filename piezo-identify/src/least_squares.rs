@@ -21,7 +21,7 @@
 //! sum of squares with no cancellation, so F is accurate even when it is
 //! 10⁻²⁰ of ‖u‖² (exact recovery).
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DMatrixView, DVector, DVectorView};
 
 /// Singular values of the scaled R below this fraction of the largest are
 /// treated as zero.
@@ -40,7 +40,37 @@ pub struct LinearSolution {
 
 /// Solves min ‖Xθ − u‖² (module comment). `x` has one row per sample and at
 /// most as many columns as rows.
-pub fn solve_least_squares(mut x: DMatrix<f64>, u: &[f64]) -> LinearSolution {
+pub fn solve_least_squares(x: DMatrix<f64>, u: &[f64]) -> LinearSolution {
+    solve_scaled(x, u, 0.0)
+}
+
+/// [`solve_least_squares`] with Tikhonov regularisation of the column-scaled
+/// coefficients, λ‖θ_s‖², λ the largest for which the residual sum of
+/// squares grows by at most the fraction `rss_increase` (the discrepancy
+/// principle).
+///
+/// Why: when two regressors are nearly collinear (two backlash operators
+/// that barely move over the fitted samples, with the constant), least
+/// squares gives them huge opposite weights that cancel on the samples and
+/// explain a trace of their residual. Anywhere the two differ more, outside
+/// the fitted range or after a small drift of the state, the cancellation
+/// fails and the model is off by the weights' size. Among all coefficient
+/// sets that fit the samples equally well (within `rss_increase`, 10⁻³: the
+/// RMS within 0.05 %), the regularised solve returns the one with the
+/// smallest scaled weights; a direction the data support strongly keeps its
+/// weight, one that merely cancels loses it. With an exact fit (F = 0) λ is
+/// 0 and nothing changes.
+pub fn solve_least_squares_regularized(
+    x: DMatrix<f64>,
+    u: &[f64],
+    rss_increase: f64,
+) -> LinearSolution {
+    solve_scaled(x, u, rss_increase)
+}
+
+/// Column-scaled QR, SVD of R; Tikhonov with the discrepancy principle when
+/// `rss_increase` > 0 (module comment and the two callers).
+fn solve_scaled(mut x: DMatrix<f64>, u: &[f64], rss_increase: f64) -> LinearSolution {
     let (rows, columns) = x.shape();
     assert_eq!(rows, u.len(), "one target per regressor row");
     assert!(rows >= columns, "least squares needs rows >= columns");
@@ -64,15 +94,58 @@ pub fn solve_least_squares(mut x: DMatrix<f64>, u: &[f64]) -> LinearSolution {
     let largest = svd.singular_values.max();
     let floor = largest * RELATIVE_SINGULAR_VALUE_FLOOR;
     let rank = svd.singular_values.iter().filter(|s| **s > floor).count();
-    let scaled_theta = if largest > 0.0 {
-        svd.solve(&head, floor)
-            .expect("U and V were computed, so the SVD can solve")
-    } else {
-        DVector::zeros(columns)
-    };
-
     // ‖u − Xθ‖² = ‖Qᵀu − [R; 0]θ‖²: the tail of Qᵀu plus what the head misses.
     let tail: f64 = qt_u.rows(columns, rows - columns).norm_squared();
+    let scaled_theta = if largest <= 0.0 {
+        DVector::zeros(columns)
+    } else if rss_increase > 0.0 {
+        let u_svd = svd.u.as_ref().expect("U was computed");
+        let v_t = svd.v_t.as_ref().expect("V was computed");
+        let components = u_svd.tr_mul(&head);
+        let sigma = &svd.singular_values;
+        // Head residual for λ: Σ (λ/(σ² + λ))²·c² over the kept directions,
+        // c² for the dropped ones.
+        let residual = |lambda: f64| -> f64 {
+            sigma
+                .iter()
+                .zip(components.iter())
+                .map(|(s, c)| {
+                    if *s > floor {
+                        (lambda / (s * s + lambda) * c).powi(2)
+                    } else {
+                        c * c
+                    }
+                })
+                .sum::<f64>()
+        };
+        let unregularised = tail + residual(0.0);
+        let allowed = (1.0 + rss_increase) * unregularised;
+        // The residual grows with λ: bisect ln λ between 10⁻³⁰ and 1 of σ_max².
+        let (mut low, mut high) = ((1e-30 * largest * largest).ln(), (largest * largest).ln());
+        if tail + residual(low.exp()) > allowed {
+            high = low;
+        }
+        for _ in 0..100 {
+            let middle = 0.5 * (low + high);
+            if tail + residual(middle.exp()) <= allowed {
+                low = middle;
+            } else {
+                high = middle;
+            }
+        }
+        let lambda = if high == low { 0.0 } else { low.exp() };
+        let mut theta = DVector::zeros(columns);
+        for (i, (s, c)) in sigma.iter().zip(components.iter()).enumerate() {
+            if *s > floor {
+                theta += v_t.row(i).transpose() * (s * c / (s * s + lambda));
+            }
+        }
+        theta
+    } else {
+        svd.solve(&head, floor)
+            .expect("U and V were computed, so the SVD can solve")
+    };
+
     let head_miss = (&head - &r * &scaled_theta).norm_squared();
     let coefficients = scaled_theta
         .iter()
@@ -83,6 +156,224 @@ pub fn solve_least_squares(mut x: DMatrix<f64>, u: &[f64]) -> LinearSolution {
         coefficients,
         residual_sum_of_squares: tail + head_miss,
         rank,
+    }
+}
+
+/// A centred column whose norm is below this fraction of the column's own
+/// norm is constant up to rounding, and counts as zero.
+const CONSTANT_COLUMN_TOLERANCE: f64 = 1e-10;
+
+/// Solves min ‖Xθ − u‖² where column `intercept` of X is the constant 1:
+/// the other columns and u are centred (their means over the rows taken
+/// out), solved by [`solve_least_squares`], and the intercept follows from
+/// the means.
+///
+/// Why: a column that is constant over the rows (a hysteresis operator that
+/// did not move on the fitted samples) is the intercept again. The plain
+/// solve splits the constant among all such columns, minimum-norm in scaled
+/// units, and each then carries a weight the data never tested: outside the
+/// fitted range, where the operator moves again, that weight bends the
+/// model by an amount no sample justified. Centred, such a column is zero
+/// and gets no weight; the residual is the same.
+pub fn solve_least_squares_with_intercept(
+    x: DMatrix<f64>,
+    u: &[f64],
+    intercept: usize,
+) -> LinearSolution {
+    solve_centred(x, u, intercept, 0.0)
+}
+
+/// [`solve_least_squares_with_intercept`] regularised as
+/// [`solve_least_squares_regularized`] (the intercept is not penalised).
+pub fn solve_least_squares_with_intercept_regularized(
+    x: DMatrix<f64>,
+    u: &[f64],
+    intercept: usize,
+    rss_increase: f64,
+) -> LinearSolution {
+    solve_centred(x, u, intercept, rss_increase)
+}
+
+fn solve_centred(
+    x: DMatrix<f64>,
+    u: &[f64],
+    intercept: usize,
+    rss_increase: f64,
+) -> LinearSolution {
+    let (rows, columns) = x.shape();
+    assert!(intercept < columns, "the intercept is one of the columns");
+    assert_eq!(rows, u.len(), "one target per regressor row");
+    let others: Vec<usize> = (0..columns).filter(|&j| j != intercept).collect();
+    let n = rows.max(1) as f64;
+    let u_mean = u.iter().sum::<f64>() / n;
+    let means: Vec<f64> = others.iter().map(|&j| x.column(j).sum() / n).collect();
+    let mut centred = DMatrix::zeros(rows, others.len());
+    for (k, (&j, mean)) in others.iter().zip(&means).enumerate() {
+        let original = x.column(j).norm();
+        let mut column = centred.column_mut(k);
+        column.copy_from(&x.column(j));
+        column.add_scalar_mut(-mean);
+        if column.norm() <= CONSTANT_COLUMN_TOLERANCE * original {
+            column.fill(0.0);
+        }
+    }
+    let targets: Vec<f64> = u.iter().map(|v| v - u_mean).collect();
+    let solution = solve_scaled(centred, &targets, rss_increase);
+    let mut coefficients = vec![0.0; columns];
+    let mut constant = u_mean;
+    for (k, &j) in others.iter().enumerate() {
+        coefficients[j] = solution.coefficients[k];
+        constant -= solution.coefficients[k] * means[k];
+    }
+    coefficients[intercept] = constant;
+    LinearSolution {
+        coefficients,
+        residual_sum_of_squares: solution.residual_sum_of_squares,
+        rank: solution.rank + 1,
+    }
+}
+
+/// Eigenvalues of the scaled XᵀX below this fraction of the largest are
+/// dropped when Cholesky fails ([`NormalEquations::solve`]).
+pub const GRAM_EIGENVALUE_FLOOR: f64 = 1e-12;
+
+/// Rows [`NormalEquations`] gathers before adding them to XᵀX in one
+/// matrix product.
+const NORMAL_EQUATION_BLOCK: usize = 256;
+
+/// XᵀX and Xᵀu accumulated row by row, for the many cheap solves of a search.
+///
+/// The separable search solves a least-squares problem for every trial
+/// (c, w_s). QR on the tall X costs 2·N·p² flops and a matrix of N·p values
+/// per trial; the normal equations cost N·p² (added in blocks of rows by
+/// nalgebra's matrix product, which runs the vectorised kernels of
+/// `matrixmultiply`) and keep only a block. Their weakness, a condition
+/// number squared, costs accuracy in θ along the nearly collinear
+/// directions, where X barely changes the fit: the fitted values, and so the
+/// residual, are off by about ε·κ(X)·‖u‖ (κ(X) ≤ 10⁸ for the column-scaled
+/// regressors here: a relative error of 10⁻¹⁶ in F at worst). The residual is
+/// therefore not read from the normal equations (u·u − θ·Xᵀu cancels) but
+/// summed directly ([`NormalEquations::residual_sum_of_squares`]). When the
+/// scaled XᵀX is not numerically positive definite (κ(X)² beyond 10¹⁶),
+/// [`NormalEquations::solve`] truncates its eigendecomposition instead.
+#[derive(Clone, Debug)]
+pub struct NormalEquations {
+    columns: usize,
+    gram: DMatrix<f64>,
+    rhs: DVector<f64>,
+    /// Every row added, one after the other (Xᵀ column-major), kept for the
+    /// residual.
+    rows: Vec<f64>,
+    targets: Vec<f64>,
+    /// Rows already in `gram` and `rhs`.
+    summed: usize,
+}
+
+impl NormalEquations {
+    /// Empty sums for `columns` regressors; `capacity` rows are expected.
+    pub fn new(columns: usize, capacity: usize) -> Self {
+        NormalEquations {
+            columns,
+            gram: DMatrix::zeros(columns, columns),
+            rhs: DVector::zeros(columns),
+            rows: Vec::with_capacity(columns * capacity),
+            targets: Vec::with_capacity(capacity),
+            summed: 0,
+        }
+    }
+
+    /// Adds one row x (`columns` values) with target u.
+    #[inline]
+    pub fn add_row(&mut self, x: &[f64], u: f64) {
+        self.rows.extend_from_slice(&x[..self.columns]);
+        self.targets.push(u);
+        if self.targets.len() - self.summed == NORMAL_EQUATION_BLOCK {
+            self.flush();
+        }
+    }
+
+    /// Adds the rows not yet summed to XᵀX and Xᵀu.
+    fn flush(&mut self) {
+        let (p, k) = (self.columns, self.targets.len() - self.summed);
+        if k == 0 {
+            return;
+        }
+        let block = &self.rows[self.summed * p..];
+        let transposed = DMatrixView::from_slice(block, p, k);
+        let rows = DMatrixView::from_slice_with_strides(block, k, p, p, 1);
+        self.gram.gemm(1.0, &transposed, &rows, 1.0);
+        let targets = DVectorView::from_slice(&self.targets[self.summed..], k);
+        self.rhs.gemv(1.0, &transposed, &targets, 1.0);
+        self.summed += k;
+    }
+
+    /// ‖Xθ − u‖² summed over the rows (not from the normal equations, which
+    /// cancel: the type's comment).
+    pub fn residual_sum_of_squares(&self, theta: &[f64]) -> f64 {
+        self.rows
+            .chunks_exact(self.columns)
+            .zip(&self.targets)
+            .map(|(x, u)| {
+                let fitted: f64 = x.iter().zip(theta).map(|(x, t)| x * t).sum();
+                (u - fitted).powi(2)
+            })
+            .sum()
+    }
+
+    /// Rows added so far.
+    pub fn rows(&self) -> usize {
+        self.targets.len()
+    }
+
+    /// θ minimising ‖Xθ − u‖², by Cholesky of the column-scaled XᵀX; a column
+    /// that is zero throughout gets 0. When the scaled XᵀX is not positive
+    /// definite in floating point (κ(X)² beyond 10¹⁶: columns nearly
+    /// collinear), by its eigendecomposition with eigenvalues below
+    /// [`GRAM_EIGENVALUE_FLOOR`] of the largest dropped, the minimum-norm
+    /// solution on the rest (a truncated SVD of X at 10⁻⁶·σ_max, coarser than
+    /// [`solve_least_squares`]'s 10⁻¹², which is why the search's final
+    /// solve is by QR). None when θ is not finite.
+    pub fn solve(&mut self) -> Option<Vec<f64>> {
+        self.solve_with(&vec![true; self.columns])
+    }
+
+    /// [`NormalEquations::solve`] on the columns where `active` is set only
+    /// (the others get 0).
+    pub fn solve_with(&mut self, active: &[bool]) -> Option<Vec<f64>> {
+        self.flush();
+        let used: Vec<usize> = (0..self.columns)
+            .filter(|&i| active[i] && self.gram[(i, i)] > 0.0)
+            .collect();
+        let scales: Vec<f64> = used.iter().map(|&i| self.gram[(i, i)].sqrt()).collect();
+        let k = used.len();
+        let scaled = DMatrix::from_fn(k, k, |a, b| {
+            self.gram[(used[a], used[b])] / (scales[a] * scales[b])
+        });
+        let rhs = DVector::from_fn(k, |a, _| self.rhs[used[a]] / scales[a]);
+        let theta = match scaled.clone().cholesky() {
+            Some(cholesky) => cholesky.solve(&rhs),
+            None => {
+                let eigen = scaled.symmetric_eigen();
+                let largest = eigen.eigenvalues.max();
+                let floor = largest * GRAM_EIGENVALUE_FLOOR;
+                let mut theta = DVector::zeros(k);
+                for (j, &lambda) in eigen.eigenvalues.iter().enumerate() {
+                    if lambda > floor {
+                        let v = eigen.eigenvectors.column(j);
+                        theta += v * (v.dot(&rhs) / lambda);
+                    }
+                }
+                theta
+            }
+        };
+        if theta.iter().any(|t| !t.is_finite()) {
+            return None;
+        }
+        let mut coefficients = vec![0.0; self.columns];
+        for (a, &i) in used.iter().enumerate() {
+            coefficients[i] = theta[a] / scales[a];
+        }
+        Some(coefficients)
     }
 }
 
@@ -137,5 +428,117 @@ mod tests {
         assert!((solution.coefficients[1] - 1.0).abs() < 1e-12);
         assert_eq!(solution.coefficients[2], 0.0);
         assert!(solution.residual_sum_of_squares < 1e-20);
+    }
+
+    #[test]
+    fn a_constant_column_gets_no_weight_beside_an_intercept() {
+        // Columns: intercept, a ramp, a column constant at 5 (an operator
+        // that never moved). The plain solve shares the constant between the
+        // intercept and that column; with the intercept it stays there.
+        let n = 50;
+        let x = DMatrix::from_fn(n, 3, |i, j| match j {
+            0 => 1.0,
+            1 => i as f64 * 0.1,
+            _ => 5.0,
+        });
+        let u: Vec<f64> = (0..n).map(|i| 2.0 + 0.3 * i as f64 * 0.1).collect();
+        let plain = solve_least_squares(x.clone(), &u);
+        assert!(plain.coefficients[2].abs() > 0.01, "{plain:?}");
+        let centred = solve_least_squares_with_intercept(x, &u, 0);
+        assert_eq!(centred.coefficients[2], 0.0);
+        assert!((centred.coefficients[0] - 2.0).abs() < 1e-12);
+        assert!((centred.coefficients[1] - 0.3).abs() < 1e-12);
+        assert!(centred.residual_sum_of_squares < 1e-20);
+        assert!((plain.residual_sum_of_squares - centred.residual_sum_of_squares).abs() < 1e-20);
+    }
+
+    #[test]
+    fn regularisation_drops_weights_that_only_cancel() {
+        // Two regressors equal to the ramp t up to traces of 10⁻⁵ that
+        // differ; u = t + noise + 1.5·10⁻⁵ of the first trace. Least squares
+        // explains that last sliver with weights 1.5 and −0.5 (their
+        // difference multiplies the traces); it is 0.02 % of the residual,
+        // so the regularised solve shares the ramp evenly instead.
+        let n = 400;
+        let t = |i: usize| i as f64 / n as f64;
+        let trace = |i: usize, k: f64| ((i as f64) * k).sin();
+        let x = DMatrix::from_fn(n, 3, |i, j| match j {
+            0 => 1.0,
+            1 => t(i) + 1e-5 * trace(i, 0.37),
+            _ => t(i) + 1e-5 * trace(i, 0.91),
+        });
+        let u: Vec<f64> = (0..n)
+            .map(|i| t(i) + 1e-3 * trace(i, 2.3) + 1.5e-5 * trace(i, 0.37))
+            .collect();
+        let plain = solve_least_squares_with_intercept(x.clone(), &u, 0);
+        let regular = solve_least_squares_with_intercept_regularized(x, &u, 0, 1e-3);
+        assert!(plain.coefficients[1] > 1.2, "{plain:?}");
+        let [_, w1, w2] = [
+            regular.coefficients[0],
+            regular.coefficients[1],
+            regular.coefficients[2],
+        ];
+        assert!((w1 - w2).abs() < 0.2, "{regular:?}");
+        assert!((w1 + w2 - 1.0).abs() < 1e-2, "{regular:?}");
+        assert!(
+            regular.residual_sum_of_squares <= 1.001 * plain.residual_sum_of_squares * (1.0 + 1e-9)
+        );
+        // An exact fit is not regularised.
+        let exact: Vec<f64> = (0..n).map(|i| 2.0 + 3.0 * t(i)).collect();
+        let x = DMatrix::from_fn(n, 2, |i, j| if j == 0 { 1.0 } else { t(i) });
+        let fit = solve_least_squares_regularized(x, &exact, 1e-3);
+        assert!((fit.coefficients[1] - 3.0).abs() < 1e-10, "{fit:?}");
+    }
+
+    #[test]
+    fn normal_equations_agree_with_qr() {
+        let n = 300;
+        let x = DMatrix::from_fn(n, 4, |i, j| {
+            let t = i as f64 * 0.02;
+            match j {
+                0 => 1.0,
+                1 => 1e3 * t,
+                2 => 0.0,
+                _ => (t * 1.7).sin() * 1e-2,
+            }
+        });
+        let u: Vec<f64> = (0..n).map(|i| (i as f64 * 0.11).cos() + 0.3).collect();
+        let mut normal = NormalEquations::new(4, n);
+        for i in 0..n {
+            let row: Vec<f64> = (0..4).map(|j| x[(i, j)]).collect();
+            normal.add_row(&row, u[i]);
+        }
+        assert_eq!(normal.rows(), n);
+        let theta = normal.solve().unwrap();
+        let qr = solve_least_squares(x.clone(), &u);
+        assert_eq!(theta[2], 0.0);
+        let rss = |t: &[f64]| -> f64 {
+            (0..n)
+                .map(|i| {
+                    let fitted: f64 = (0..4).map(|j| x[(i, j)] * t[j]).sum();
+                    (u[i] - fitted).powi(2)
+                })
+                .sum()
+        };
+        assert!(
+            (rss(&theta) - qr.residual_sum_of_squares).abs() < 1e-12 * qr.residual_sum_of_squares
+        );
+        assert!((normal.residual_sum_of_squares(&theta) - rss(&theta)).abs() < 1e-12 * rss(&theta));
+    }
+
+    #[test]
+    fn normal_equations_give_the_minimum_norm_solution_of_a_singular_system() {
+        // Two identical columns: Cholesky fails, the weight is shared evenly.
+        let mut normal = NormalEquations::new(2, 10);
+        for i in 0..10 {
+            let v = i as f64 + 1.0;
+            normal.add_row(&[v, v], 2.0 * v);
+        }
+        let theta = normal.solve().unwrap();
+        assert!(
+            (theta[0] - 1.0).abs() < 1e-12 && (theta[1] - 1.0).abs() < 1e-12,
+            "{theta:?}"
+        );
+        assert!(normal.residual_sum_of_squares(&theta) < 1e-20);
     }
 }

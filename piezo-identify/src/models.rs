@@ -196,9 +196,11 @@ impl ClassicalPiParams {
     /// Number of identified parameters: the weights and the offset.
     pub const PARAMETER_COUNT: usize = CLASSICAL_OPERATORS + 1;
 
-    /// r_i = i·span/10, i = 0…9, over a displacement range `span` [µm].
+    /// r_i = i·span/20, i = 0…9, over a range `span` of the model's input:
+    /// a loop over the whole range moves every operator (an operator moves
+    /// once the input has travelled 2r from its last turning point).
     pub fn evenly_spaced_thresholds(span: f64) -> [f64; CLASSICAL_OPERATORS] {
-        std::array::from_fn(|i| i as f64 * span / CLASSICAL_OPERATORS as f64)
+        std::array::from_fn(|i| i as f64 * span / (2 * CLASSICAL_OPERATORS) as f64)
     }
 }
 
@@ -281,6 +283,7 @@ mod tests {
             c: 1.1,
             u1max: 12.0,
             a: [1e-4, -0.01, 0.3, 0.2],
+            rest_cycle: 0.0,
         };
         let y = sine(500);
         let direct = inverse_pi_trajectory(&params, &y, 1e-3);
@@ -315,6 +318,11 @@ mod tests {
             weights,
             thresholds: ClassicalPiParams::evenly_spaced_thresholds(10.0),
             offset: 0.5,
+        };
+        assert_eq!(params.thresholds[3], 1.5);
+        let params = ClassicalPiParams {
+            thresholds: ClassicalPiParams::evenly_spaced_thresholds(20.0),
+            ..params
         };
         assert_eq!(params.thresholds[3], 3.0);
         let u = predict(&mut ClassicalPi::new(params), &[1.0, 5.0, 4.0, -2.0], 1.0);

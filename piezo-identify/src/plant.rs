@@ -269,20 +269,31 @@ pub enum RecordAxis {
 /// pairs the command held over [t_n, t_n+1] (limited to `command_max`, the
 /// amplifier's input range: beyond it the stage does not respond) with the
 /// displacement at t_n+1, as [`crate::compare::synthetic_plant_record`] does.
+///
+/// With `exercise` > 0 s the record starts with one exercise cycle of that
+/// length, u = 5(1 − cos 2πt/T) V (0 → 10 → 0 V), before eq. (6): the
+/// cycle a lab runs to bring a stack onto its working loop. The first
+/// `exercise_samples(exercise, sample_rate)` samples are that cycle.
 pub fn eq6_record(
     plant: &PlantFmu,
     axis: RecordAxis,
     duration: f64,
     sample_rate: f64,
     command_max: f64,
+    exercise: f64,
 ) -> Result<Record, PlantError> {
     let mut session = plant.session()?;
     let h = 1.0 / sample_rate;
-    let samples = (duration * sample_rate).round() as usize;
+    let warm_up = exercise_samples(exercise, sample_rate);
+    let samples = (duration * sample_rate).round() as usize + warm_up;
     let mut input = Vec::with_capacity(samples);
     let mut output = Vec::with_capacity(samples);
     for n in 0..samples {
-        let u = eq6_command(n as f64 * h);
+        let u = if n < warm_up {
+            5.0 * (1.0 - (std::f64::consts::TAU * n as f64 * h / exercise).cos())
+        } else {
+            eq6_command((n - warm_up) as f64 * h)
+        };
         let commands = match axis {
             RecordAxis::Y => [u, 0.0, 0.0],
             RecordAxis::X => [0.0, u, u],
@@ -299,6 +310,11 @@ pub fn eq6_record(
         output,
         sample_period: h,
     })
+}
+
+/// Samples of an exercise cycle of `exercise` s at `sample_rate`.
+pub fn exercise_samples(exercise: f64, sample_rate: f64) -> usize {
+    (exercise * sample_rate).round() as usize
 }
 
 /// Seed 001 §5.2's identification run: a sine of `frequency` [Hz] between 0

@@ -67,6 +67,11 @@ impl RateDependentLayout {
         self.cubic_columns() + self.rate_columns() + BACKLASH_OPERATORS
     }
 
+    /// The constant column (a4 of the cubic), when there is one.
+    pub fn intercept_column(&self) -> Option<usize> {
+        self.cubic.then_some(3)
+    }
+
     /// 4 with the cubic, else 0.
     pub fn cubic_columns(&self) -> usize {
         if self.cubic { 4 } else { 0 }
@@ -101,15 +106,56 @@ pub fn rate_dependent_regressors(
     sample_period: f64,
     scored_from: usize,
 ) -> DMatrix<f64> {
+    let fitted: Vec<bool> = (0..y.len()).map(|n| n >= scored_from).collect();
+    masked_rate_dependent_regressors(layout, c, ws, u1max, y, sample_period, &fitted)
+}
+
+/// As [`rate_dependent_regressors`], with a row for every sample n where
+/// `fitted[n]` (the operators run through every sample).
+pub fn masked_rate_dependent_regressors(
+    layout: RateDependentLayout,
+    c: f64,
+    ws: &[f64],
+    u1max: f64,
+    y: &[f64],
+    sample_period: f64,
+    fitted: &[bool],
+) -> DMatrix<f64> {
+    let rows = fitted.iter().filter(|f| **f).count();
+    let columns = layout.linear_columns();
+    let mut matrix = DMatrix::zeros(rows, columns);
+    let data = matrix.as_mut_slice();
+    let mut row = 0;
+    for_each_rate_dependent_row(layout, c, ws, u1max, y, sample_period, fitted, |_, x| {
+        for (j, value) in x.iter().enumerate() {
+            data[j * rows + row] = *value;
+        }
+        row += 1;
+    });
+    matrix
+}
+
+/// Runs the operators of a model of the eq. (3)-(5) family along `y` from
+/// the de-energized start and calls `row(n, x)` with the regressors x of
+/// every sample n where `fitted[n]` (column order as
+/// [`rate_dependent_regressors`]). Allocates nothing.
+#[allow(clippy::too_many_arguments)]
+pub fn for_each_rate_dependent_row(
+    layout: RateDependentLayout,
+    c: f64,
+    ws: &[f64],
+    u1max: f64,
+    y: &[f64],
+    sample_period: f64,
+    fitted: &[bool],
+    mut row: impl FnMut(usize, &[f64]),
+) {
     assert_eq!(
         ws.len(),
         layout.dead_zone_count(),
         "one weight per dead zone"
     );
-    let rows = y.len().saturating_sub(scored_from);
-    let columns = layout.linear_columns();
-    let mut matrix = DMatrix::zeros(rows, columns);
-    let data = matrix.as_mut_slice();
+    assert_eq!(fitted.len(), y.len(), "one flag per sample");
     let mut dead_zone_thresholds = [0.0; TEN_DEAD_ZONE_PATTERN.len()];
     for (d, p) in dead_zone_thresholds
         .iter_mut()
@@ -122,33 +168,111 @@ pub fn rate_dependent_regressors(
     let mut memories = [0.0; BACKLASH_OPERATORS];
     let rate_column = layout.cubic_columns();
     let constant_column = rate_column + layout.rate_columns();
+    let mut x = [0.0; 4 + 2 * BACKLASH_OPERATORS];
+    let x = &mut x[..layout.linear_columns()];
     let mut previous = y.first().copied().unwrap_or(0.0);
-    for (n, &yn) in y.iter().enumerate() {
+    for (n, (&yn, &fit)) in y.iter().zip(fitted).enumerate() {
         let rate = (yn - previous) / sample_period;
         previous = yn;
         let z = crate::models::dead_zone_sum(yn, ws, dead_zone_thresholds);
         for (memory, r) in memories.iter_mut().zip(&thresholds) {
             *memory = backlash(z, *r, *memory);
         }
-        if n < scored_from {
+        if !fit {
             continue;
         }
-        let row = n - scored_from;
         if layout.cubic {
-            data[row] = yn * yn * yn;
-            data[rows + row] = yn * yn;
-            data[2 * rows + row] = yn;
-            data[3 * rows + row] = 1.0;
+            x[0] = yn * yn * yn;
+            x[1] = yn * yn;
+            x[2] = yn;
+            x[3] = 1.0;
         }
         for (i, h) in memories.iter().enumerate() {
             // eq. (4): w_h,i·H_i = k_i·(ẏ·H_i) + b_i·H_i.
             if layout.rate_dependent {
-                data[(rate_column + i) * rows + row] = rate * h;
+                x[rate_column + i] = rate * h;
             }
-            data[(constant_column + i) * rows + row] = *h;
+            x[constant_column + i] = *h;
+        }
+        row(n, x);
+    }
+}
+
+/// Which backlash operators of a model of the eq. (3)-(5) family reverse
+/// over the fitted samples: their output both rises and falls between
+/// consecutive samples of which the later is fitted. An operator whose
+/// play is wider than the loops it sees moves only when the input sets a
+/// new extreme: on a first loading, or a hair at a time as noise and drift
+/// push the extremes out. Its output is then a slowly creeping offset, and
+/// the weight least squares gives it describes drift, not hysteresis; when
+/// the loops grow later it moves and that weight bends the model
+/// (`protocol` drops such operators).
+#[allow(clippy::too_many_arguments)]
+pub fn reversing_operators(
+    layout: RateDependentLayout,
+    c: f64,
+    ws: &[f64],
+    u1max: f64,
+    y: &[f64],
+    fitted: &[bool],
+) -> [bool; BACKLASH_OPERATORS] {
+    let mut dead_zone_thresholds = [0.0; TEN_DEAD_ZONE_PATTERN.len()];
+    for (d, p) in dead_zone_thresholds
+        .iter_mut()
+        .zip(layout.dead_zone_pattern)
+    {
+        *d = c * p;
+    }
+    let dead_zone_thresholds = &dead_zone_thresholds[..ws.len()];
+    let thresholds = backlash_thresholds(u1max);
+    let mut memories = [0.0; BACKLASH_OPERATORS];
+    let mut rose = [false; BACKLASH_OPERATORS];
+    let mut fell = [false; BACKLASH_OPERATORS];
+    for (&yn, &fit) in y.iter().zip(fitted) {
+        let z = crate::models::dead_zone_sum(yn, ws, dead_zone_thresholds);
+        for (i, (memory, r)) in memories.iter_mut().zip(&thresholds).enumerate() {
+            let next = backlash(z, *r, *memory);
+            if fit {
+                rose[i] |= next > *memory;
+                fell[i] |= next < *memory;
+            }
+            *memory = next;
         }
     }
-    matrix
+    std::array::from_fn(|i| rose[i] && fell[i])
+}
+
+/// [`reversing_operators`] for the classical P-I model's operators on y.
+pub fn reversing_classical_operators(
+    thresholds: &[f64; CLASSICAL_OPERATORS],
+    y: &[f64],
+    fitted: &[bool],
+) -> [bool; CLASSICAL_OPERATORS] {
+    let mut memories = [0.0; CLASSICAL_OPERATORS];
+    let mut rose = [false; CLASSICAL_OPERATORS];
+    let mut fell = [false; CLASSICAL_OPERATORS];
+    for (&yn, &fit) in y.iter().zip(fitted) {
+        for (i, (memory, r)) in memories.iter_mut().zip(thresholds).enumerate() {
+            let next = backlash(yn, *r, *memory);
+            if fit {
+                rose[i] |= next > *memory;
+                fell[i] |= next < *memory;
+            }
+            *memory = next;
+        }
+    }
+    std::array::from_fn(|i| rose[i] && fell[i])
+}
+
+impl RateDependentLayout {
+    /// The columns of operator i (its k and b columns).
+    pub fn operator_columns(&self, operator: usize) -> impl Iterator<Item = usize> {
+        let rate = self
+            .rate_dependent
+            .then_some(self.cubic_columns() + operator);
+        let constant = self.cubic_columns() + self.rate_columns() + operator;
+        rate.into_iter().chain(std::iter::once(constant))
+    }
 }
 
 /// X of the classical P-I model: [H_{r_1}[y] … H_{r_10}[y], 1], rows for
@@ -158,22 +282,35 @@ pub fn classical_regressors(
     y: &[f64],
     scored_from: usize,
 ) -> DMatrix<f64> {
-    let rows = y.len().saturating_sub(scored_from);
+    let fitted: Vec<bool> = (0..y.len()).map(|n| n >= scored_from).collect();
+    masked_classical_regressors(thresholds, y, &fitted)
+}
+
+/// As [`classical_regressors`], with a row for every sample n where
+/// `fitted[n]`.
+pub fn masked_classical_regressors(
+    thresholds: &[f64; CLASSICAL_OPERATORS],
+    y: &[f64],
+    fitted: &[bool],
+) -> DMatrix<f64> {
+    assert_eq!(fitted.len(), y.len(), "one flag per sample");
+    let rows = fitted.iter().filter(|f| **f).count();
     let mut matrix = DMatrix::zeros(rows, CLASSICAL_OPERATORS + 1);
     let data = matrix.as_mut_slice();
     let mut memories = [0.0; CLASSICAL_OPERATORS];
-    for (n, &yn) in y.iter().enumerate() {
+    let mut row = 0;
+    for (&yn, &fit) in y.iter().zip(fitted) {
         for (memory, r) in memories.iter_mut().zip(thresholds) {
             *memory = backlash(yn, *r, *memory);
         }
-        if n < scored_from {
+        if !fit {
             continue;
         }
-        let row = n - scored_from;
         for (i, h) in memories.iter().enumerate() {
             data[i * rows + row] = *h;
         }
         data[CLASSICAL_OPERATORS * rows + row] = 1.0;
+        row += 1;
     }
     matrix
 }

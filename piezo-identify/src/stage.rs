@@ -26,11 +26,16 @@
 //!    starts at rest at 0). They fill `bouc_wen` of the preset; the preset
 //!    keeps seed 000's feedforward and decoupling selected.
 //!
-//! Single-axis runs: home x = 8 µm, y = 7 µm, θ = 0; the reference moves from
-//! the origin to the start by a raised cosine over 0.5 s, holds 0.5 s, then a
-//! 1 Hz sine of 10 µm peak to peak about home starting at the bottom (θ:
-//! ±9.2·10⁻³°, eq. 16's amplitude) runs for 3 s; the fit uses the last 2 s.
-//! These are the conditions of the demo's Fig. 7/10 runs (demo/experiments.py).
+//! Single-axis runs, as seed 000 §5 prints them: "the motion axis was driven
+//! (10 µm or 9.2×10⁻³ deg), with the demand on the other two axes held at
+//! zero". Demands are absolute, from the de-energized rest: a y or x run is a
+//! 1 Hz sine from 0 to 10 µm starting at the bottom (y = 5 − 5 cos 2πt) with
+//! the other axes demanded at 0; a θ run is ±9.2·10⁻³° (eq. 16's amplitude)
+//! about x at half its stroke, where §3.2 puts x's home "in order to implement
+//! the rotational motion", y at 0. The reference reaches the start pose by a
+//! raised cosine over 0.5 s (only the θ run's x moves), holds 0.5 s, then the
+//! sine runs for 5 s; the fit uses the last 2 s. These are the conditions of
+//! the demo's Fig. 7/10 runs (demo/experiments.py).
 
 use std::f64::consts::PI;
 
@@ -44,25 +49,40 @@ use crate::bouc_wen_fit::{
     BoucWenFitError, BoucWenFitOptions, identify_bouc_wen, wide_shape_bounds,
 };
 use crate::decoupling::{
-    Compensation, DecouplingError, NO_CUTOFF, decoupling_params, fit_compensation,
+    Compensation, DecouplingError, NO_CUTOFF, decoupling_params, fit_compensation_with_cutoff,
 };
 use crate::fit::{Fit, FitError, FitOptions, StartResult, fit_modified_inverse_pi_with_progress};
 use crate::gapso::GaPsoOptions;
-use crate::plant::{PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record, sine_records};
+use crate::plant::{
+    PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record, exercise_samples, sine_records,
+};
 
-pub const HOME: [f64; 3] = [8.0, 7.0, 0.0];
 pub const APPROACH_TIME: f64 = 0.5;
 pub const SETTLE_TIME: f64 = 0.5;
 pub const SINE_HZ: f64 = 1.0;
-pub const SINE_AMPLITUDE_UM: f64 = 5.0;
+/// Peak-to-peak of the translation sines, from 0 [µm] (seed 000 §5: 10 µm).
+pub const TRANSLATION_SPAN_UM: f64 = 10.0;
+/// x demand of the θ runs [µm]: half the x stroke (seed 000 §2: 12.74 µm),
+/// the home §3.2 defines for rotation.
+pub const ROTATION_X_UM: f64 = 12.74 / 2.0;
 pub const ROTATION_AMPLITUDE_DEG: f64 = 9.2e-3;
-/// Length of a single-axis run after the approach [s], and the part fitted.
-pub const RUN_TIME: f64 = 3.0;
+/// Length of a single-axis run after the approach [s], and the part fitted:
+/// three settling cycles, then two (the plant's Bouc-Wen minor loops settle
+/// within about four cycles of a new excursion; the demo measures the same
+/// two cycles).
+pub const RUN_TIME: f64 = 5.0;
 pub const FITTED_TIME: f64 = 2.0;
 pub const SAMPLE_PERIOD: f64 = 1e-4;
 pub const PREVIEW: usize = 2;
 /// eq. (6) is applied for 10 s (one period of its 0.2 Hz component).
 pub const IDENTIFICATION_TIME: f64 = 10.0;
+/// The exercise cycle before eq. (6), 0 → 10 → 0 V [s]: it runs the stack
+/// over the loop it rests on, so the model's memories (set by running the
+/// operators through the cycle, not fitted) start in the stack's state.
+pub const EXERCISE_TIME: f64 = 2.0;
+/// PI's recommended control input of its LVPZT amplifiers (E-505: −2..12 V,
+/// −20..120 V at the stack; MODEL.md §4).
+pub const COMMAND_RANGE: (f64, f64) = (-2.0, 12.0);
 
 /// The axis a single-axis run drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -72,48 +92,86 @@ pub enum DrivenAxis {
     Theta,
 }
 
-/// Where and how hard the single-axis runs drive a stage: the defaults are
-/// seed 000's (home x 8 µm, y 7 µm on its 12 µm strokes; the §3.2 PI gains).
-/// Another stage needs its own: a home where its actuators sit well above
-/// 0 V, and PI gains scaled by the inverse of its gain in µm per command
-/// volt relative to seed 000's stage, which keeps the loop gain that
-/// Ziegler-Nichols gave seed 000 (seed 001's XY200S moves 12x further per
-/// volt, and the §3.2 gains make its loops unstable).
+/// How hard and where the single-axis runs drive a stage. The defaults are
+/// seed 000's as printed (§5, §3.2); another stage scales them to its
+/// strokes (seed 001's XY200S, 144 µm, runs the same procedure at 11.3x the
+/// amplitudes), and its PI gains by the inverse of its gain in µm per
+/// command volt relative to seed 000's stage, which keeps the loop gain that
+/// Ziegler-Nichols gave seed 000 (the §3.2 gains make the XY200S's loops
+/// unstable).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct StageConditions {
-    /// x [µm], y [µm], θ [rad].
-    pub home: [f64; 3],
+    /// Peak-to-peak of the x and y sines, from 0 [µm].
+    pub translation_span_um: f64,
+    /// Demand of the held translation while the other one is driven [µm]:
+    /// x during the y run, y during the x run (seed 000: 0, 0). A stage
+    /// whose actuators cannot go below 0 V can only cancel a coupling that
+    /// lifts the held axis from a home above it (seed 000 §3.2's reason
+    /// for x's home at half stroke).
+    pub held_um: [f64; 2],
+    /// x demand of the θ run [µm] (half the x stroke).
+    pub rotation_x_um: f64,
+    /// Amplitude of the θ sine [deg]; `None`: the stage has no rotation to
+    /// identify (its x actuators move together), D4 stays zero.
+    pub rotation_amplitude_deg: Option<f64>,
     /// Factor on both PI gain pairs of §3.2.
     pub gain_scale: f64,
+    /// Command range of the controller [V].
+    pub command_range: (f64, f64),
+    /// The cutoff value that means "no cutoff" [µm]: Table 2's ±10 µm on a
+    /// 12 µm stage, scaled with the stroke on another one.
+    pub no_cutoff_um: f64,
 }
 
 impl Default for StageConditions {
     fn default() -> Self {
         StageConditions {
-            home: HOME,
+            translation_span_um: TRANSLATION_SPAN_UM,
+            held_um: [0.0, 0.0],
+            rotation_x_um: ROTATION_X_UM,
+            rotation_amplitude_deg: Some(ROTATION_AMPLITUDE_DEG),
             gain_scale: 1.0,
+            command_range: COMMAND_RANGE,
+            no_cutoff_um: NO_CUTOFF,
         }
     }
 }
 
-/// The reference of a single-axis run at time `t` (x [µm], y [µm], θ [rad])
-/// about seed 000's home.
-pub fn single_axis_reference(axis: DrivenAxis, t: f64) -> [f64; 3] {
-    single_axis_reference_about(axis, HOME, t)
+impl StageConditions {
+    /// Seed 000's conditions on a stage whose strokes are `scale` times seed
+    /// 000's (cutoffs and amplitudes scaled; no rotation run when the stage
+    /// does not rotate).
+    pub fn scaled(scale: f64, rotation: bool) -> Self {
+        let seed000 = StageConditions::default();
+        StageConditions {
+            translation_span_um: seed000.translation_span_um * scale,
+            rotation_x_um: seed000.rotation_x_um * scale,
+            rotation_amplitude_deg: seed000.rotation_amplitude_deg.filter(|_| rotation),
+            no_cutoff_um: seed000.no_cutoff_um * scale,
+            ..seed000
+        }
+    }
 }
 
-/// The reference of a single-axis run about `home`.
-pub fn single_axis_reference_about(axis: DrivenAxis, home: [f64; 3], t: f64) -> [f64; 3] {
+/// The reference of a single-axis run at time `t` (x [µm], y [µm], θ [rad]).
+pub fn single_axis_reference(axis: DrivenAxis, conditions: &StageConditions, t: f64) -> [f64; 3] {
     let start = APPROACH_TIME + SETTLE_TIME;
     let path = |tau: f64| {
-        let mut pose = home;
         let phase = 2.0 * PI * SINE_HZ * tau;
+        let half = 0.5 * conditions.translation_span_um;
         match axis {
-            DrivenAxis::Y => pose[1] += SINE_AMPLITUDE_UM * (phase - PI / 2.0).sin(),
-            DrivenAxis::X => pose[0] += SINE_AMPLITUDE_UM * (phase - PI / 2.0).sin(),
-            DrivenAxis::Theta => pose[2] = ROTATION_AMPLITUDE_DEG.to_radians() * phase.sin(),
+            DrivenAxis::Y => [conditions.held_um[0], half - half * phase.cos(), 0.0],
+            DrivenAxis::X => [half - half * phase.cos(), conditions.held_um[1], 0.0],
+            DrivenAxis::Theta => [
+                conditions.rotation_x_um,
+                0.0,
+                conditions
+                    .rotation_amplitude_deg
+                    .unwrap_or(0.0)
+                    .to_radians()
+                    * phase.sin(),
+            ],
         }
-        pose
     };
     if t >= start {
         return path(t - start);
@@ -207,8 +265,14 @@ fn fit_bouc_wen_models(
                 // The monotone check must hold on every sample, which a
                 // search on a decimated record does not see.
                 decimation: if monotone { 1 } else { 10 },
-                warm_up_samples: 0,
-                fit_offset: false,
+                // The first period runs the model from h = 0 onto the loop
+                // the stage rests on; the fit starts after it.
+                warm_up_samples: (SAMPLE_PERIOD.recip() / BOUC_WEN_HZ).round() as usize,
+                // The readings are zeroed at the stage's rest, the model's
+                // output after its first cycle is not: the offset between
+                // them is fitted and dropped, since the controller's models
+                // start at their own rest, zeroed there (`rest_cycle`).
+                fit_offset: true,
                 monotone,
                 ..BoucWenFitOptions::default()
             };
@@ -225,6 +289,9 @@ fn fit_bouc_wen_models(
         y_from_x: fitted[1].0,
         y: fitted[2].0,
         x_from_y: fitted[3].0,
+        // The plant rests on its loop to 10 V of command (100 V): so do the
+        // models.
+        rest_cycle: BOUC_WEN_PEAK,
     };
     Ok((
         models,
@@ -290,21 +357,37 @@ pub fn identify_stage(
         .start("L")
         .ok_or_else(|| StageError::NoSpacing("plant".to_owned()))?;
     let sample_rate = 1.0 / SAMPLE_PERIOD;
-    let command_max = 10.0;
+    let (command_min, command_max) = conditions.command_range;
     let mut fits = Vec::new();
     for (axis, name) in [(RecordAxis::X, "x"), (RecordAxis::Y, "y")] {
         progress(&format!(
             "eq. (6) record and fit of the {name} inverse model"
         ));
-        let record = eq6_record(plant, axis, IDENTIFICATION_TIME, sample_rate, command_max)?;
-        let fit = fit_modified_inverse_pi_with_progress(
+        let record = eq6_record(
+            plant,
+            axis,
+            IDENTIFICATION_TIME,
+            sample_rate,
+            command_max,
+            EXERCISE_TIME,
+        )?;
+        let warm_up = exercise_samples(EXERCISE_TIME, sample_rate);
+        let options = FitOptions {
+            warm_up_samples: options.warm_up_samples.max(warm_up),
+            ..options.clone()
+        };
+        let mut fit = fit_modified_inverse_pi_with_progress(
             &record.output,
             &record.input,
             record.sample_period,
-            options,
+            &options,
             &|s: &StartResult| fit_progress(s.start),
         )
         .map_err(|source| StageError::Fit { axis: name, source })?;
+        // The stage rests on the loop the exercise cycle ran: the model's
+        // memories start where that cycle left them (eq. 1's "initial energy
+        // condition").
+        fit.params.rest_cycle = record.output[..warm_up].iter().copied().fold(0.0, f64::max);
         fits.push(fit);
     }
     let (x_fit, y_fit) = (fits.remove(0), fits.remove(0));
@@ -329,13 +412,13 @@ pub fn identify_stage(
         decoupling_params: DecouplingParams {
             dk: [0.0; 4],
             db: [0.0; 4],
-            p: [NO_CUTOFF; 4],
-            q: [-NO_CUTOFF; 4],
+            p: [conditions.no_cutoff_um; 4],
+            q: [-conditions.no_cutoff_um; 4],
         },
         hysteresis_model: HysteresisModel::ModifiedPi,
         decoupling_model: DecouplingModel::PiecewiseLinear,
         bouc_wen,
-        command_min: 0.0,
+        command_min,
         command_max,
     };
     let spacing_um = spacing_mm * 1e3;
@@ -353,7 +436,12 @@ pub fn identify_stage(
             }
         };
         let mut pairs: [Option<(Vec<f64>, Vec<f64>)>; 4] = Default::default();
-        for axis in [DrivenAxis::Y, DrivenAxis::X, DrivenAxis::Theta] {
+        let axes: &[DrivenAxis] = if conditions.rotation_amplitude_deg.is_some() {
+            &[DrivenAxis::Y, DrivenAxis::X, DrivenAxis::Theta]
+        } else {
+            &[DrivenAxis::Y, DrivenAxis::X]
+        };
+        for &axis in axes {
             progress(&format!(
                 "decoupling round {}: single-axis {axis:?} run",
                 round + 1
@@ -366,7 +454,7 @@ pub fn identify_stage(
             let run = closed_loop(
                 plant,
                 &run_params,
-                |t| single_axis_reference_about(axis, conditions.home, t),
+                |t| single_axis_reference(axis, conditions, t),
                 APPROACH_TIME + SETTLE_TIME + RUN_TIME,
                 SAMPLE_PERIOD,
                 PREVIEW,
@@ -381,23 +469,34 @@ pub fn identify_stage(
             }
         }
         let fit = |index: usize, e: &[f64], f: &[f64]| {
-            fit_compensation(f, e).map_err(|source| StageError::Decoupling {
-                index: index + 1,
-                source,
+            fit_compensation_with_cutoff(f, e, conditions.no_cutoff_um).map_err(|source| {
+                StageError::Decoupling {
+                    index: index + 1,
+                    source,
+                }
             })
         };
-        let pairs = pairs.map(|p| p.expect("every compensation has its run"));
-        let d1 = fit(0, &pairs[0].1, &pairs[0].0)?;
-        let d2 = fit(1, &pairs[1].1, &pairs[1].0)?;
-        let d3 = fit(2, &pairs[2].1, &pairs[2].0)?;
-        // y's two compensations add up (y_r = y_d + D3 + D4), and the
-        // rotation run holds x at home, so its y error also holds the static
-        // coupling of the x pair at home, which D3 already compensates: D4
-        // gets what D3 leaves of it (otherwise the offset is compensated
-        // twice).
-        let x_home_share = d3.eval(conditions.home[0]) - applied_eval(2, conditions.home[0]);
-        let theta_target: Vec<f64> = pairs[3].1.iter().map(|e| e - x_home_share).collect();
-        let d4 = fit(3, &theta_target, &pairs[3].0)?;
+        let pair = |index: usize| {
+            pairs[index]
+                .as_ref()
+                .expect("every compensation that is fitted has its run")
+        };
+        let d1 = fit(0, &pair(0).1, &pair(0).0)?;
+        let d2 = fit(1, &pair(1).1, &pair(1).0)?;
+        let d3 = fit(2, &pair(2).1, &pair(2).0)?;
+        let d4 = if pairs[3].is_some() {
+            // y's two compensations add up (y_r = y_d + D3 + D4), and the
+            // rotation run holds x at half stroke, so its y error also holds
+            // the static coupling of the x pair there, which D3 compensates:
+            // D4 gets what D3 leaves of it (otherwise the offset is
+            // compensated twice).
+            let x = conditions.rotation_x_um;
+            let x_share = d3.eval(x) - applied_eval(2, x);
+            let theta_target: Vec<f64> = pair(3).1.iter().map(|e| e - x_share).collect();
+            fit(3, &theta_target, &pair(3).0)?
+        } else {
+            Compensation::none(conditions.no_cutoff_um)
+        };
         let fitted = [d1, d2, d3, d4];
         controller.decoupling_params = decoupling_params(&fitted);
         all_rounds.push(fitted);

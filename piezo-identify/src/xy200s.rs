@@ -46,11 +46,11 @@
 //! the RMS of each conversion.
 
 use piezo_models::bouc_wen::rk4_path;
-use piezo_models::{BoucWenParams, FlexureStageParams};
+use piezo_models::{AsymmetricBoucWen, BoucWenParams, FlexureStageParams};
 use serde::{Deserialize, Serialize};
 
 use crate::bouc_wen_fit::{
-    BoucWenFitError, BoucWenFitOptions, identify_bouc_wen, predict, wide_shape_bounds,
+    BoucWenFitError, BoucWenFitOptions, identify_bouc_wen, wide_shape_bounds,
 };
 use crate::gapso::GaPsoOptions;
 
@@ -193,11 +193,12 @@ pub struct Xy200sPreset {
 
 /// Output after a ramp from rest to the full 150 V (the stroke's definition
 /// in `piezo_models::fingerprint::stroke`, quasi-static) [µm].
+/// The extension a 0 → 150 V ramp gives from the stage's rest (the 0 V end
+/// of the 0..150 V loop, where FlexureStage starts: `rest_cycle_voltage`).
 fn stroke_of(params: BoucWenParams) -> f64 {
-    let ramp: Vec<f64> = (1..=1500).map(|i| i as f64 * 0.1).collect();
-    *predict(params, 0.0, &ramp)
-        .last()
-        .expect("the ramp is not empty")
+    let mut model = AsymmetricBoucWen::at_exercised_rest(params, ACTUATOR_MAX_V);
+    model.advance_to(ACTUATOR_MAX_V, 0.1);
+    model.output()
 }
 
 fn convert(
@@ -269,6 +270,7 @@ pub fn xy200s_preset() -> Result<Xy200sPreset, BoucWenFitError> {
     stage.amplifier.gain = AMPLIFIER_GAIN;
     stage.amplifier.v_min = 0.0;
     stage.amplifier.v_max = ACTUATOR_MAX_V;
+    stage.rest_cycle_voltage = ACTUATOR_MAX_V;
     let actuator_x = scaled_output(xx.identified, xx.stroke_scale);
     let actuator_y = scaled_output(yy.identified, yy.stroke_scale);
     for (actuator, hysteresis) in stage

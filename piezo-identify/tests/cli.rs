@@ -101,14 +101,28 @@ fn fits_a_file_by_header_names_and_writes_json() {
         report.contains("600 samples, 6.00 s at 100.000000 Hz"),
         "{report}"
     );
-    assert!(report.contains("best of 2 starts"), "{report}");
-    assert!(report.contains("validation record"), "{report}");
-    assert!(report.contains("classical"), "{report}");
-    let params: InversePiParams =
+    // The summary names the columns it used.
+    assert!(
+        report.contains(
+            "columns: input column 1 \"volts\", output column 2 \"microns\", time column 0 \"time\", comma-separated, header on line 2"
+        ),
+        "{report}"
+    );
+    assert!(report.contains("2 starts"), "{report}");
+    assert!(report.contains("validation file"), "{report}");
+    assert!(report.contains("classical P-I"), "{report}");
+    let written: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let params: InversePiParams = serde_json::from_value(written["params"].clone()).unwrap();
     params.validate("fitted").unwrap();
-    // Progress goes to stderr only on a terminal; here stderr stays empty.
-    assert_eq!(stderr(&output), "");
+    assert_eq!(written["displacement_offset_um"].as_f64(), Some(0.0));
+    // Without a terminal, progress comes as lines on stderr, one per phase
+    // at least.
+    let progress = stderr(&output);
+    assert!(
+        progress.contains("piezo-identify: proposed model: 0/2"),
+        "{progress}"
+    );
 }
 
 #[test]
@@ -185,6 +199,8 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
         "--generations",
         "40",
         "--no-offset",
+        "--warm-up",
+        "0",
         "--out",
         json.to_str().unwrap(),
         "--report",
@@ -197,9 +213,15 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
         "{printed}"
     );
     assert!(printed.contains("GA-PSO"), "{printed}");
-    assert!(printed.contains("refined"), "{printed}");
-    let fitted: piezo_models::BoucWenParams =
+    assert!(
+        printed.contains("Levenberg-Marquardt inside the search box"),
+        "{printed}"
+    );
+    let written: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(written["sensor_offset_um"].as_f64(), Some(0.0));
+    let fitted: piezo_models::BoucWenParams =
+        serde_json::from_value(written["params"].clone()).unwrap();
     let fitted = fitted.with_state_scale(fitted.q / truth.q);
     assert!((fitted.p - truth.p).abs() < 0.01 * truth.p, "{fitted:?}");
     let report: serde_json::Value =
@@ -207,6 +229,7 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
     assert!(report["identification"]["refined"]["rms"].as_f64().unwrap() < 1e-3);
 
     let output = run(&["bouc-wen", data, "--time", "time", "--bounds", "n=3:1"]);
+    // (refused before any fit)
     assert!(!output.status.success());
     assert_eq!(
         stderr(&output),
@@ -228,4 +251,224 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
         stderr(&output),
         format!("{bad}:3: field 1 (\"x\") is not a number\n")
     );
+}
+
+/// A tab-separated record with spaces in its names (a spreadsheet export):
+/// `--output Moment` names no column and is refused with the list of names
+/// (it once split the header on spaces and fitted another column); the full
+/// name works and the summary says which columns were read.
+#[test]
+fn tab_separated_names_with_spaces_are_whole_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("export.tsv");
+    let mut text = String::from("Time (s)\tAngle (deg)\tMoment (Nm)\n");
+    for n in 0..400 {
+        let t = n as f64 * 0.01;
+        let u = 5.0 + 4.0 * (std::f64::consts::TAU * t).sin();
+        text.push_str(&format!(
+            "{t}\t{u}\t{}\n",
+            1.3 * u + 0.1 * (std::f64::consts::TAU * t).cos()
+        ));
+    }
+    std::fs::write(&path, text).unwrap();
+    let path = path.to_str().unwrap();
+    let output = run(&[
+        "inverse-pi",
+        path,
+        "--time",
+        "Time (s)",
+        "--input",
+        "Angle (deg)",
+        "--output",
+        "Moment",
+    ]);
+    assert!(!output.status.success());
+    assert_eq!(
+        stderr(&output),
+        format!(
+            "{path}:1: column \"Moment\" is not in the header (columns: \"Time (s)\", \"Angle (deg)\", \"Moment (Nm)\")\n"
+        )
+    );
+    let output = run(&[
+        "inverse-pi",
+        path,
+        "--time",
+        "Time (s)",
+        "--input",
+        "Angle (deg)",
+        "--output",
+        "Moment (Nm)",
+        "--starts",
+        "2",
+        "--max-iterations",
+        "40",
+        "--split",
+        "0.5",
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(
+        stdout(&output).contains(
+            "columns: input column 1 \"Angle (deg)\", output column 2 \"Moment (Nm)\", time column 0 \"Time (s)\", tab-separated"
+        ),
+        "{}",
+        stdout(&output)
+    );
+}
+
+/// A record like a pandas export with its unnamed index column and a file
+/// whose first column is empty throughout are read; an empty file is named
+/// as such (it was reported at "line 0").
+#[test]
+fn pandas_exports_and_empty_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let pandas = dir.path().join("pandas.csv");
+    let empty_column = dir.path().join("empty_first.tsv");
+    let mut with_index = String::from(",volts,um\n");
+    let mut without = String::new();
+    for n in 0..300 {
+        let u = 5.0 + 4.0 * (n as f64 * 0.0628).sin();
+        with_index.push_str(&format!("{n},{u},{}\n", 1.2 * u));
+        without.push_str(&format!("\t{u}\t{}\n", 1.2 * u));
+    }
+    std::fs::write(&pandas, with_index).unwrap();
+    std::fs::write(&empty_column, without).unwrap();
+    for (path, columns) in [
+        (&pandas, ["--input", "volts", "--output", "um"]),
+        (&empty_column, ["--input", "1", "--output", "2"]),
+    ] {
+        let mut args = vec![
+            "bouc-wen",
+            path.to_str().unwrap(),
+            "--rate",
+            "100",
+            "--generations",
+            "3",
+        ];
+        args.extend(columns);
+        let output = run(&args);
+        assert!(
+            output.status.success(),
+            "{}: {}",
+            path.display(),
+            stderr(&output)
+        );
+    }
+    let empty = dir.path().join("empty.dat");
+    std::fs::write(&empty, "").unwrap();
+    let output = run(&["inverse-pi", empty.to_str().unwrap(), "--rate", "100"]);
+    assert!(!output.status.success());
+    assert_eq!(
+        stderr(&output),
+        format!(
+            "{}: the file is empty (no header and no data rows)\n",
+            empty.display()
+        )
+    );
+}
+
+/// Negative numbers are values, not options: `--offset -1.684` is taken,
+/// `--warm-up -1` and `--warm-up NaN` are refused with what to give (they
+/// were once taken as 0), and a bad --split too.
+#[test]
+fn numbers_are_parsed_and_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("record.csv");
+    write_good_record(&data);
+    let data = data.to_str().unwrap();
+    let common = ["--input", "volts", "--output", "microns", "--time", "time"];
+    let with = |extra: &[&str]| {
+        let mut args = vec!["inverse-pi", data];
+        args.extend(common);
+        args.extend([
+            "--starts",
+            "1",
+            "--max-iterations",
+            "20",
+            "--smooth",
+            "0",
+            "--weights",
+            "constant",
+        ]);
+        args.extend(extra);
+        run(&args)
+    };
+    let output = with(&["--offset", "-1.684"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(
+        stdout(&output).contains("displacement offset -1.684000 um"),
+        "{}",
+        stdout(&output)
+    );
+    for (option, value) in [
+        ("--warm-up", "-1"),
+        ("--warm-up", "NaN"),
+        ("--settle", "-0.1"),
+    ] {
+        let output = with(&[option, value]);
+        assert!(!output.status.success(), "{option} {value}");
+        let message = stderr(&output);
+        assert!(
+            message.contains(&format!("invalid value '{value}' for '{option}"))
+                && message.contains("give a number of seconds, 0 or more"),
+            "{option} {value}: {message}"
+        );
+    }
+    let output = with(&["--split", "1.5"]);
+    assert!(!output.status.success());
+    assert!(
+        stderr(&output).contains("give a fraction between 0 and 1"),
+        "{}",
+        stderr(&output)
+    );
+}
+
+/// The --validate file is read before the fit (a typo there once cost the
+/// whole fit), and a validation file left with nothing to score after its
+/// warm-up is an error, not "0 scored samples, RMS 0.000" with exit 0.
+#[test]
+fn the_validation_file_is_checked_before_the_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("record.csv");
+    write_good_record(&data);
+    let data = data.to_str().unwrap();
+    let missing = dir.path().join("no_such_file.csv");
+    let args = |validate: &str, extra: &[&str]| {
+        let mut args = vec![
+            "inverse-pi",
+            data,
+            "--input",
+            "volts",
+            "--output",
+            "microns",
+            "--time",
+            "time",
+            "--validate",
+            validate,
+        ];
+        args.extend(extra);
+        run(&args)
+    };
+    let started = std::time::Instant::now();
+    let output = args(missing.to_str().unwrap(), &[]);
+    assert!(!output.status.success());
+    assert!(
+        stderr(&output).starts_with(missing.to_str().unwrap()),
+        "{}",
+        stderr(&output)
+    );
+    assert!(
+        stdout(&output).is_empty(),
+        "nothing was fitted: {}",
+        stdout(&output)
+    );
+    assert!(started.elapsed().as_secs_f64() < 5.0);
+
+    let output = args(data, &["--validate-warm-up", "10"]);
+    assert!(!output.status.success());
+    assert!(
+        stderr(&output).contains("no sample is left to score after its warm-up"),
+        "{}",
+        stderr(&output)
+    );
+    assert!(stdout(&output).is_empty(), "{}", stdout(&output));
 }

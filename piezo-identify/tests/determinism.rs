@@ -27,11 +27,20 @@ fn record() -> (Vec<f64>, Vec<f64>) {
 }
 
 fn fit_in_pool(threads: usize, seed: u64) -> Fit<InversePiParams> {
+    fit_in_pool_with(threads, seed, None)
+}
+
+fn fit_in_pool_with(
+    threads: usize,
+    seed: u64,
+    screening: Option<piezo_identify::fit::Screening>,
+) -> Fit<InversePiParams> {
     let (y, u) = record();
     let options = FitOptions {
         starts: 5,
         seed,
         max_iterations: 150,
+        screening,
         ..FitOptions::default()
     };
     rayon::ThreadPoolBuilder::new()
@@ -81,4 +90,22 @@ fn same_seed_same_bits_for_any_thread_count() {
         "seed 11: F {:.6e}, best start {:?}; seed 12: F {:.6e}",
         one.quality.objective, one.best_start, other.quality.objective
     );
+}
+
+/// Screening (every start briefly, the best on to convergence) ranks the
+/// starts by F with ties to the lowest index: still bit-identical for any
+/// thread count, and the kept starts are marked.
+#[test]
+fn screening_is_deterministic_too() {
+    let screening = Some(piezo_identify::fit::Screening {
+        iterations: 20,
+        kept: 2,
+        relative_tolerance: 1e-6,
+    });
+    let one = fit_in_pool_with(1, 11, screening);
+    let three = fit_in_pool_with(3, 11, screening);
+    assert_eq!(bits(&one), bits(&three), "1 vs 3 threads");
+    assert_eq!(one.starts.iter().filter(|s| s.polished).count(), 2);
+    let best = one.best_start.unwrap();
+    assert!(one.starts[best].polished);
 }

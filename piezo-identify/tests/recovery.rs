@@ -3,7 +3,7 @@
 //! returned parameters.
 
 use piezo_identify::compare::eq6_command;
-use piezo_identify::least_squares::solve_least_squares;
+use piezo_identify::least_squares::solve_least_squares_with_intercept;
 use piezo_identify::regressors::{PROPOSED, rate_dependent_regressors};
 use piezo_identify::{FitOptions, fit_modified_inverse_pi};
 use piezo_models::inverse_pi::{inverse_pi_trajectory, linear_coefficients, u1max_over_range};
@@ -128,9 +128,10 @@ fn separable_solve_equals_the_streaming_model() {
     let fit = fit_modified_inverse_pi(&y, &u, SAMPLE_PERIOD, &options).unwrap();
     let p = fit.params;
 
-    // Separable form: regressors at the returned (c, w_s, u1max), least squares.
+    // Separable form: regressors at the returned (c, w_s, u1max), least
+    // squares with a4 (column 3) as the intercept, as the fit solves it.
     let x = rate_dependent_regressors(PROPOSED, p.c, &p.ws, p.u1max, &y, SAMPLE_PERIOD, 10);
-    let solution = solve_least_squares(x.clone(), &u[10..]);
+    let solution = solve_least_squares_with_intercept(x.clone(), &u[10..], 3);
     let theta = linear_coefficients(&p);
     assert_eq!(
         solution.coefficients,

@@ -1,11 +1,16 @@
-//! The piezo amplifier: three identical channels, each a gain with output
-//! limits followed by a first-order lag.
+//! The piezo amplifier: three identical channels, each a gain between an
+//! input and an output limit, followed by a first-order lag.
 //!
 //! Seed 000 §3.2: the command is "amplified by a piezoelectric amplifier with a
-//! gain of 10"; its amplifier is a PI E-505. A first-order lag is what a
-//! current-limited linear amplifier driving a capacitive stack looks like in the
-//! small-signal range: V̇ = 2π·f_a·(V_t − V), with V_t = clamp(G·u, v_min, v_max).
-//! The lower limit is 0 V because the stacks cannot retract (seed 000 §3.2).
+//! gain of 10"; its amplifier is a PI E-505.00 (§2). A first-order lag is what
+//! a current-limited linear amplifier driving a capacitive stack looks like in
+//! the small-signal range: V̇ = 2π·f_a·(V_t − V), with
+//! V_t = clamp(G·clamp(u, u_min, u_max), v_min, v_max).
+//!
+//! The limits are the hardware's, and bipolar: PI's LVPZT amplifiers take a
+//! control input of −2..12 V (−3..13 V at most) and the E-505 drives its
+//! output from −30 to 130 V. The stacks can be driven below their 0 V rest,
+//! which seed 000's own numbers need (MODEL.md §4 gives the sources).
 
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -18,6 +23,11 @@ pub struct AmplifierParams {
     pub gain: f64,
     /// First-order bandwidth f_a [Hz].
     pub bandwidth_hz: f64,
+    /// Lowest control input the amplifier follows [V]; below it the input
+    /// stage saturates.
+    pub input_min: f64,
+    /// Highest control input the amplifier follows [V].
+    pub input_max: f64,
     /// Lowest output voltage [V].
     pub v_min: f64,
     /// Highest output voltage [V].
@@ -30,12 +40,14 @@ impl AmplifierParams {
         1.0 / (TAU * self.bandwidth_hz)
     }
 
-    /// The target voltage V_t = clamp(G·u, v_min, v_max) of one channel and
-    /// whether the limits cut it. A NaN command gives a NaN target (not clipped):
-    /// nothing is rejected here, the stage reports a non-finite state instead.
+    /// The target voltage V_t = clamp(G·clamp(u, u_min, u_max), v_min, v_max)
+    /// of one channel and whether a limit cut it. A NaN command gives a NaN
+    /// target (not clipped): nothing is rejected here, the stage reports a
+    /// non-finite state instead.
     pub fn target(&self, command: f64) -> (f64, bool) {
         let wanted = self.gain * command;
-        let target = wanted.clamp(self.v_min, self.v_max);
+        let target = (self.gain * command.clamp(self.input_min, self.input_max))
+            .clamp(self.v_min, self.v_max);
         (target, target != wanted && !wanted.is_nan())
     }
 }
@@ -98,23 +110,47 @@ mod tests {
         AmplifierParams {
             gain: 10.0,
             bandwidth_hz: 3000.0,
-            v_min: 0.0,
-            v_max: 100.0,
+            input_min: -3.0,
+            input_max: 13.0,
+            v_min: -30.0,
+            v_max: 130.0,
         }
     }
 
     #[test]
     fn targets_are_clamped_and_reported() {
         let amp = Amplifier::new(params());
-        let (t, c) = amp.targets([-1.0, 5.0, 12.0]);
-        assert_eq!(t, [0.0, 50.0, 100.0]);
+        let (t, c) = amp.targets([-4.0, 5.0, 14.0]);
+        assert_eq!(t, [-30.0, 50.0, 130.0]);
         assert_eq!(c, [true, false, true]);
-        let (t, c) = amp.targets([0.0, 10.0, f64::INFINITY]);
-        assert_eq!(t, [0.0, 100.0, 100.0]);
+        let (t, c) = amp.targets([-3.0, 13.0, f64::INFINITY]);
+        assert_eq!(t, [-30.0, 130.0, 130.0]);
         assert_eq!(c, [false, false, true]);
+        let (t, c) = amp.targets([-1.5, 0.0, 12.0]);
+        assert_eq!(t, [-15.0, 0.0, 120.0]);
+        assert_eq!(c, [false; 3]);
         let (t, c) = amp.targets([f64::NAN, 1.0, 1.0]);
         assert!(t[0].is_nan());
         assert!(!c[0]);
+    }
+
+    /// Whichever limit is the narrower one cuts: the input stage when the
+    /// gain is low, the output rails when it is high.
+    #[test]
+    fn the_narrower_of_input_and_output_limits_cuts() {
+        let low_gain = AmplifierParams {
+            gain: 5.0,
+            ..params()
+        };
+        assert_eq!(low_gain.target(20.0), (65.0, true));
+        assert_eq!(low_gain.target(-20.0), (-15.0, true));
+        let high_gain = AmplifierParams {
+            gain: 15.0,
+            ..params()
+        };
+        assert_eq!(high_gain.target(12.0), (130.0, true));
+        assert_eq!(high_gain.target(-2.5), (-30.0, true));
+        assert_eq!(high_gain.target(-1.0), (-15.0, false));
     }
 
     /// Relaxing by e^{−s1/τ} then e^{−s2/τ} equals relaxing by e^{−(s1+s2)/τ}:

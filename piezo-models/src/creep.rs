@@ -52,6 +52,21 @@ impl Creep {
         self.time_constant
     }
 
+    /// κ [µm/V].
+    pub fn gain(&self) -> f64 {
+        self.gain
+    }
+
+    /// Sets c (a continuous-state integrator owns it).
+    pub fn set_value(&mut self, value: f64) {
+        self.value = value;
+    }
+
+    /// ċ = (κ·V − c)/T at actuator voltage `voltage` [µm/s].
+    pub fn rate(&self, voltage: f64) -> f64 {
+        (self.gain * voltage - self.value) / self.time_constant
+    }
+
     /// The exact path from the current value while the voltage relaxes from
     /// `v_start` towards `v_target` with time constant `tau`.
     pub fn path(&self, v_start: f64, v_target: f64, tau: f64) -> CreepPath {

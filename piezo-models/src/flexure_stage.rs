@@ -4,7 +4,8 @@
 //! PZT1 drives y; PZT2 and PZT3 are the parallel pair that drives x (together)
 //! and θ_z (in opposition). Signal chain per step:
 //!
-//! 1. amplifier: V_t = clamp(G·u, v_min, v_max), V̇ = 2π f_a (V_t − V);
+//! 1. amplifier: V_t = clamp(G·clamp(u, u_min, u_max), v_min, v_max),
+//!    V̇ = 2π f_a (V_t − V);
 //! 2. actuator i: extension e_i = BW_i(V_i) + c_i (asymmetric Bouc-Wen plus creep);
 //! 3. coupled hysteresis (seed 001 eq. (7)-(8)): d_x1 = H(V1), d_rot1 = H(V1),
 //!    d_y2 = H(V2), d_y3 = H(V3), each an asymmetric Bouc-Wen model of its own;
@@ -29,6 +30,11 @@ use crate::oscillator::{ModeSet, Oscillator, exponential_particular};
 use crate::sensor_noise::{SensorNoise, SensorNoiseParams};
 use serde::{Deserialize, Serialize};
 use std::fmt;
+
+/// The same stage as a system of ordinary differential equations in time, for
+/// integrators other than [`FlexureStage::step`] (FMI Model Exchange).
+#[path = "flexure_stage_ode.rs"]
+pub mod ode;
 
 /// One piezo stack: its hysteresis and its creep.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -75,6 +81,12 @@ pub struct FlexureStageParams {
     /// PZT1 (y), PZT2 and PZT3 (the x pair).
     pub actuators: [ActuatorParams; 3],
     pub coupling: CouplingParams,
+    /// The actuators' working loop that sets the rest the stage starts from
+    /// [V]: every hysteresis model (actuators and couplings) starts at the
+    /// 0 V end of its loop between 0 and this voltage, the readings zeroed
+    /// there, as a stack rests after it has been operated (MODEL.md §2).
+    /// 0: the virgin state h = 0 of seed 001's model.
+    pub rest_cycle_voltage: f64,
     pub modes: ModeSet,
     /// L, distance between the two x sensors (s2, s3) [mm].
     pub sensor_spacing_mm: f64,
@@ -194,6 +206,13 @@ impl FlexureStageParams {
             amp.bandwidth_hz,
             "bandwidth_hz > 0 (finite)",
         )?;
+        ensure_finite("amplifier.input_min", amp.input_min)?;
+        ensure(
+            amp.input_max.is_finite() && amp.input_max > amp.input_min,
+            "amplifier.input_max",
+            amp.input_max,
+            &format!("input_max > input_min = {} (finite)", amp.input_min),
+        )?;
         ensure_finite("amplifier.v_min", amp.v_min)?;
         ensure(
             amp.v_max.is_finite() && amp.v_max > amp.v_min,
@@ -223,6 +242,12 @@ impl FlexureStageParams {
             )?;
         }
         let c = &self.coupling;
+        ensure(
+            self.rest_cycle_voltage.is_finite() && self.rest_cycle_voltage >= 0.0,
+            "rest_cycle_voltage",
+            self.rest_cycle_voltage,
+            "rest_cycle_voltage >= 0 (finite)",
+        )?;
         validate_bouc_wen("coupling.x_from_pzt1", &c.x_from_pzt1)?;
         validate_bouc_wen("coupling.rot_from_pzt1", &c.rot_from_pzt1)?;
         validate_bouc_wen("coupling.y_from_pzt2", &c.y_from_pzt2)?;
@@ -418,8 +443,9 @@ pub struct FlexureStage {
 }
 
 impl FlexureStage {
-    /// A stage at rest: all voltages 0, hysteretic states 0, creep 0, modes at
-    /// rest, sensors noise-free until the first step.
+    /// A stage at rest: all voltages 0, every hysteresis model at its
+    /// exercised rest (`rest_cycle_voltage`), creep 0, modes at rest, every
+    /// reading 0, sensors noise-free until the first step.
     pub fn new(params: FlexureStageParams) -> Result<Self, ParamError> {
         params.validate()?;
         let tau = params.amplifier.time_constant();
@@ -438,14 +464,14 @@ impl FlexureStage {
         let c = &params.coupling;
         Ok(Self {
             amplifier: Amplifier::new(params.amplifier),
-            actuators: params
-                .actuators
-                .map(|a| AsymmetricBoucWen::new(a.hysteresis)),
+            actuators: params.actuators.map(|a| {
+                AsymmetricBoucWen::at_exercised_rest(a.hysteresis, params.rest_cycle_voltage)
+            }),
             creep: params
                 .actuators
                 .map(|a| Creep::new(a.creep_gain, a.creep_time)),
             couplings: [c.x_from_pzt1, c.rot_from_pzt1, c.y_from_pzt2, c.y_from_pzt3]
-                .map(AsymmetricBoucWen::new),
+                .map(|h| AsymmetricBoucWen::at_exercised_rest(h, params.rest_cycle_voltage)),
             modes,
             noise: SensorNoise::new(params.noise),
             tau,
@@ -794,7 +820,7 @@ mod tests {
     #[test]
     fn clipping_and_non_finite_commands_are_reported_not_rejected() {
         let mut stage = FlexureStage::new(FlexureStageParams::default()).unwrap();
-        let report = stage.step([11.0, -0.5, 5.0], 1e-4);
+        let report = stage.step([14.0, -3.5, 5.0], 1e-4);
         assert_eq!(report.clipped, [true, true, false]);
         assert_eq!(report.fault, None);
         let report = stage.step([f64::NAN, 0.0, 0.0], 1e-4);
@@ -835,7 +861,7 @@ mod tests {
         stage.step([3.0, 7.0, 4.0], 60.0);
         let v = stage.amplifier_voltages();
         let bw = |p: BoucWenParams, v: f64| {
-            let mut m = AsymmetricBoucWen::new(p);
+            let mut m = AsymmetricBoucWen::at_exercised_rest(p, params.rest_cycle_voltage);
             m.advance_to(v, 0.01);
             m.output()
         };

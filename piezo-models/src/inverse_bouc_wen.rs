@@ -57,6 +57,12 @@ pub struct BoucWenModels {
     pub x_from_y: BoucWenParams,
     /// H_YX: the x pair's mean command → y.
     pub y_from_x: BoucWenParams,
+    /// The working loop the actuators rest on, in command volts: every model
+    /// starts at the 0 V end of its loop between 0 and this command
+    /// (`AsymmetricBoucWen::at_exercised_rest`), as the plant's stacks rest
+    /// after being operated. 0: seed 001's virgin state h = 0.
+    #[serde(default)]
+    pub rest_cycle: f64,
 }
 
 /// Eq. (6), solved exactly (module comment).
@@ -68,10 +74,11 @@ pub struct InverseBoucWen {
 }
 
 impl InverseBoucWen {
-    /// At rest (v = 0, h = 0); `max_du` as for `AsymmetricBoucWen::advance_to`.
-    pub fn new(params: BoucWenParams, max_du: f64) -> Self {
+    /// At rest (v = 0, h at the rest of the loop to `rest_cycle`, 0 for a
+    /// virgin model); `max_du` as for `AsymmetricBoucWen::advance_to`.
+    pub fn new(params: BoucWenParams, rest_cycle: f64, max_du: f64) -> Self {
         InverseBoucWen {
-            model: AsymmetricBoucWen::new(params),
+            model: AsymmetricBoucWen::at_exercised_rest(params, rest_cycle),
             max_du,
         }
     }
@@ -166,8 +173,8 @@ pub struct CouplingEstimate {
 impl CouplingEstimator {
     pub fn new(models: &BoucWenModels, max_du: f64) -> Self {
         CouplingEstimator {
-            x_from_y: AsymmetricBoucWen::new(models.x_from_y),
-            y_from_x: AsymmetricBoucWen::new(models.y_from_x),
+            x_from_y: AsymmetricBoucWen::at_exercised_rest(models.x_from_y, models.rest_cycle),
+            y_from_x: AsymmetricBoucWen::at_exercised_rest(models.y_from_x, models.rest_cycle),
             max_du,
         }
     }
@@ -203,7 +210,8 @@ pub struct BoucWenFeedforward {
 impl BoucWenFeedforward {
     pub fn new(models: &BoucWenModels, max_du: f64) -> Self {
         BoucWenFeedforward {
-            inverses: [models.y, models.x, models.x].map(|p| InverseBoucWen::new(p, max_du)),
+            inverses: [models.y, models.x, models.x]
+                .map(|p| InverseBoucWen::new(p, models.rest_cycle, max_du)),
         }
     }
 
@@ -258,7 +266,7 @@ mod tests {
                 ..piezo()
             },
         ] {
-            let mut inverse = InverseBoucWen::new(params, SIMULATE_MAX_DU);
+            let mut inverse = InverseBoucWen::new(params, 0.0, SIMULATE_MAX_DU);
             let mut forward = AsymmetricBoucWen::new(params);
             for i in 0..20_000 {
                 let t = i as f64 * 1e-4;
@@ -279,7 +287,7 @@ mod tests {
 
     #[test]
     fn solve_does_not_move_the_state_and_a_held_demand_holds_the_command() {
-        let mut inverse = InverseBoucWen::new(piezo(), SIMULATE_MAX_DU);
+        let mut inverse = InverseBoucWen::new(piezo(), 0.0, SIMULATE_MAX_DU);
         let v = inverse.solve(4.0);
         assert_eq!(inverse.output(), 0.0);
         inverse.commit(v);
@@ -302,6 +310,7 @@ mod tests {
                 q: -0.5,
                 ..piezo()
             },
+            rest_cycle: 0.0,
         };
         let mut estimator = CouplingEstimator::new(&models, SIMULATE_MAX_DU);
         estimator.commit([4.0, 2.0, 6.0]);

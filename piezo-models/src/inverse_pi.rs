@@ -13,6 +13,11 @@
 //! The backlash operators (eq. 1) keep one memory each; eq. 1's initial value
 //! `max(u(0) − r, min(u(0) + r, 0))` is the backlash update from a memory of 0,
 //! so the memories start at 0 and the first sample needs no special case.
+//! Seed 000 adds that "the start state of the backlash operator is determined
+//! by the initial energy condition of the actuation devices": an actuator
+//! that rests after being operated (as FlexureStage's stacks do) starts on the
+//! descending branch of its working loop, which `rest_cycle` gives: the
+//! memories start where a demand 0 → `rest_cycle` → 0 leaves them.
 //!
 //! Given c, w_s and u1max the model is linear in (a, k, b): see
 //! [`linear_regressors`], which identification uses to solve that part exactly.
@@ -64,6 +69,11 @@ pub struct InversePiParams {
     pub u1max: f64,
     /// Cubic input function G(y) = a1·y³ + a2·y² + a3·y + a4 [V/µm³, V/µm², V/µm, V].
     pub a: [f64; 4],
+    /// The working loop the actuator rests on [µm]: the memories start where
+    /// a demand 0 → `rest_cycle` → 0 leaves them. 0: eq. (1)'s zero memories,
+    /// a de-energized actuator that was never operated (the paper's Table 1).
+    #[serde(default)]
+    pub rest_cycle: f64,
 }
 
 impl InversePiParams {
@@ -100,6 +110,13 @@ impl InversePiParams {
         finite("b", &self.b)?;
         finite("ws", &self.ws)?;
         finite("a", &self.a)?;
+        if !(self.rest_cycle.is_finite() && self.rest_cycle >= 0.0) {
+            return Err(ParamError {
+                parameter: format!("{name}.rest_cycle"),
+                value: self.rest_cycle,
+                allowed: "rest_cycle >= 0 (finite)".to_owned(),
+            });
+        }
         for (field, value) in [("c", self.c), ("u1max", self.u1max)] {
             if !(value.is_finite() && value > 0.0) {
                 return Err(ParamError {
@@ -149,6 +166,38 @@ pub fn u1max_over_range(ws: &[f64; DEAD_ZONE_OPERATORS], c: f64, y_max: f64) -> 
 struct BacklashMemories([f64; BACKLASH_OPERATORS]);
 
 impl BacklashMemories {
+    /// The memories a demand 0 → `top` → 0 leaves, from zero memories. z is
+    /// piecewise linear in y with breaks at the dead-zone thresholds, so its
+    /// path is exact through those breaks; the play operators' memory depends
+    /// only on the extremes of their input, not on its speed.
+    fn after_cycle(
+        top: f64,
+        ws: &[f64; DEAD_ZONE_OPERATORS],
+        c: f64,
+        thresholds: &[f64; BACKLASH_OPERATORS],
+    ) -> BacklashMemories {
+        let mut memories = BacklashMemories::default();
+        if top.is_nan() || top <= 0.0 {
+            return memories;
+        }
+        // The thresholds ascend (eq. 5), so this is the path up, then down.
+        let breaks = dead_zone_thresholds(c);
+        let inside = |d: &f64| *d > 0.0 && *d < top;
+        let mut visit = |y: f64| {
+            memories.advance(dead_zone_superposition(y, ws, c), thresholds);
+        };
+        visit(0.0);
+        breaks.iter().filter(|d| inside(d)).for_each(|d| visit(*d));
+        visit(top);
+        breaks
+            .iter()
+            .rev()
+            .filter(|d| inside(d))
+            .for_each(|d| visit(*d));
+        visit(0.0);
+        memories
+    }
+
     /// Advances every operator with input z; returns their outputs.
     fn advance(
         &mut self,
@@ -173,12 +222,20 @@ pub struct ModifiedInversePi {
 }
 
 impl ModifiedInversePi {
+    /// A model at its rest: memories after a demand 0 → `rest_cycle` → 0 (all
+    /// 0 for `rest_cycle` = 0).
     pub fn new(params: InversePiParams) -> Self {
+        let backlash_thresholds = params.backlash_thresholds();
         ModifiedInversePi {
             dead_zone_thresholds: params.dead_zone_thresholds(),
-            backlash_thresholds: params.backlash_thresholds(),
+            memories: BacklashMemories::after_cycle(
+                params.rest_cycle,
+                &params.ws,
+                params.c,
+                &backlash_thresholds,
+            ),
+            backlash_thresholds,
             params,
-            memories: BacklashMemories::default(),
         }
     }
 
@@ -186,9 +243,14 @@ impl ModifiedInversePi {
         &self.params
     }
 
-    /// Back to the de-energized start (all memories 0).
+    /// Back to the rest the model started from.
     pub fn reset(&mut self) {
-        self.memories = BacklashMemories::default();
+        self.memories = BacklashMemories::after_cycle(
+            self.params.rest_cycle,
+            &self.params.ws,
+            self.params.c,
+            &self.backlash_thresholds,
+        );
     }
 
     /// One sample of eq. (3)-(5): the command [V] for demanded displacement
@@ -316,6 +378,7 @@ mod tests {
             c: 1.1,
             u1max: 11.0,
             a: [1e-4, -0.02, 0.9, -0.1],
+            rest_cycle: 0.0,
         };
         let y: Vec<f64> = (0..400)
             .map(|n| 6.0 + 5.0 * (n as f64 * 0.05).sin())

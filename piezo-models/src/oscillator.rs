@@ -81,6 +81,26 @@ impl Oscillator {
         self.omega
     }
 
+    /// ζ [1].
+    pub fn damping_ratio(&self) -> f64 {
+        self.zeta
+    }
+
+    /// Sets position and velocity (a continuous-state integrator owns them).
+    pub fn set_state(&mut self, state: ModalPoint) {
+        self.state = state;
+    }
+
+    /// (q̇, q̈) of q̈ + 2ζω q̇ + ω² q = ω² f at the current state for the
+    /// forcing `f`: the right-hand side a time-domain integrator needs.
+    pub fn rate(&self, forcing: f64) -> ModalPoint {
+        let ModalPoint { position, velocity } = self.state;
+        ModalPoint {
+            position: velocity,
+            velocity: self.omega * (self.omega * (forcing - position) - 2.0 * self.zeta * velocity),
+        }
+    }
+
     /// The particular-solution gain for the forcing term a·e^{−λs}: the mode
     /// follows K·e^{−λs} with K = g·a, g = ω²/(λ² − 2ζωλ + ω²). The denominator
     /// is (λ − ζω)² + ω²(1 − ζ²) > 0, so g is finite for every λ when ζ < 1.

@@ -126,7 +126,9 @@ pub struct ControllerParams {
     pub decoupling_model: DecouplingModel,
     /// Seed 001's four Bouc-Wen models, in command volts.
     pub bouc_wen: BoucWenModels,
-    /// Command range of every channel [V] (0..10 V: the actuators cannot retract).
+    /// Command range of every channel [V]. Seed 000's stage: −2..12 V, the
+    /// control input range PI recommends for its LVPZT amplifiers such as
+    /// the E-505 (−20..120 V at the stacks; MODEL.md §4).
     pub command_min: f64,
     pub command_max: f64,
 }
@@ -153,8 +155,8 @@ impl ControllerParams {
             // Seed 000 has no Bouc-Wen models; those identified on this
             // project's plant stand in, so the seed 001 paths can be tried.
             bouc_wen: ControllerParams::stage().bouc_wen,
-            command_min: 0.0,
-            command_max: 10.0,
+            command_min: -2.0,
+            command_max: 12.0,
         }
     }
 
@@ -375,6 +377,13 @@ impl PiezoController {
 
     pub fn output(&self) -> &ControllerOutput {
         &self.output
+    }
+
+    /// Per channel, whether the last sample's command was limited: 1 at
+    /// `command_max`, −1 at `command_min`, 0 inside (what the anti-windup
+    /// of the next sample acts on).
+    pub fn limited(&self) -> [i8; 3] {
+        self.limited
     }
 
     /// One sample of period `dt` (> 0): references x_ref, y_ref [µm],

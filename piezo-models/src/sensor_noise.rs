@@ -1,8 +1,10 @@
 //! Gaussian noise of the three displacement sensors, seeded and reproducible.
 //!
 //! Seed 000 §2 reads the platform with three Keyence LK-H050 laser displacement
-//! sensors, sampled by the controller at 10 kHz. The default rms of 0.01 µm is
-//! the order of such a sensor's noise at that rate. The generator is
+//! sensors, sampled by the controller at 10 kHz. The preset's rms of 0.005 µm
+//! is the sensor's repeatability (0.025 µm) read as a 99 % band, below the
+//! bound the paper's own Fig. 7a sets (RMS 0.0134 µm, noise included);
+//! MODEL.md §2 gives the reasoning. The generator is
 //! Xoshiro256++ (serialisable, so a saved state continues the same sequence)
 //! feeding a standard normal.
 

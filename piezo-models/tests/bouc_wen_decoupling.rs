@@ -5,11 +5,11 @@
 //! subtracted from x's reference.
 //!
 //! The controller's models here are the plant's own (converted to command
-//! volts through the amplifier gain), so the test isolates the law from the
+//! volts through the amplifier gain), starting, like the plant's, at the rest
+//! of their working loop, so the test isolates the law from the
 //! identification: what remains is the amplifier's lag, the modes and the
-//! one-sample delay of the estimate. x is held at a home above 0 V, since
-//! the actuators cannot retract and a positive coupling can only be
-//! cancelled by lowering x's voltage.
+//! one-sample delay of the estimate. x is held at a home above 0 V
+//! and the commands stay in 0..10 V, where every stage of the project works.
 
 use piezo_models::{
     BoucWenFeedforward, BoucWenModels, BoucWenParams, CouplingEstimator, FlexureStage,
@@ -48,6 +48,9 @@ fn oracle_models(params: &FlexureStageParams) -> BoucWenModels {
         y: params.actuators[0].hysteresis.with_input_scale(g),
         x_from_y: c.x_from_pzt1.with_input_scale(g),
         y_from_x: y_from_x.with_input_scale(g),
+        // The plant's stacks rest on their loop to rest_cycle_voltage: the
+        // same loop in command volts.
+        rest_cycle: params.rest_cycle_voltage / g,
     }
 }
 

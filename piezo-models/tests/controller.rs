@@ -48,7 +48,7 @@ fn feedforward_alone_is_the_inverse_model_of_each_channel() {
         for (c, expected) in expected.into_iter().enumerate() {
             assert_eq!(out.feedforward[c], expected, "channel {c}, sample {n}");
             assert_eq!(out.feedback[c], 0.0);
-            assert_eq!(out.u[c], expected.clamp(0.0, 10.0));
+            assert_eq!(out.u[c], expected.clamp(p.command_min, p.command_max));
         }
         assert_eq!(out.decoupled.x_r2, inputs[1]);
         assert_eq!(out.decoupled.y_rx, y_ref);
@@ -95,26 +95,27 @@ fn integrators_hold_while_their_channel_is_limited() {
     p.feedback_x = false;
     p.feedback_theta = false;
     let ki = p.translation_gains.ki;
+    let limit = p.command_max;
     let mut controller = PiezoController::new(p).unwrap();
-    // A 20 µm error asks for more than 10 V within 10 ms (ki·e·t = 10 V at t = 10 ms).
+    // A 20 µm error asks for more than 12 V within 13 ms (ki·e·t = 12 V at t = 12 ms).
     let mut limited_at = None;
     for n in 0..400 {
         let out = controller.step(0.0, 20.0, 0.0, [0.0; 3], DT);
-        if out.u[0] == 10.0 && limited_at.is_none() {
+        if out.u[0] == limit && limited_at.is_none() {
             limited_at = Some(n);
         }
     }
     let limited_at = limited_at.expect("the command reaches its limit");
-    assert!(limited_at < 120, "limited after {limited_at} samples");
+    assert!(limited_at < 140, "limited after {limited_at} samples");
     let held = controller.output().feedback[0];
     assert!(
-        (10.0..=10.0 + ki * 20.0 * DT + 1e-9).contains(&held),
+        (limit..=limit + ki * 20.0 * DT + 1e-9).contains(&held),
         "the integrator stops within one increment past the limit: fb = {held}"
     );
     // When the error reverses, the command leaves the limit at once: no
     // stored windup to unwind.
     let out = controller.step(0.0, 20.0, 0.0, [21.0, 0.0, 0.0], DT);
-    assert!(out.u[0] < 10.0, "u1 = {}", out.u[0]);
+    assert!(out.u[0] < limit, "u1 = {}", out.u[0]);
 }
 
 #[test]

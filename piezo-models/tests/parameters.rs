@@ -24,7 +24,7 @@ fn unknown_fields_are_rejected() {
 #[test]
 fn out_of_range_values_are_rejected_by_name() {
     type Mutation = fn(&mut FlexureStageParams);
-    let cases: [(&str, f64, Mutation); 16] = [
+    let cases: [(&str, f64, Mutation); 18] = [
         ("amplifier.gain", 0.0, |p| p.amplifier.gain = 0.0),
         ("amplifier.bandwidth_hz", f64::INFINITY, |p| {
             p.amplifier.bandwidth_hz = f64::INFINITY
@@ -32,7 +32,13 @@ fn out_of_range_values_are_rejected_by_name() {
         ("amplifier.v_min", f64::NAN, |p| {
             p.amplifier.v_min = f64::NAN
         }),
-        ("amplifier.v_max", -1.0, |p| p.amplifier.v_max = -1.0),
+        ("amplifier.v_max", -40.0, |p| p.amplifier.v_max = -40.0),
+        ("amplifier.input_min", f64::NEG_INFINITY, |p| {
+            p.amplifier.input_min = f64::NEG_INFINITY
+        }),
+        ("amplifier.input_max", -3.0, |p| {
+            p.amplifier.input_max = -3.0
+        }),
         ("actuators[1].hysteresis.n", 0.5, |p| {
             p.actuators[1].hysteresis.n = 0.5
         }),

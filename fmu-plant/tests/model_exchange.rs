@@ -1,0 +1,413 @@
+//! FlexureStage as Model Exchange against FlexureStage as Co-Simulation, on
+//! the calibration fingerprints' procedures (`piezo_models::fingerprint`):
+//! both interfaces of the one binary, through the C ABI, with the same
+//! commands held over the same 100 µs samples (10 µs for the resonance
+//! record).
+//!
+//! - Co-Simulation: `fmi2DoStep` per sample, with the hysteresis chords cut
+//!   to 1 mV (`solver.max_voltage_step`) so that its own approximation is far
+//!   below the tolerance.
+//! - Model Exchange: as an importer with a variable-step solver runs it: at
+//!   each sample an event (enter event mode, set the inputs, new discrete
+//!   states, back to continuous time), then Dormand-Prince 8(5,3) (the
+//!   `ode_solvers` crate) over the sample on the states scaled by their
+//!   nominals, relative and absolute tolerance 1e-10, through
+//!   `fmi2SetTime`/`fmi2SetContinuousStates`/`fmi2GetDerivatives`, and
+//!   `fmi2CompletedIntegratorStep` after it.
+//!
+//! Asserted: every sensor reading of every sample within 1e-6 µm; the
+//! fingerprints computed from them (coupling spans and loop widths, major
+//! loops, the 790 Hz θ mode) the same. `-- --nocapture` prints the figures.
+
+use std::path::Path;
+
+use fmi2_conformance::{Fmu, Instance, OK, WARNING};
+use fmu_plant::FlexureStageFmu;
+use ode_solvers::{Dop853, SVector, System};
+use piezo_models::FlexureStageParams;
+use piezo_models::fingerprint::{
+    self, FULL_COMMAND, RAMP_TIME, RESONANCE_RECORD_TIME, RESONANCE_SAMPLE_PERIOD,
+    RESONANCE_STEP_COMMAND, SAMPLE_PERIOD,
+};
+
+const STATES: usize = 19;
+type State = SVector<f64, STATES>;
+
+/// The agreement asked of the two interfaces, on every sensor reading.
+const TOLERANCE_UM: f64 = 1e-6;
+/// Dormand-Prince tolerances (relative, and absolute on the nominal-scaled
+/// states).
+const SOLVER_TOLERANCE: f64 = 1e-10;
+
+fn plant() -> Fmu {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+    Fmu::load(
+        &fmi2_conformance::cdylib_path(
+            "fmu_plant",
+            root,
+            &[
+                "fmu-plant/src",
+                "fmi2-cosim/src",
+                "fmi2-cosim/linker",
+                "piezo-models/src",
+                "piezo-models/presets",
+            ],
+        ),
+        &fmi2_cosim::model_description::model_description::<FlexureStageFmu>()
+            .expect("the description renders"),
+    )
+}
+
+/// The right-hand side through the C ABI, on states scaled by their nominals.
+struct Scaled<'a> {
+    inst: &'a Instance<'a>,
+    nominals: [f64; STATES],
+}
+
+impl System<f64, State> for Scaled<'_> {
+    fn system(&self, t: f64, z: &State, dz: &mut State) {
+        let x: Vec<f64> = (0..STATES).map(|i| z[i] * self.nominals[i]).collect();
+        assert_eq!(self.inst.set_time(t), OK);
+        let dx = self.inst.derivatives_at(&x);
+        for i in 0..STATES {
+            dz[i] = dx[i] / self.nominals[i];
+        }
+    }
+}
+
+/// One instance of either interface, stepped a sample at a time with the
+/// commands held.
+enum Rig<'a> {
+    CoSimulation(Instance<'a>),
+    ModelExchange {
+        inst: Instance<'a>,
+        nominals: [f64; STATES],
+        evaluations: usize,
+    },
+}
+
+impl<'a> Rig<'a> {
+    fn co_simulation(fmu: &'a Fmu) -> Rig<'a> {
+        let mut inst = fmu.instantiate("cs", false);
+        let vr = fmu.variable("solver.max_voltage_step").vr;
+        assert_eq!(inst.set_real(&[vr], &[1e-3]), OK);
+        inst.initialize();
+        Rig::CoSimulation(inst)
+    }
+
+    fn model_exchange(fmu: &'a Fmu) -> Rig<'a> {
+        let mut inst = fmu.instantiate_model_exchange("me", false);
+        inst.initialize();
+        inst.event_iteration();
+        let (status, nominals) = inst.get_nominals(STATES);
+        assert_eq!(status, OK);
+        Rig::ModelExchange {
+            inst,
+            nominals: nominals.try_into().expect("19 states"),
+            evaluations: 0,
+        }
+    }
+
+    fn instance(&self) -> &Instance<'a> {
+        match self {
+            Rig::CoSimulation(inst) | Rig::ModelExchange { inst, .. } => inst,
+        }
+    }
+
+    fn sensors(&self) -> [f64; 3] {
+        let inst = self.instance();
+        let vrs = ["s1", "s2", "s3"].map(|name| inst.fmu.variable(name).vr);
+        let (status, values) = inst.get_real(&vrs);
+        assert_eq!(status, OK);
+        [values[0], values[1], values[2]]
+    }
+
+    /// One sample of length `h` with `commands` held; the sensors after it.
+    fn step(&mut self, commands: [f64; 3], h: f64) -> [f64; 3] {
+        match self {
+            Rig::CoSimulation(inst) => {
+                let vrs = ["u1", "u2", "u3"].map(|name| inst.fmu.variable(name).vr);
+                assert_eq!(inst.set_real(&vrs, &commands), OK);
+                let status = inst.do_step(h);
+                assert!(status == OK || status == WARNING, "{:#?}", inst.take_log());
+            }
+            Rig::ModelExchange {
+                inst,
+                nominals,
+                evaluations,
+            } => {
+                // A jump of the inputs is an event for the importer.
+                let vrs = ["u1", "u2", "u3"].map(|name| inst.fmu.variable(name).vr);
+                assert_eq!(inst.enter_event_mode(), OK);
+                let status = inst.set_real(&vrs, &commands);
+                assert!(status == OK || status == WARNING);
+                let (status, _) = inst.new_discrete_states();
+                assert_eq!(status, OK);
+                assert_eq!(inst.enter_continuous_time_mode(), OK);
+                let (status, x) = inst.get_continuous_states(STATES);
+                assert_eq!(status, OK);
+                let z = State::from_fn(|i, _| x[i] / nominals[i]);
+                let t0 = inst.time;
+                let system = Scaled {
+                    inst,
+                    nominals: *nominals,
+                };
+                let mut solver =
+                    Dop853::new(system, t0, t0 + h, h, z, SOLVER_TOLERANCE, SOLVER_TOLERANCE);
+                solver.set_output(ode_solvers::OutputType::Sparse);
+                let stats = solver.integrate().expect("Dop853 integrates the sample");
+                *evaluations += stats.num_eval as usize;
+                let z1 = solver.y_out().last().expect("the end of the sample");
+                let x1: Vec<f64> = (0..STATES).map(|i| z1[i] * nominals[i]).collect();
+                inst.time = t0 + h;
+                assert_eq!(inst.set_time(inst.time), OK);
+                assert_eq!(inst.set_continuous_states(&x1), OK);
+                let (status, _, _) = inst.completed_integrator_step();
+                assert!(status == OK || status == WARNING, "{:#?}", inst.take_log());
+            }
+        }
+        self.sensors()
+    }
+}
+
+/// A procedure of the fingerprints: a sequence of samples, each its length
+/// and the commands held over it.
+type Procedure = Vec<(f64, [f64; 3])>;
+
+/// `duration` s at `period`, the commands of sample k being demand(k·period).
+fn run(procedure: &mut Procedure, duration: f64, period: f64, demand: impl Fn(f64) -> [f64; 3]) {
+    let steps = (duration / period).round() as usize;
+    for k in 1..=steps {
+        procedure.push((period, demand(k as f64 * period)));
+    }
+}
+
+/// The linear 1 s ramp of `fingerprint::Rig::ramp_to`.
+fn ramp(procedure: &mut Procedure, from: [f64; 3], to: [f64; 3]) {
+    run(procedure, RAMP_TIME, SAMPLE_PERIOD, |t| {
+        let f = t / RAMP_TIME;
+        [0, 1, 2].map(|i| from[i] + (to[i] - from[i]) * f)
+    });
+}
+
+/// The procedures, exactly as `piezo_models::fingerprint` runs them, with the
+/// sweep amplitudes its calibration solves for.
+fn procedures(params: &FlexureStageParams) -> Vec<(&'static str, Procedure, f64)> {
+    let u_home = fingerprint::x_home_command(params);
+    let sweeps = fingerprint::coupling_sweeps(params, u_home);
+    let home = [0.0, u_home, u_home];
+    let tau = std::f64::consts::TAU;
+    let mut list = Vec::new();
+
+    let mut y = Procedure::new();
+    ramp(&mut y, [0.0; 3], home);
+    let a = sweeps.y_sweep_amplitude;
+    run(&mut y, 2.0, SAMPLE_PERIOD, |t| {
+        [0.5 * a * (1.0 - (tau * t).cos()), u_home, u_home]
+    });
+    list.push(("y sweep (s2, s3 from y)", y, 1.0));
+
+    let mut x = Procedure::new();
+    let a = sweeps.x_sweep_amplitude;
+    run(&mut x, 2.0, SAMPLE_PERIOD, |t| {
+        let u = 0.5 * a * (1.0 - (tau * t).cos());
+        [0.0, u, u]
+    });
+    list.push(("x sweep (y from x)", x, 1.0));
+
+    let mut rotation = Procedure::new();
+    ramp(&mut rotation, [0.0; 3], home);
+    let d = sweeps.rotation_sweep_amplitude;
+    run(&mut rotation, 2.75, SAMPLE_PERIOD, |t| {
+        let s = d * (tau * t).sin();
+        [0.0, u_home + s, u_home - s]
+    });
+    list.push(("rotation sweep (y from theta)", rotation, 1.75));
+
+    let wave = move |t: f64| 0.5 * FULL_COMMAND * (1.0 - (tau * t).cos());
+    let mut major_x = Procedure::new();
+    run(&mut major_x, 2.0, SAMPLE_PERIOD, |t| {
+        [0.0, wave(t), wave(t)]
+    });
+    list.push(("major loop x", major_x, 1.0));
+    let mut major_y = Procedure::new();
+    run(&mut major_y, 2.0, SAMPLE_PERIOD, |t| [wave(t), 0.0, 0.0]);
+    list.push(("major loop y", major_y, 1.0));
+
+    let mut resonance = Procedure::new();
+    ramp(&mut resonance, [0.0; 3], home);
+    run(&mut resonance, 0.5, SAMPLE_PERIOD, |_| home);
+    let held = [
+        0.0,
+        u_home + RESONANCE_STEP_COMMAND,
+        u_home - RESONANCE_STEP_COMMAND,
+    ];
+    run(
+        &mut resonance,
+        RESONANCE_RECORD_TIME,
+        RESONANCE_SAMPLE_PERIOD,
+        |_| held,
+    );
+    list.push(("theta resonance record", resonance, 1.5));
+    list
+}
+
+struct Outcome {
+    sensors: Vec<[f64; 3]>,
+    seconds: f64,
+}
+
+fn simulate(mut rig: Rig<'_>, procedure: &Procedure) -> (Outcome, usize) {
+    let started = std::time::Instant::now();
+    let sensors = procedure
+        .iter()
+        .map(|(h, commands)| rig.step(*commands, *h))
+        .collect();
+    let evaluations = match rig {
+        Rig::ModelExchange { evaluations, .. } => evaluations,
+        Rig::CoSimulation(_) => 0,
+    };
+    (
+        Outcome {
+            sensors,
+            seconds: started.elapsed().as_secs_f64(),
+        },
+        evaluations,
+    )
+}
+
+/// Sensor readings of samples from `from` s on (the measured cycle).
+fn window<'s>(
+    procedure: &Procedure,
+    sensors: &'s [[f64; 3]],
+    from: f64,
+) -> (Vec<[f64; 3]>, Vec<&'s [f64; 3]>) {
+    let mut t = 0.0;
+    let mut commands = Vec::new();
+    let mut readings = Vec::new();
+    for ((h, u), s) in procedure.iter().zip(sensors) {
+        t += h;
+        if t >= from - 1e-9 {
+            commands.push(*u);
+            readings.push(s);
+        }
+    }
+    (commands, readings)
+}
+
+#[test]
+fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
+    let fmu = plant();
+    let params = FlexureStageParams::default();
+    let spacing = params.sensor_spacing_mm * 1e3;
+    for (name, procedure, from) in procedures(&params) {
+        let (cs, _) = simulate(Rig::co_simulation(&fmu), &procedure);
+        let (me, evaluations) = simulate(Rig::model_exchange(&fmu), &procedure);
+        let worst = cs
+            .sensors
+            .iter()
+            .zip(&me.sensors)
+            .flat_map(|(a, b)| (0..3).map(move |i| (a[i] - b[i]).abs()))
+            .fold(0.0, f64::max);
+        println!(
+            "{name}: {} samples, largest |s_ME - s_CS| {worst:.2e} um; CS {:.2} s, ME {:.2} s \
+             ({evaluations} derivative evaluations)",
+            procedure.len(),
+            cs.seconds,
+            me.seconds
+        );
+        assert!(worst <= TOLERANCE_UM, "{name}: {worst:e} um");
+
+        // The fingerprints computed from both records.
+        let (commands, cs_window) = window(&procedure, &cs.sensors, from);
+        let (_, me_window) = window(&procedure, &me.sensors, from);
+        let shapes = |readings: &[&[f64; 3]],
+                      input: &dyn Fn(&[f64; 3]) -> f64,
+                      output: &dyn Fn(&[f64; 3]) -> f64| {
+            let u: Vec<f64> = commands.iter().map(input).collect();
+            let y: Vec<f64> = readings.iter().map(|s| output(s)).collect();
+            fingerprint::loop_shape(&u, &y)
+        };
+        let compare = |what: &str, a: fingerprint::LoopShape, b: fingerprint::LoopShape| {
+            println!(
+                "  {what}: span {:.6} um, width {:.6} um (ME - CS: {:.1e}, {:.1e})",
+                a.span_um,
+                a.max_width_um,
+                b.span_um - a.span_um,
+                b.max_width_um - a.max_width_um
+            );
+            assert!(
+                (a.span_um - b.span_um).abs() <= 2.0 * TOLERANCE_UM,
+                "{what} span"
+            );
+            assert!(
+                (a.max_width_um - b.max_width_um).abs() <= 2.0 * TOLERANCE_UM,
+                "{what} width"
+            );
+        };
+        match name {
+            "y sweep (s2, s3 from y)" => {
+                for (k, label) in [(1, "s2 from y"), (2, "s3 from y")] {
+                    let input = |u: &[f64; 3]| u[0];
+                    let output = move |s: &[f64; 3]| s[k];
+                    compare(
+                        label,
+                        shapes(&cs_window, &input, &output),
+                        shapes(&me_window, &input, &output),
+                    );
+                }
+            }
+            "x sweep (y from x)" => {
+                let input = |u: &[f64; 3]| u[1];
+                let output = |s: &[f64; 3]| s[0];
+                compare(
+                    "y from x",
+                    shapes(&cs_window, &input, &output),
+                    shapes(&me_window, &input, &output),
+                );
+            }
+            "rotation sweep (y from theta)" => {
+                let input = |u: &[f64; 3]| 0.5 * (u[1] - u[2]);
+                let output = |s: &[f64; 3]| s[0];
+                compare(
+                    "y from rotation",
+                    shapes(&cs_window, &input, &output),
+                    shapes(&me_window, &input, &output),
+                );
+            }
+            "major loop x" => {
+                let input = |u: &[f64; 3]| u[1];
+                let output = |s: &[f64; 3]| 0.5 * (s[1] + s[2]);
+                compare(
+                    "major loop x",
+                    shapes(&cs_window, &input, &output),
+                    shapes(&me_window, &input, &output),
+                );
+            }
+            "major loop y" => {
+                let input = |u: &[f64; 3]| u[0];
+                let output = |s: &[f64; 3]| s[0];
+                compare(
+                    "major loop y",
+                    shapes(&cs_window, &input, &output),
+                    shapes(&me_window, &input, &output),
+                );
+            }
+            _ => {
+                let theta = |readings: &[&[f64; 3]]| -> Vec<f64> {
+                    readings.iter().map(|s| (s[1] - s[2]) / spacing).collect()
+                };
+                let cs_peak =
+                    fingerprint::spectral_peak_hz(&theta(&cs_window), RESONANCE_SAMPLE_PERIOD);
+                let me_peak =
+                    fingerprint::spectral_peak_hz(&theta(&me_window), RESONANCE_SAMPLE_PERIOD);
+                println!("  theta mode: CS {cs_peak} Hz, ME {me_peak} Hz");
+                assert_eq!(cs_peak, me_peak);
+                assert!(
+                    (cs_peak - 790.0).abs() <= 0.02 * 790.0,
+                    "seed 000 §2: 790 Hz"
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,1037 @@
+//! The default identification of a measured record: what `piezo-identify
+//! inverse-pi FILE --split 0.5` and `bouc-wen FILE --split 0.5` do when the
+//! user gives nothing else, and why (README, "Protocol").
+//!
+//! - **Fit part and scored part.** A record split in two (`--split`,
+//!   `--validate-from`) is fitted on its first part and scored on the rest
+//!   with the model run from the start of the record: its state at the first
+//!   scored sample is the one the measured history left. A separate
+//!   validation file is run from rest at its own first sample and scored
+//!   after its own warm-up.
+//! - **What is fitted** ([`Plan`], [`crate::segments`]): not the rest
+//!   segments, not the settling after each voltage step, not the first
+//!   settling time of the record; the models run through all of them. The
+//!   same samples are left out of the score.
+//! - **Choices made from the fit part only** (inverse P-I): the smoothing of
+//!   the displacement (none, or a centred moving average over 1/160, 1/80 or
+//!   1/40 of the fastest cycle: at most 0.1 % amplitude loss at that cycle)
+//!   and rate-dependent or constant backlash weights are chosen by forward
+//!   validation inside the fit part: the (c, w_s) search runs on its first
+//!   70 % of fitted samples, every candidate's linear part is solved there,
+//!   and the candidates are compared on the last 30 %, predicted with the
+//!   operator state carried over, as the scored part will be. Rate-dependent
+//!   weights (ten more parameters) are taken only when they lower that error
+//!   by more than 5 %. The classical P-I baseline gets its own smoothing by
+//!   the same comparison.
+//! - **Cost**: the (c, w_s) searches run on every m-th sample, m such that
+//!   at most about 3000 samples are searched and at least 100 per fastest
+//!   cycle remain; 30 starts are screened for 60 Nelder-Mead iterations and
+//!   the best 5 run on to convergence ([`crate::fit::Screening`]). The
+//!   linear part and every error use all samples.
+//! - **Baselines**, fitted on the same samples: the classical P-I model and
+//!   a straight line; for Bouc-Wen also the best straight line of the scored
+//!   part itself (fitted on what it is scored on: no line can do better).
+//!
+//! Errors are given as RMS and largest |error| and as % of the fit part's
+//! span: the input span for the inverse models (voltage errors), the output
+//! span (stroke) for the forward ones.
+
+use std::ops::Range;
+use std::time::Instant;
+
+use nalgebra::DMatrix;
+use piezo_models::InversePiParams;
+use serde::Serialize;
+
+use crate::bouc_wen_fit::{
+    BoucWenFitError, BoucWenFitOptions, BoucWenIdentification, default_shape_bounds,
+    identify_bouc_wen, predict as predict_bouc_wen,
+};
+use crate::data::Record;
+use crate::fit::{
+    FitError, FitOptions, FitQuality, Screening, StartResult, fit_classical_pi,
+    fit_modified_inverse_pi_with_progress, range_of, selected,
+};
+use crate::gapso::{Bounds, GaPsoOptions};
+use crate::least_squares::{solve_least_squares, solve_least_squares_with_intercept_regularized};
+use crate::models::{
+    CLASSICAL_OPERATORS, ClassicalPi, ClassicalPiParams, SIX_DEAD_ZONE_PATTERN, predict, u1max_for,
+};
+use crate::regressors::{
+    PROPOSED, masked_classical_regressors, masked_rate_dependent_regressors,
+    reversing_classical_operators, reversing_operators,
+};
+use crate::segments::{
+    SegmentOptions, SegmentThresholds, Segments, detect_segments, fastest_cycle, first_loading_end,
+    merge, thresholds,
+};
+use crate::validation::smoothed_between_steps;
+
+/// Share of the fit part's fitted samples the inner search runs on; the rest
+/// scores the candidates.
+pub const INNER_TRAIN_FRACTION: f64 = 0.7;
+/// Rate-dependent weights must lower the inner validation error by more than
+/// this fraction.
+pub const RATE_DEPENDENCE_MARGIN: f64 = 0.05;
+/// Smoothing windows tried, as fractions of the fastest cycle.
+pub const SMOOTHING_CYCLE_FRACTIONS: [f64; 3] = [1.0 / 160.0, 1.0 / 80.0, 1.0 / 40.0];
+/// The search keeps at least this many samples per fastest cycle ...
+pub const SEARCH_SAMPLES_PER_CYCLE: f64 = 100.0;
+/// ... and otherwise decimates to about this many samples.
+pub const SEARCH_SAMPLES: usize = 3000;
+
+/// The linear parts are regularised, allowing their residual sum of squares
+/// to grow by this fraction (RMS by 0.05 %):
+/// `least_squares::solve_least_squares_regularized` says why.
+pub const LINEAR_RSS_INCREASE: f64 = 1e-3;
+
+/// RK4 substeps per scaled input unit in GA-PSO's evaluations
+/// (`BoucWenFitOptions::search_substeps` says why 100 is enough).
+pub const BOUC_WEN_SEARCH_SUBSTEPS: f64 = 100.0;
+
+/// Where the record is cut and what is left out.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PlanOptions {
+    pub segments: SegmentOptions,
+    /// Seconds at the start of the record not fitted (None: the settling
+    /// time, the start of a record being treated as a step).
+    pub warm_up_seconds: Option<f64>,
+    /// Find rest segments and steps and leave them out (else only the
+    /// warm-up is left out).
+    pub detect_segments: bool,
+}
+
+impl Default for PlanOptions {
+    fn default() -> Self {
+        PlanOptions {
+            segments: SegmentOptions::default(),
+            warm_up_seconds: None,
+            detect_segments: true,
+        }
+    }
+}
+
+/// Why the protocol cannot run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProtocolError {
+    #[error("the input never changes in the fit part: nothing drives the stage")]
+    NoExcitation,
+    #[error("the fit part is empty (the split is at sample {0})")]
+    EmptyFitPart(usize),
+    #[error(
+        "no sample is left to fit: the warm-up ({warm_up} samples), rest segments and settling after steps cover the fit part"
+    )]
+    NothingToFit { warm_up: usize },
+    #[error(
+        "no sample is left to score: the warm-up ({warm_up} samples), rest segments and settling after steps cover the {samples} samples after the split"
+    )]
+    NothingScored { warm_up: usize, samples: usize },
+    #[error("{0}")]
+    Fit(#[from] FitError),
+    #[error("{0}")]
+    BoucWen(#[from] BoucWenFitError),
+}
+
+/// Which samples of a record are fitted and which scored.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Plan {
+    pub samples: usize,
+    /// The fit part is 0..fit_end, the scored part fit_end..samples.
+    pub fit_end: usize,
+    pub sample_period: f64,
+    pub thresholds: SegmentThresholds,
+    /// Rests and steps of the whole record.
+    pub segments: Segments,
+    pub warm_up_samples: usize,
+    /// Samples of the fit part that are not fitted (warm-up included).
+    pub fit_excluded: Vec<Range<usize>>,
+    /// Samples of the scored part that are not scored.
+    pub scored_excluded: Vec<Range<usize>>,
+    /// Fastest cycle of the input over the fit part, rests aside [samples].
+    pub fastest_cycle: Option<f64>,
+}
+
+impl Plan {
+    /// The plan of a record of input `u`, fitted on 0..fit_end.
+    pub fn new(
+        u: &[f64],
+        sample_period: f64,
+        fit_end: usize,
+        options: &PlanOptions,
+    ) -> Result<Plan, ProtocolError> {
+        let fit_end = fit_end.min(u.len());
+        if fit_end == 0 {
+            return Err(ProtocolError::EmptyFitPart(fit_end));
+        }
+        let thresholds = thresholds(&u[..fit_end], sample_period, &options.segments)
+            .ok_or(ProtocolError::NoExcitation)?;
+        let segments = if options.detect_segments {
+            detect_segments(u, &thresholds)
+        } else {
+            Segments::default()
+        };
+        // The start of the record and every step: settling, then the first
+        // loading (segments::first_loading_end), unless a warm-up is given
+        // for the start.
+        let mut starts: Vec<usize> = segments.steps.clone();
+        let warm_up_samples = match options.warm_up_seconds {
+            Some(seconds) => (seconds / sample_period).round() as usize,
+            None => {
+                starts.insert(0, 0);
+                0
+            }
+        };
+        let excluded = {
+            let mut all = segments.excluded(thresholds.settle_samples, u.len());
+            all.push(0..warm_up_samples.min(u.len()));
+            for (i, &start) in starts.iter().enumerate() {
+                let next = starts.get(i + 1).copied().unwrap_or(u.len());
+                let settled = start + thresholds.settle_samples;
+                let end = first_loading_end(u, settled, next, thresholds.span)
+                    .unwrap_or(settled)
+                    .max(settled);
+                // Only the fit part: a step in the scored part is scored once
+                // settled (its state is the one the model computed).
+                if start < fit_end {
+                    all.push(start..end.min(fit_end));
+                }
+            }
+            merge(&mut all);
+            all
+        };
+        let clip = |range: Range<usize>| -> Range<usize> {
+            range.start.clamp(0, u.len())..range.end.clamp(0, u.len())
+        };
+        let fit_excluded: Vec<Range<usize>> = excluded
+            .iter()
+            .map(|r| clip(r.start..r.end.min(fit_end)))
+            .filter(|r| !r.is_empty())
+            .collect();
+        let scored_excluded: Vec<Range<usize>> = excluded
+            .iter()
+            .map(|r| clip(r.start.max(fit_end)..r.end))
+            .filter(|r| !r.is_empty())
+            .collect();
+        let mut plan = Plan {
+            samples: u.len(),
+            fit_end,
+            sample_period,
+            thresholds,
+            segments,
+            warm_up_samples,
+            fit_excluded,
+            scored_excluded,
+            fastest_cycle: None,
+        };
+        let fitted = plan.fitted();
+        if !fitted.iter().any(|f| *f) {
+            return Err(ProtocolError::NothingToFit {
+                warm_up: warm_up_samples,
+            });
+        }
+        if fit_end < u.len() && !plan.scored().iter().any(|s| *s) {
+            return Err(ProtocolError::NothingScored {
+                warm_up: warm_up_samples,
+                samples: u.len() - fit_end,
+            });
+        }
+        // The excitation's cycle, over the whole fit part but its rests (the
+        // first loading is excluded from the fit, not from the excitation).
+        let moving = flags(fit_end, 0, &plan.segments.rests);
+        plan.fastest_cycle = fastest_cycle(&u[..fit_end], &moving, thresholds.span);
+        Ok(plan)
+    }
+
+    /// Which samples of the fit part (0..fit_end) are fitted.
+    pub fn fitted(&self) -> Vec<bool> {
+        flags(self.fit_end, 0, &self.fit_excluded)
+    }
+
+    /// Which samples of the record are scored (none of the fit part).
+    pub fn scored(&self) -> Vec<bool> {
+        flags(self.samples, self.fit_end, &self.scored_excluded)
+    }
+
+    /// Whether the record has a scored part.
+    pub fn has_scored_part(&self) -> bool {
+        self.fit_end < self.samples
+    }
+
+    /// The scored samples of a separate record of the same experiment, run
+    /// from rest at its first sample: all but its warm-up (`warm_up_samples`,
+    /// or by default the settling time and the first loading, as at the
+    /// start of the fit part: its state before the record is assumed) and,
+    /// with `detect`, its rests and settling after steps (found with this
+    /// plan's thresholds).
+    pub fn validation_scored(
+        &self,
+        u: &[f64],
+        warm_up_samples: Option<usize>,
+        detect: bool,
+    ) -> (Segments, Vec<bool>) {
+        let segments = if detect {
+            detect_segments(u, &self.thresholds)
+        } else {
+            Segments::default()
+        };
+        let warm_up = warm_up_samples.unwrap_or_else(|| {
+            let settled = self.thresholds.settle_samples;
+            let next = segments.steps.first().copied().unwrap_or(u.len());
+            first_loading_end(u, settled, next, self.thresholds.span)
+                .unwrap_or(settled)
+                .max(settled)
+        });
+        let mut excluded = segments.excluded(self.thresholds.settle_samples, u.len());
+        excluded.push(0..warm_up.min(u.len()));
+        merge(&mut excluded);
+        (segments, flags(u.len(), 0, &excluded))
+    }
+
+    /// Search decimation for `fitted` samples (module comment).
+    pub fn search_decimation(&self, fitted: usize) -> usize {
+        let by_samples = fitted.div_ceil(SEARCH_SAMPLES).max(1);
+        let by_cycle = self.fastest_cycle.map_or(by_samples, |c| {
+            ((c / SEARCH_SAMPLES_PER_CYCLE).floor() as usize).max(1)
+        });
+        by_samples.min(by_cycle)
+    }
+
+    /// Smoothing half widths to try [samples]: none, and windows of the
+    /// fractions [`SMOOTHING_CYCLE_FRACTIONS`] of the fastest cycle.
+    pub fn smoothing_candidates(&self) -> Vec<usize> {
+        let mut widths = vec![0];
+        if let Some(cycle) = self.fastest_cycle {
+            for fraction in SMOOTHING_CYCLE_FRACTIONS {
+                let window = cycle * fraction;
+                let half = ((window - 1.0) / 2.0).floor();
+                if half >= 1.0 {
+                    widths.push(half as usize);
+                }
+            }
+        }
+        widths.dedup();
+        widths
+    }
+}
+
+/// `len` flags, false before `from` and in every range of `excluded`.
+fn flags(len: usize, from: usize, excluded: &[Range<usize>]) -> Vec<bool> {
+    let mut flags: Vec<bool> = (0..len).map(|n| n >= from).collect();
+    for r in excluded {
+        for f in &mut flags[r.start.min(len)..r.end.min(len)] {
+            *f = false;
+        }
+    }
+    flags
+}
+
+/// The ranges where `flags` is false.
+fn unset_ranges(flags: &[bool]) -> Vec<Range<usize>> {
+    let mut ranges = Vec::new();
+    let mut start = None;
+    for (n, f) in flags.iter().enumerate() {
+        match (f, start) {
+            (false, None) => start = Some(n),
+            (true, Some(s)) => {
+                ranges.push(s..n);
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        ranges.push(s..flags.len());
+    }
+    ranges
+}
+
+/// What the protocol reports while it runs: a phase with its number of
+/// steps, then one call per step with the best objective so far.
+#[derive(Clone, Copy, Debug)]
+pub enum ProgressEvent<'a> {
+    Phase { name: &'a str, steps: usize },
+    Step { best: f64 },
+}
+
+/// Receives [`ProgressEvent`]s, from any thread.
+pub type ProgressSink<'a> = &'a (dyn Fn(ProgressEvent) + Sync);
+
+/// RMS and largest error on a set of samples, also as % of a span.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ErrorFigures {
+    pub samples: usize,
+    pub rms: f64,
+    pub max_abs: f64,
+    /// Sample of the largest error (in the record scored).
+    pub max_abs_sample: usize,
+    pub rms_percent: f64,
+    pub max_percent: f64,
+}
+
+impl ErrorFigures {
+    fn of(prediction: &[f64], measured: &[f64], scored: &[bool], span: f64) -> ErrorFigures {
+        let q = FitQuality::of_samples(prediction, measured, scored);
+        ErrorFigures {
+            samples: q.samples,
+            rms: q.rms,
+            max_abs: q.max_abs,
+            max_abs_sample: q.max_abs_sample,
+            rms_percent: 100.0 * q.rms / span,
+            max_percent: 100.0 * q.max_abs / span,
+        }
+    }
+}
+
+/// Settings of [`identify_inverse_pi`]; `None` means "chosen by the
+/// protocol" (module comment).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InversePiSettings {
+    pub starts: usize,
+    pub seed: u64,
+    pub max_iterations: u64,
+    pub screening: Option<Screening>,
+    pub decimation: Option<usize>,
+    /// Half width of the displacement's moving average [samples].
+    pub smoothing: Option<usize>,
+    pub rate_dependent: Option<bool>,
+    /// Displacement offset [µm] (None: the smallest fitted displacement).
+    pub offset: Option<f64>,
+}
+
+impl Default for InversePiSettings {
+    fn default() -> Self {
+        InversePiSettings {
+            starts: 30,
+            seed: 0,
+            max_iterations: 2000,
+            screening: Some(Screening {
+                iterations: 60,
+                kept: 5,
+                relative_tolerance: 1e-6,
+            }),
+            decimation: None,
+            smoothing: None,
+            rate_dependent: None,
+            offset: None,
+        }
+    }
+}
+
+/// One candidate of the forward validation inside the fit part.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Candidate {
+    /// Half width of the moving average [samples].
+    pub smoothing: usize,
+    pub rate_dependent: bool,
+    /// RMS error on the validation samples [V].
+    pub validation_rms: f64,
+}
+
+/// The forward validation inside the fit part.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CrossValidation {
+    /// The search ran on the fitted samples before this one ...
+    pub train_end: usize,
+    pub train_samples: usize,
+    /// ... and the candidates were scored on those after it.
+    pub validation_samples: usize,
+    /// The (c, w_s) of that search, shared by every candidate.
+    pub c: f64,
+    pub ws: Vec<f64>,
+    pub proposed: Vec<Candidate>,
+    pub classical: Vec<Candidate>,
+}
+
+/// The errors of the inverse models on a set of samples [V], % of the fit
+/// part's input span.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct InversePiErrors {
+    pub proposed: ErrorFigures,
+    pub classical: ErrorFigures,
+    pub line: ErrorFigures,
+}
+
+/// What [`identify_inverse_pi`] found.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InversePiIdentification {
+    pub params: InversePiParams,
+    /// Half width of the displacement's moving average [samples].
+    pub smoothing: usize,
+    pub rate_dependent: bool,
+    /// Whether each was chosen by the validation inside the fit part (else
+    /// given).
+    pub smoothing_validated: bool,
+    pub weights_validated: bool,
+    pub cross_validation: Option<CrossValidation>,
+    /// Subtracted from the (smoothed) displacement [µm].
+    pub offset: f64,
+    pub decimation: usize,
+    pub starts: Vec<StartResult>,
+    pub best_start: Option<usize>,
+    pub classical: ClassicalPiParams,
+    pub classical_smoothing: usize,
+    pub classical_offset: f64,
+    /// u = line[0]·(y − offset) + line[1].
+    pub line: [f64; 2],
+    /// Input span and displacement span of the fitted samples.
+    pub input_span: f64,
+    pub stroke: f64,
+    pub fit_errors: InversePiErrors,
+    /// On the scored part of the record (when split).
+    pub unseen: Option<InversePiErrors>,
+    pub seconds: f64,
+}
+
+impl InversePiIdentification {
+    /// The models' errors on a record (`y` measured displacement, `u`
+    /// voltage) run from its first sample; `steps` its voltage steps (the
+    /// smoothing stops at them), `scored` the samples scored.
+    pub fn errors_on(
+        &self,
+        y: &[f64],
+        u: &[f64],
+        sample_period: f64,
+        steps: &[usize],
+        scored: &[bool],
+    ) -> InversePiErrors {
+        let prepared = |half_width: usize, offset: f64| -> Vec<f64> {
+            smoothed_between_steps(y, half_width, steps)
+                .iter()
+                .map(|v| v - offset)
+                .collect()
+        };
+        let y_proposed = prepared(self.smoothing, self.offset);
+        let proposed = predict(
+            &mut piezo_models::ModifiedInversePi::new(self.params),
+            &y_proposed,
+            sample_period,
+        );
+        let y_classical = prepared(self.classical_smoothing, self.classical_offset);
+        let classical = predict(
+            &mut ClassicalPi::new(self.classical),
+            &y_classical,
+            sample_period,
+        );
+        let line: Vec<f64> = y_proposed
+            .iter()
+            .map(|v| self.line[0] * v + self.line[1])
+            .collect();
+        let span = self.input_span;
+        InversePiErrors {
+            proposed: ErrorFigures::of(&proposed, u, scored, span),
+            classical: ErrorFigures::of(&classical, u, scored, span),
+            line: ErrorFigures::of(&line, u, scored, span),
+        }
+    }
+}
+
+/// The fitted samples before `train_end` and the index that splits the
+/// fitted samples of `fitted` at `fraction`.
+fn inner_split(fitted: &[bool], fraction: f64) -> usize {
+    let total = fitted.iter().filter(|f| **f).count();
+    let wanted = ((total as f64) * fraction).round() as usize;
+    let mut seen = 0;
+    for (n, f) in fitted.iter().enumerate() {
+        if *f {
+            if seen == wanted {
+                return n;
+            }
+            seen += 1;
+        }
+    }
+    fitted.len()
+}
+
+/// Least squares of `targets` on the given columns of the rows `train`
+/// (`intercept` the position of the constant among them), RMS of the
+/// prediction on the rows `validation`.
+fn validation_rms(
+    x: &DMatrix<f64>,
+    targets: &[f64],
+    columns: &[usize],
+    intercept: usize,
+    train: &[usize],
+    validation: &[usize],
+) -> f64 {
+    let sub = |rows: &[usize]| {
+        DMatrix::from_fn(rows.len(), columns.len(), |i, j| x[(rows[i], columns[j])])
+    };
+    let train_targets: Vec<f64> = train.iter().map(|&r| targets[r]).collect();
+    let solution = solve_least_squares_with_intercept_regularized(
+        sub(train),
+        &train_targets,
+        intercept,
+        LINEAR_RSS_INCREASE,
+    );
+    let predicted = sub(validation) * nalgebra::DVector::from_vec(solution.coefficients);
+    let sum: f64 = validation
+        .iter()
+        .zip(predicted.iter())
+        .map(|(&r, p)| (p - targets[r]).powi(2))
+        .sum();
+    (sum / validation.len().max(1) as f64).sqrt()
+}
+
+/// Fits seed 000's proposed model to `record` by the protocol of the module
+/// comment, with the classical P-I model and a straight line as baselines,
+/// and scores all three on the scored part of `plan` when there is one.
+pub fn identify_inverse_pi(
+    record: &Record,
+    plan: &Plan,
+    settings: &InversePiSettings,
+    progress: ProgressSink,
+) -> Result<InversePiIdentification, ProtocolError> {
+    let started = Instant::now();
+    let dt = record.sample_period;
+    let fit_end = plan.fit_end;
+    let y_fit = &record.output[..fit_end];
+    let u_fit = &record.input[..fit_end];
+    let fitted = plan.fitted();
+    let fit_steps: Vec<usize> = plan
+        .segments
+        .steps
+        .iter()
+        .copied()
+        .filter(|&s| s < fit_end)
+        .collect();
+    let smooth = |half_width: usize| smoothed_between_steps(y_fit, half_width, &fit_steps);
+    let smoothings = match settings.smoothing {
+        Some(h) => vec![h],
+        None => plan.smoothing_candidates(),
+    };
+    let layouts = match settings.rate_dependent {
+        Some(r) => vec![r],
+        None => vec![false, true],
+    };
+    let search_options = |starts: usize, flags: &[bool], rate_dependent: bool| FitOptions {
+        starts,
+        seed: settings.seed,
+        max_iterations: settings.max_iterations,
+        decimation: settings
+            .decimation
+            .unwrap_or_else(|| plan.search_decimation(flags.iter().filter(|f| **f).count())),
+        warm_up_samples: 0,
+        excluded: unset_ranges(flags),
+        rate_dependent,
+        screening: settings.screening,
+        rss_increase: LINEAR_RSS_INCREASE,
+        reversing_operators_only: true,
+    };
+    let tick = |s: &StartResult| progress(ProgressEvent::Step { best: s.objective });
+
+    // Forward validation inside the fit part.
+    let (smoothing, rate_dependent, classical_smoothing, cross_validation) = if smoothings.len()
+        == 1
+        && layouts.len() == 1
+    {
+        (smoothings[0], layouts[0], smoothings[0], None)
+    } else {
+        let train_end = inner_split(&fitted, INNER_TRAIN_FRACTION);
+        let train_flags: Vec<bool> = fitted[..train_end].to_vec();
+        let heaviest = *smoothings.iter().max().expect("at least one candidate");
+        let prepared = |half_width: usize| -> (Vec<f64>, f64) {
+            let y = smooth(half_width);
+            let offset = settings
+                .offset
+                .unwrap_or_else(|| range_of(&y[..train_end], &train_flags).0);
+            (y.iter().map(|v| v - offset).collect(), offset)
+        };
+        let (y_search, _) = prepared(heaviest);
+        let options = search_options(settings.starts, &train_flags, layouts == [true]);
+        progress(ProgressEvent::Phase {
+            name: "validation search",
+            steps: options.starts,
+        });
+        let inner = fit_modified_inverse_pi_with_progress(
+            &y_search[..train_end],
+            &u_fit[..train_end],
+            dt,
+            &options,
+            &tick,
+        )?;
+        let (c, ws) = (inner.params.c, inner.params.ws);
+        let rows: Vec<usize> = (0..fit_end).filter(|&n| fitted[n]).collect();
+        let targets: Vec<f64> = rows.iter().map(|&n| u_fit[n]).collect();
+        let train: Vec<usize> = (0..rows.len()).filter(|&i| rows[i] < train_end).collect();
+        // The train samples over the whole fit part, for the operators'
+        // reversals (judged where the linear part is fitted).
+        let train_mask: Vec<bool> = (0..fit_end).map(|n| fitted[n] && n < train_end).collect();
+        let validation: Vec<usize> = (0..rows.len()).filter(|&i| rows[i] >= train_end).collect();
+        let mut proposed = Vec::new();
+        let mut classical = Vec::new();
+        for &half_width in &smoothings {
+            let (y, _) = prepared(half_width);
+            let y_max = range_of(&y[..train_end], &train_flags).1;
+            let thresholds = SIX_DEAD_ZONE_PATTERN.map(|p| p * c);
+            let u1max = u1max_for(&ws, &thresholds, y_max);
+            let mut x = masked_rate_dependent_regressors(PROPOSED, c, &ws, u1max, &y, dt, &fitted);
+            let reversing = reversing_operators(PROPOSED, c, &ws, u1max, &y, &train_mask);
+            for operator in (0..reversing.len()).filter(|&i| !reversing[i]) {
+                for column in PROPOSED.operator_columns(operator) {
+                    x.column_mut(column).fill(0.0);
+                }
+            }
+            for &rate_dependent in &layouts {
+                let columns: Vec<usize> = if rate_dependent {
+                    (0..PROPOSED.linear_columns()).collect()
+                } else {
+                    (0..4).chain(14..24).collect()
+                };
+                proposed.push(Candidate {
+                    smoothing: half_width,
+                    rate_dependent,
+                    validation_rms: validation_rms(&x, &targets, &columns, 3, &train, &validation),
+                });
+            }
+            let (low, high) = range_of(&y[..train_end], &train_flags);
+            let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
+            let mut x = masked_classical_regressors(&thresholds, &y, &fitted);
+            let reversing = reversing_classical_operators(&thresholds, &y, &train_mask);
+            for column in (0..reversing.len()).filter(|&i| !reversing[i]) {
+                x.column_mut(column).fill(0.0);
+            }
+            let columns: Vec<usize> = (0..x.ncols()).collect();
+            classical.push(Candidate {
+                smoothing: half_width,
+                rate_dependent: false,
+                validation_rms: validation_rms(
+                    &x,
+                    &targets,
+                    &columns,
+                    CLASSICAL_OPERATORS,
+                    &train,
+                    &validation,
+                ),
+            });
+        }
+        let best = |rate: bool| {
+            proposed
+                .iter()
+                .filter(|c| c.rate_dependent == rate)
+                .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
+                .copied()
+        };
+        let chosen = match (best(false), best(true)) {
+            (Some(constant), Some(rated)) => {
+                if rated.validation_rms < (1.0 - RATE_DEPENDENCE_MARGIN) * constant.validation_rms {
+                    rated
+                } else {
+                    constant
+                }
+            }
+            (Some(only), None) | (None, Some(only)) => only,
+            (None, None) => unreachable!("at least one layout"),
+        };
+        let classical_best = classical
+            .iter()
+            .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
+            .expect("at least one candidate")
+            .smoothing;
+        (
+            chosen.smoothing,
+            chosen.rate_dependent,
+            classical_best,
+            Some(CrossValidation {
+                train_end,
+                train_samples: train.len(),
+                validation_samples: validation.len(),
+                c,
+                ws: ws.to_vec(),
+                proposed,
+                classical,
+            }),
+        )
+    };
+
+    // The final fit on every fitted sample of the fit part.
+    let shift = |half_width: usize| -> (Vec<f64>, f64) {
+        let y = smooth(half_width);
+        let offset = settings.offset.unwrap_or_else(|| range_of(&y, &fitted).0);
+        (y.iter().map(|v| v - offset).collect(), offset)
+    };
+    let (y, offset) = shift(smoothing);
+    let options = search_options(settings.starts, &fitted, rate_dependent);
+    progress(ProgressEvent::Phase {
+        name: "proposed model",
+        steps: options.starts,
+    });
+    let fit = fit_modified_inverse_pi_with_progress(&y, u_fit, dt, &options, &tick)?;
+    let (y_classical, classical_offset) = shift(classical_smoothing);
+    let classical = fit_classical_pi(&y_classical, u_fit, dt, &options)?;
+    let rows: Vec<f64> = selected(&y, &fitted);
+    let line_solution = solve_least_squares(
+        DMatrix::from_fn(rows.len(), 2, |i, j| if j == 0 { rows[i] } else { 1.0 }),
+        &selected(u_fit, &fitted),
+    );
+    let (u_low, u_high) = range_of(u_fit, &fitted);
+    let (y_low, y_high) = range_of(&y, &fitted);
+    let mut identification = InversePiIdentification {
+        params: fit.params,
+        smoothing,
+        rate_dependent,
+        smoothing_validated: settings.smoothing.is_none(),
+        weights_validated: settings.rate_dependent.is_none(),
+        cross_validation,
+        offset,
+        decimation: options.decimation,
+        starts: fit.starts,
+        best_start: fit.best_start,
+        classical: classical.params,
+        classical_smoothing,
+        classical_offset,
+        line: [line_solution.coefficients[0], line_solution.coefficients[1]],
+        input_span: u_high - u_low,
+        stroke: y_high - y_low,
+        // Filled in below, by the method that scores any record.
+        fit_errors: InversePiErrors::default(),
+        unseen: None,
+        seconds: 0.0,
+    };
+    identification.fit_errors = identification.errors_on(y_fit, u_fit, dt, &fit_steps, &fitted);
+    if plan.has_scored_part() {
+        identification.unseen = Some(identification.errors_on(
+            &record.output,
+            &record.input,
+            dt,
+            &plan.segments.steps,
+            &plan.scored(),
+        ));
+    }
+    identification.seconds = started.elapsed().as_secs_f64();
+    Ok(identification)
+}
+
+/// Settings of [`identify_bouc_wen_protocol`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BoucWenSettings {
+    pub gapso: GaPsoOptions,
+    pub bounds: Bounds,
+    /// GA-PSO's decimation (None: as the inverse model's search).
+    pub decimation: Option<usize>,
+    /// Half width of a moving average of the fitted displacement [samples];
+    /// the score is always against the measured displacement.
+    pub smoothing: usize,
+    pub fit_offset: bool,
+    pub monotone: bool,
+    pub refine: bool,
+}
+
+impl Default for BoucWenSettings {
+    fn default() -> Self {
+        BoucWenSettings {
+            gapso: GaPsoOptions::default(),
+            bounds: default_shape_bounds(),
+            decimation: None,
+            smoothing: 0,
+            fit_offset: true,
+            monotone: false,
+            refine: true,
+        }
+    }
+}
+
+/// Errors of the forward models on a set of samples [µm], % of the fit
+/// part's stroke.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ForwardErrors {
+    /// The kept model (refined when refinement was kept).
+    pub bouc_wen: ErrorFigures,
+    pub gapso: ErrorFigures,
+    pub classical: ErrorFigures,
+    /// The straight line fitted on the fit part.
+    pub line: ErrorFigures,
+    /// The best straight line of the scored samples themselves.
+    pub best_line: ErrorFigures,
+}
+
+/// What [`identify_bouc_wen_protocol`] found.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BoucWenProtocolFit {
+    pub identification: BoucWenIdentification,
+    /// The options the fit ran with (decimation and excluded samples
+    /// included).
+    pub options: BoucWenFitOptions,
+    /// Classical P-I model of the output from the input.
+    pub classical: ClassicalPiParams,
+    /// y = line[0]·u + line[1].
+    pub line: [f64; 2],
+    /// Output span of the fitted samples.
+    pub stroke: f64,
+    pub fit_errors: ForwardErrors,
+    pub unseen: Option<ForwardErrors>,
+    pub seconds: f64,
+}
+
+impl BoucWenProtocolFit {
+    /// The models' errors on a record (input `u`, measured output `y`) run
+    /// from rest at its first sample, on the samples `scored`.
+    pub fn errors_on(
+        &self,
+        u: &[f64],
+        y: &[f64],
+        sample_period: f64,
+        scored: &[bool],
+    ) -> ForwardErrors {
+        let best = self.identification.best();
+        let gapso = &self.identification.gapso;
+        let classical = predict(&mut ClassicalPi::new(self.classical), u, sample_period);
+        let line: Vec<f64> = u.iter().map(|v| self.line[0] * v + self.line[1]).collect();
+        let rows_u = selected(u, scored);
+        let best_line = solve_least_squares(
+            DMatrix::from_fn(rows_u.len(), 2, |i, j| if j == 0 { rows_u[i] } else { 1.0 }),
+            &selected(y, scored),
+        )
+        .coefficients;
+        let best_line: Vec<f64> = u.iter().map(|v| best_line[0] * v + best_line[1]).collect();
+        let span = self.stroke;
+        ForwardErrors {
+            bouc_wen: ErrorFigures::of(
+                &predict_bouc_wen(best.params, best.offset, u),
+                y,
+                scored,
+                span,
+            ),
+            gapso: ErrorFigures::of(
+                &predict_bouc_wen(gapso.params, gapso.offset, u),
+                y,
+                scored,
+                span,
+            ),
+            classical: ErrorFigures::of(&classical, y, scored, span),
+            line: ErrorFigures::of(&line, y, scored, span),
+            best_line: ErrorFigures::of(&best_line, y, scored, span),
+        }
+    }
+}
+
+/// Fits seed 001's Bouc-Wen model to `record` on the fitted samples of
+/// `plan` (GA-PSO, then Levenberg-Marquardt kept inside the box and only if
+/// it improves the fit part), with the classical P-I model and straight
+/// lines as baselines, and scores them on the scored part when there is one.
+pub fn identify_bouc_wen_protocol(
+    record: &Record,
+    plan: &Plan,
+    settings: &BoucWenSettings,
+    progress: ProgressSink,
+) -> Result<BoucWenProtocolFit, ProtocolError> {
+    let started = Instant::now();
+    let dt = record.sample_period;
+    let fit_end = plan.fit_end;
+    let u_fit = &record.input[..fit_end];
+    let y_fit = &record.output[..fit_end];
+    let fitted = plan.fitted();
+    let fit_steps: Vec<usize> = plan
+        .segments
+        .steps
+        .iter()
+        .copied()
+        .filter(|&s| s < fit_end)
+        .collect();
+    let target = smoothed_between_steps(y_fit, settings.smoothing, &fit_steps);
+    let options = BoucWenFitOptions {
+        gapso: settings.gapso.clone(),
+        bounds: settings.bounds.clone(),
+        decimation: settings
+            .decimation
+            .unwrap_or_else(|| plan.search_decimation(fitted.iter().filter(|f| **f).count())),
+        warm_up_samples: 0,
+        excluded: unset_ranges(&fitted),
+        fit_offset: settings.fit_offset,
+        monotone: settings.monotone,
+        search_substeps: BOUC_WEN_SEARCH_SUBSTEPS,
+        refine: settings.refine,
+        refine_within_bounds: true,
+    };
+    progress(ProgressEvent::Phase {
+        name: "GA-PSO",
+        steps: options.gapso.generations,
+    });
+    let identification = identify_bouc_wen(u_fit, &target, &options, |_, best| {
+        progress(ProgressEvent::Step { best })
+    })?;
+    let fit_options = FitOptions {
+        excluded: options.excluded.clone(),
+        rss_increase: LINEAR_RSS_INCREASE,
+        reversing_operators_only: true,
+        ..FitOptions::default()
+    };
+    let classical = fit_classical_pi(u_fit, &target, dt, &fit_options)?;
+    let rows_u = selected(u_fit, &fitted);
+    let line = solve_least_squares(
+        DMatrix::from_fn(rows_u.len(), 2, |i, j| if j == 0 { rows_u[i] } else { 1.0 }),
+        &selected(&target, &fitted),
+    )
+    .coefficients;
+    let (low, high) = range_of(y_fit, &fitted);
+    let mut result = BoucWenProtocolFit {
+        identification,
+        options,
+        classical: classical.params,
+        line: [line[0], line[1]],
+        stroke: high - low,
+        // Filled in below, by the method that scores any record.
+        fit_errors: ForwardErrors::default(),
+        unseen: None,
+        seconds: 0.0,
+    };
+    result.fit_errors = result.errors_on(u_fit, y_fit, dt, &fitted);
+    if plan.has_scored_part() {
+        result.unseen = Some(result.errors_on(&record.input, &record.output, dt, &plan.scored()));
+    }
+    result.seconds = started.elapsed().as_secs_f64();
+    Ok(result)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unset_ranges_and_flags_are_inverse() {
+        let excluded = vec![0..3, 5..6, 9..10];
+        let f = flags(10, 0, &excluded);
+        assert_eq!(unset_ranges(&f), excluded);
+        assert_eq!(unset_ranges(&flags(4, 2, &[])), vec![0..2]);
+    }
+
+    #[test]
+    fn inner_split_puts_the_fraction_of_fitted_samples_before_it() {
+        let fitted: Vec<bool> = (0..20).map(|n| n >= 10).collect();
+        assert_eq!(inner_split(&fitted, 0.7), 17);
+    }
+
+    #[test]
+    fn a_plan_leaves_out_rest_steps_and_warm_up_and_scores_the_rest() {
+        // 1 s rest, step onto a 1 Hz sine, 200 Hz, 5 s; split at 3 s.
+        let u: Vec<f64> = (0..1000)
+            .map(|n| {
+                if n < 200 {
+                    0.0
+                } else {
+                    2.0 + (std::f64::consts::TAU * (n - 200) as f64 / 200.0).sin()
+                }
+            })
+            .collect();
+        let plan = Plan::new(&u, 0.005, 600, &PlanOptions::default()).unwrap();
+        assert_eq!(plan.segments.rests, vec![0..200]);
+        assert_eq!(plan.segments.steps, vec![200]);
+        // Rest, settling (to 220), first loading: the sine's first maximum
+        // at 250 and first minimum at 350.
+        assert_eq!(plan.fit_excluded, vec![0..350]);
+        assert!(plan.scored_excluded.is_empty());
+        assert_eq!(plan.fitted().iter().filter(|f| **f).count(), 250);
+        assert_eq!(plan.scored().iter().filter(|f| **f).count(), 400);
+        let cycle = plan.fastest_cycle.unwrap();
+        assert!((cycle - 200.0).abs() <= 2.0, "{cycle}");
+        assert_eq!(plan.smoothing_candidates(), vec![0, 2]);
+        // A warm-up over the whole scored part is refused.
+        let options = PlanOptions {
+            warm_up_seconds: Some(5.0),
+            ..PlanOptions::default()
+        };
+        assert!(matches!(
+            Plan::new(&u, 0.005, 600, &options),
+            Err(ProtocolError::NothingToFit { .. })
+        ));
+    }
+}

@@ -1,0 +1,383 @@
+//! What a measured record holds besides the excitation: rest segments,
+//! voltage steps, and the start of the record, and how long its fastest
+//! cycle is.
+//!
+//! A lab record often begins with the stage at rest (the input held, often at
+//! 0 V, for seconds), then the command steps onto the excitation. Neither
+//! teaches a hysteresis model anything: a rest segment is one point of the
+//! loop repeated thousands of times, and after a step the displacement rings
+//! (structural modes), lags (amplifier) and the sensor may overshoot, none of
+//! which a rate-independent hysteresis model describes. Fitted by least
+//! squares they dominate: a 2 s rest at 5 kHz outweighs a 1 Hz loop ten
+//! to one. So they are found here and left out of the fit (the models still
+//! run through them, so that their memories are right afterwards), and the
+//! report says what was left out.
+//!
+//! Detection uses only the input (the command, which the experimenter set)
+//! and only the fit part's statistics, so it never looks at what is scored:
+//! - the input's noise σ from the median absolute fourth difference
+//!   (σ·√70 for white noise; a smooth signal's fourth differences are tiny);
+//! - a rest is a run of at least [`SegmentOptions::min_rest_seconds`] in which
+//!   the input stays within max(0.2 % of the input span, 5σ) of the run's
+//!   first value. A sine of 0.1 Hz or faster stays that close to one value
+//!   for at most 0.3 s at its turning points (0.2 % of its span is reached
+//!   0.09 rad either side of the peak), so the 0.5 s default never takes a
+//!   turning point for a rest;
+//! - a step is a sample-to-sample change larger than both 5 % of the span
+//!   and 2.5 times the 99th percentile of the changes outside rest segments.
+//!   A sine sampled at only 20 points per cycle changes by at most 31 % of
+//!   its amplitude per sample, so the 99th percentile is about that, while a
+//!   step onto a sine from rest is typically its whole amplitude or more;
+//! - after each step, [`SegmentOptions::settle_seconds`] are not fitted
+//!   (0.1 s by default: a flexure stage's modes of 100 Hz and more with
+//!   damping ratios of a few per cent ring down, and amplifiers settle, in a
+//!   few tens of ms; the P-885 sensor's start-up transient lasts about
+//!   50 ms). The start of a record is treated as a step: the state before it
+//!   is unknown, and a record usually starts with the drive switched on.
+//!
+//! After the start and each step, the fit also waits for the end of the
+//! first loading ([`first_loading_end`]): the input's second turning point,
+//! from which on the state no longer depends on what was assumed before.
+//!
+//! The fastest cycle is estimated from the input's reversals (turning points
+//! of at least 1 % of the span): twice the 10th percentile of the time
+//! between consecutive reversals. Smoothing windows and the search's
+//! decimation are set in fractions of it, so that they mean the same at
+//! 200 Hz and at 5 kHz.
+
+use std::ops::Range;
+
+use serde::Serialize;
+
+/// Settings of [`detect_segments`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SegmentOptions {
+    /// Seconds after each step (and after the start of a record) that are
+    /// not fitted.
+    pub settle_seconds: f64,
+    /// Shortest held input that counts as a rest [s].
+    pub min_rest_seconds: f64,
+}
+
+impl Default for SegmentOptions {
+    fn default() -> Self {
+        SegmentOptions {
+            settle_seconds: 0.1,
+            min_rest_seconds: 0.5,
+        }
+    }
+}
+
+/// Fraction of the input span within which a held input counts as at rest.
+const REST_SPAN_FRACTION: f64 = 0.002;
+/// Multiple of the input noise within which a held input counts as at rest.
+const REST_NOISE_MULTIPLE: f64 = 5.0;
+/// A step changes the input by more than this fraction of its span ...
+const STEP_SPAN_FRACTION: f64 = 0.05;
+/// ... and by more than this multiple of the 99th percentile of the changes.
+const STEP_PERCENTILE_MULTIPLE: f64 = 2.5;
+/// Smallest turning point counted as a reversal, as a fraction of the span.
+const REVERSAL_SPAN_FRACTION: f64 = 0.01;
+
+/// The thresholds the fit part gives, applied to any record of the same
+/// experiment (the rest of the record, a validation file).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SegmentThresholds {
+    /// Input span of the fit part [input units].
+    pub span: f64,
+    /// Largest deviation from a held value that is still rest.
+    pub rest_tolerance: f64,
+    /// Smallest sample-to-sample change that is a step.
+    pub step: f64,
+    /// Shortest rest [samples].
+    pub min_rest_samples: usize,
+    /// Samples not fitted after a step [samples].
+    pub settle_samples: usize,
+}
+
+/// What [`detect_segments`] found in a record.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Segments {
+    /// Held input, each a range of samples.
+    pub rests: Vec<Range<usize>>,
+    /// Samples at which the input has just stepped (u[n] − u[n−1] is a step).
+    pub steps: Vec<usize>,
+}
+
+impl Segments {
+    /// The samples to leave out of a fit: every rest, and `settle` samples
+    /// from each step on (clipped to `len`), merged and sorted.
+    pub fn excluded(&self, settle: usize, len: usize) -> Vec<Range<usize>> {
+        let mut ranges: Vec<Range<usize>> = self
+            .rests
+            .iter()
+            .cloned()
+            .chain(self.steps.iter().map(|&s| s..s + settle))
+            .map(|r| r.start.min(len)..r.end.min(len))
+            .filter(|r| !r.is_empty())
+            .collect();
+        merge(&mut ranges);
+        ranges
+    }
+}
+
+/// Sorts and merges overlapping or touching ranges.
+pub fn merge(ranges: &mut Vec<Range<usize>>) {
+    ranges.sort_by_key(|r| (r.start, r.end));
+    let mut merged: Vec<Range<usize>> = Vec::with_capacity(ranges.len());
+    for r in ranges.drain(..) {
+        match merged.last_mut() {
+            Some(last) if r.start <= last.end => last.end = last.end.max(r.end),
+            _ => merged.push(r),
+        }
+    }
+    *ranges = merged;
+}
+
+/// Thresholds from the input `u` of the fit part (module comment). None when
+/// the input never changes.
+pub fn thresholds(
+    u: &[f64],
+    sample_period: f64,
+    options: &SegmentOptions,
+) -> Option<SegmentThresholds> {
+    let (low, high) = u
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        });
+    let span = high - low;
+    if !(span > 0.0 && span.is_finite()) {
+        return None;
+    }
+    let noise = input_noise(u);
+    let rest_tolerance = (REST_SPAN_FRACTION * span).max(REST_NOISE_MULTIPLE * noise);
+    let min_rest_samples = ((options.min_rest_seconds / sample_period).round() as usize).max(2);
+    let rests = find_rests(u, rest_tolerance, min_rest_samples);
+    let mut changes: Vec<f64> = Vec::with_capacity(u.len());
+    let mut rest = rests.iter().peekable();
+    for n in 1..u.len() {
+        while rest.peek().is_some_and(|r| r.end <= n) {
+            rest.next();
+        }
+        if rest
+            .peek()
+            .is_some_and(|r| r.contains(&n) && r.contains(&(n - 1)))
+        {
+            continue;
+        }
+        changes.push((u[n] - u[n - 1]).abs());
+    }
+    let typical = percentile(&mut changes, 0.99).unwrap_or(0.0);
+    Some(SegmentThresholds {
+        span,
+        rest_tolerance,
+        step: (STEP_SPAN_FRACTION * span).max(STEP_PERCENTILE_MULTIPLE * typical),
+        min_rest_samples,
+        settle_samples: (options.settle_seconds / sample_period).round() as usize,
+    })
+}
+
+/// Rests and steps of the input `u` under `thresholds`.
+pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
+    let rests = find_rests(u, thresholds.rest_tolerance, thresholds.min_rest_samples);
+    let steps = (1..u.len())
+        .filter(|&n| (u[n] - u[n - 1]).abs() > thresholds.step)
+        .collect();
+    Segments { rests, steps }
+}
+
+/// Maximal runs of at least `min_samples` within `tolerance` of their first
+/// value.
+fn find_rests(u: &[f64], tolerance: f64, min_samples: usize) -> Vec<Range<usize>> {
+    let mut rests = Vec::new();
+    let mut start = 0;
+    for n in 1..=u.len() {
+        if n == u.len() || (u[n] - u[start]).abs() > tolerance {
+            if n - start >= min_samples {
+                rests.push(start..n);
+            }
+            start = n;
+        }
+    }
+    rests
+}
+
+/// σ of white noise on `u` from the median absolute fourth difference
+/// (1.4826·MAD is σ for a normal distribution; the fourth difference of
+/// white noise has variance 70σ², while a sine of ω rad per sample shrinks
+/// by ω⁴: 0.01 at 20 samples per cycle).
+pub fn input_noise(u: &[f64]) -> f64 {
+    let mut fourth: Vec<f64> = u
+        .windows(5)
+        .map(|w| (w[4] - 4.0 * w[3] + 6.0 * w[2] - 4.0 * w[1] + w[0]).abs())
+        .collect();
+    percentile(&mut fourth, 0.5).map_or(0.0, |m| 1.4826 * m / 70f64.sqrt())
+}
+
+/// The `q`-quantile (0..1, nearest rank) of `values`, reordering them.
+pub fn percentile(values: &mut [f64], q: f64) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let rank = ((q * (values.len() - 1) as f64).round() as usize).min(values.len() - 1);
+    let (_, value, _) = values.select_nth_unstable_by(rank, f64::total_cmp);
+    Some(*value)
+}
+
+/// Turning points of `u` over the samples where `flags` is set: indices of
+/// the extremes after which the input moved back by more than `threshold`.
+pub fn reversals(u: &[f64], flags: &[bool], threshold: f64) -> Vec<usize> {
+    let mut reversals: Vec<usize> = Vec::new();
+    // Direction of the current run (0: not known yet) and its extreme.
+    let mut direction = 0.0;
+    let mut extreme: Option<(usize, f64)> = None;
+    for (n, (&v, _)) in u.iter().zip(flags).enumerate().filter(|(_, (_, f))| **f) {
+        let Some((at, value)) = extreme else {
+            extreme = Some((n, v));
+            continue;
+        };
+        let moved = v - value;
+        if direction == 0.0 {
+            if moved.abs() > threshold {
+                direction = moved.signum();
+                extreme = Some((n, v));
+            }
+        } else if moved * direction > 0.0 {
+            extreme = Some((n, v));
+        } else if -moved * direction > threshold {
+            reversals.push(at);
+            direction = -direction;
+            extreme = Some((n, v));
+        }
+    }
+    reversals
+}
+
+/// The end of the first loading of `u` from sample `from` (before `to`):
+/// the second turning point of at least 1 % of `span`. Until the input has
+/// turned at both ends of a cycle, a hysteresis model's state still depends
+/// on the state assumed before `from` (the wiping-out property of Preisach
+/// and Prandtl-Ishlinskii models: each turning point erases the memory of
+/// smaller earlier ones), and operators that only move on that first
+/// loading are fitted to a transient. None with fewer than two turning
+/// points.
+pub fn first_loading_end(u: &[f64], from: usize, to: usize, span: f64) -> Option<usize> {
+    let to = to.min(u.len());
+    if from >= to {
+        return None;
+    }
+    let flags = vec![true; to - from];
+    reversals(&u[from..to], &flags, REVERSAL_SPAN_FRACTION * span)
+        .get(1)
+        .map(|r| from + r)
+}
+
+/// Length of the fastest cycle of the input over the samples where `flags`
+/// is set [samples] (module comment); None with fewer than three reversals.
+pub fn fastest_cycle(u: &[f64], flags: &[bool], span: f64) -> Option<f64> {
+    let reversals = reversals(u, flags, REVERSAL_SPAN_FRACTION * span);
+    if reversals.len() < 3 {
+        return None;
+    }
+    let mut halves: Vec<f64> = reversals.windows(2).map(|w| (w[1] - w[0]) as f64).collect();
+    percentile(&mut halves, 0.1).map(|half| 2.0 * half)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 1 s of rest at 0, then a step onto a 2 Hz sine about 5 (amplitude 4),
+    /// at 200 Hz.
+    fn lab_input() -> Vec<f64> {
+        (0..1000)
+            .map(|n| {
+                if n < 200 {
+                    0.0
+                } else {
+                    let t = (n - 200) as f64 / 200.0;
+                    5.0 + 4.0 * (std::f64::consts::TAU * 2.0 * t).sin()
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn finds_the_rest_the_step_and_the_cycle() {
+        let u = lab_input();
+        let thresholds = thresholds(&u, 0.005, &SegmentOptions::default()).unwrap();
+        assert_eq!(thresholds.settle_samples, 20);
+        let segments = detect_segments(&u, &thresholds);
+        assert_eq!(segments.rests, vec![0..200]);
+        assert_eq!(segments.steps, vec![200]);
+        assert_eq!(segments.excluded(20, u.len()), vec![0..220]);
+        let all = vec![true; u.len()];
+        let cycle = fastest_cycle(&u, &all, thresholds.span).unwrap();
+        assert!((cycle - 100.0).abs() <= 2.0, "2 Hz at 200 Hz: {cycle}");
+        // From the step: the sine rises to its first maximum (25 samples
+        // later) and falls to its first minimum (75 samples later).
+        assert_eq!(
+            first_loading_end(&u, 200, u.len(), thresholds.span),
+            Some(275)
+        );
+        assert_eq!(first_loading_end(&u, 200, 260, thresholds.span), None);
+    }
+
+    #[test]
+    fn a_slow_sine_has_no_rest_and_no_step() {
+        // 0.1 Hz, 200 Hz, 30 s: its turning points are slow but not rests.
+        let u: Vec<f64> = (0..6000)
+            .map(|n| 1.0 + (std::f64::consts::TAU * 0.1 * n as f64 / 200.0).sin())
+            .collect();
+        let thresholds = thresholds(&u, 0.005, &SegmentOptions::default()).unwrap();
+        let segments = detect_segments(&u, &thresholds);
+        assert!(segments.rests.is_empty(), "{:?}", segments.rests);
+        assert!(segments.steps.is_empty(), "{:?}", segments.steps);
+    }
+
+    #[test]
+    fn a_coarsely_sampled_fast_sine_is_not_a_train_of_steps() {
+        // 10 Hz at 200 Hz: 20 samples per cycle, changes up to 31 % of the
+        // amplitude per sample; the step from rest onto it is still found.
+        let u: Vec<f64> = (0..400)
+            .map(|n| {
+                if n < 100 {
+                    0.0
+                } else {
+                    3.0 + 2.0 * (std::f64::consts::TAU * 10.0 * (n - 100) as f64 / 200.0).sin()
+                }
+            })
+            .collect();
+        let thresholds = thresholds(&u, 0.005, &SegmentOptions::default()).unwrap();
+        let segments = detect_segments(&u, &thresholds);
+        assert_eq!(segments.steps, vec![100]);
+        assert_eq!(segments.rests, vec![0..100]);
+    }
+
+    #[test]
+    fn noise_on_a_measured_input_does_not_break_a_rest() {
+        let u: Vec<f64> = lab_input()
+            .iter()
+            .enumerate()
+            .map(|(n, v)| v + 0.004 * ((n as f64 * 12.9898).sin() * 43758.5453).fract())
+            .collect();
+        let thresholds = thresholds(&u, 0.005, &SegmentOptions::default()).unwrap();
+        let segments = detect_segments(&u, &thresholds);
+        assert_eq!(segments.rests.len(), 1);
+        assert!(segments.rests[0].start == 0 && segments.rests[0].end >= 199);
+        assert_eq!(segments.steps, vec![200]);
+    }
+
+    #[test]
+    fn merges_ranges() {
+        let mut ranges = vec![5..9, 0..3, 2..4, 9..10];
+        merge(&mut ranges);
+        assert_eq!(ranges, vec![0..4, 5..10]);
+    }
+
+    #[test]
+    fn a_constant_input_has_no_thresholds() {
+        assert!(thresholds(&[1.0; 50], 0.01, &SegmentOptions::default()).is_none());
+    }
+}

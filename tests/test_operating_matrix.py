@@ -1,0 +1,74 @@
+"""The reachable range demo.matrix bounds its cases by, against the stage.
+
+demo.matrix runs seed 000's single-axis experiment off the paper's operating
+point and bounds only the cases whose demands the stage can reach inside the
+controller's command range (REACHABLE). That range must be inside what
+FlexureStage (its default parameters, sensor noise off) reaches when the
+commands sit at the ends of the range, approached from rest, the other
+stacks at 0 V (for theta, the x pair at the two ends, one each way).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from demo.cosim import Fmu
+from demo.matrix import REACHABLE
+from tests.conftest import REPO_ROOT
+
+PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
+CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
+STEP = 1e-4
+RAMP_TIME = 0.5
+HOLD_TIME = 0.5
+
+
+def held_pose(plant: Fmu, commands) -> dict:
+    """Noise-free pose after the commands ramp from 0 to `commands` (raised
+    cosine, 0.5 s) and hold 0.5 s."""
+    slave = plant.instance("reach")
+    try:
+        inputs = slave.real_port(("u1", "u2", "u3"))
+        outputs = slave.real_port(("x", "y", "theta_z"))
+        target = np.asarray(commands, dtype=float)
+        steps = round((RAMP_TIME + HOLD_TIME) / STEP)
+        for k in range(steps):
+            t = k * STEP
+            blend = 0.5 * (1 - math.cos(math.pi * min(t / RAMP_TIME, 1.0)))
+            inputs.set(blend * target)
+            slave.do_step(t, STEP)
+        x, y, theta = outputs.get()
+        return {"x": x, "y": y, "theta": theta}
+    finally:
+        slave.free()
+
+
+@pytest.fixture(scope="module")
+def ranges():
+    for path in (PLANT, CONTROLLER):
+        if not path.is_file():
+            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
+    with Fmu(CONTROLLER) as controller:
+        low = float(controller.variables["command_min"].start)
+        high = float(controller.variables["command_max"].start)
+    with Fmu(PLANT) as plant:
+        return {
+            "y": (held_pose(plant, (low, 0, 0))["y"], held_pose(plant, (high, 0, 0))["y"]),
+            "x": (held_pose(plant, (0, low, low))["x"], held_pose(plant, (0, high, high))["x"]),
+            "theta": tuple(sorted((
+                math.degrees(held_pose(plant, (0, low, high))["theta"]),
+                math.degrees(held_pose(plant, (0, high, low))["theta"]),
+            ))),
+        }
+
+
+@pytest.mark.parametrize("axis", ["y", "x", "theta"])
+def test_the_matrix_bounds_only_demands_the_stage_reaches(ranges, axis):
+    reached_low, reached_high = ranges[axis]
+    bound_low, bound_high = REACHABLE[axis]
+    print(f"{axis}: reaches {reached_low:.4g}..{reached_high:.4g}, "
+          f"the matrix bounds {bound_low:g}..{bound_high:g}")
+    assert reached_low < bound_low < bound_high < reached_high
