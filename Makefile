@@ -26,7 +26,7 @@ FMU_SPECS := $(PLANT) $(CONTROLLER)
 # binaries/<platform>/<library> for linux64 (glibc 2.17) and win64.
 PLATFORM_BINARIES := $(BUILD)/binaries
 
-.PHONY: all fmus test demo lint rust-test python-test model-descriptions stage-preset xy200s-preset xy200s-controller-preset identify system-deps wine venv clean
+.PHONY: all fmus test demo lint master sweep rust-test python-test model-descriptions stage-preset xy200s-preset xy200s-controller-preset identify system-deps wine venv clean
 
 all: fmus
 
@@ -130,7 +130,7 @@ rust-test: system-deps
 systems: fmus venv
 	$(PY) -m demo.systems --dist $(DIST)
 
-python-test: fmus venv systems wine
+python-test: fmus venv systems wine master
 	$(PY) -m pytest tests -q -rP
 
 test: lint rust-test python-test
@@ -188,5 +188,21 @@ identify: system-deps
 	$(RELEASE)/piezo-identify compare --synthetic | tee out/identify/compare.txt
 	piezo-identify/benches/figures.sh $(RELEASE)/piezo-identify | tee out/identify/figures.md
 
+# The co-simulation master (piezo-cosim/), shipped inside the Python package
+# as demo/bin/piezo-cosim: `python -m demo.master` and the sweeps' dask
+# workers run it from there.
+master: system-deps
+	$(CARGO) build --release --locked -p piezo-cosim
+	install -D -m 755 $(RELEASE)/piezo-cosim demo/bin/piezo-cosim
+
+# The default studies (demo/sweeps/*.toml) on a LocalCluster of this
+# machine's cores: one Parquet table per study, heatmaps and report.md in
+# out/sweep. Runs already in a table are skipped (an interrupted sweep
+# continues); SWEEP_ARGS passes options (--scheduler tcp://HOST:PORT,
+# --workers N, --restart).
+SWEEP_ARGS ?=
+sweep: fmus venv master
+	$(PY) -m demo.sweep demo/sweeps/envelope.toml demo/sweeps/robustness.toml --out out/sweep $(SWEEP_ARGS)
+
 clean:
-	rm -rf $(BUILD) $(DIST) out
+	rm -rf $(BUILD) $(DIST) out demo/bin

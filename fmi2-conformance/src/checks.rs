@@ -8,7 +8,10 @@ use fmi_schema::fmi2::Causality;
 use fmi_sys::fmi2 as sys;
 
 use crate::model_exchange::MODEL_EXCHANGE_FUNCTIONS;
-use crate::{DISCARD, ERROR, Fmu, Instance, Interface, OK, State, WARNING, allowed};
+use crate::{
+    DISCARD, DriveTo, ERROR, Fmu, FmuUnderTest, Instance, Interface, InterfaceStates, OK, State,
+    WARNING, allowed,
+};
 
 mod model_exchange;
 mod restore;

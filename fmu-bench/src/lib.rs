@@ -11,7 +11,7 @@ use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
 
 use fmi_sys::fmi2::fmi2Status;
-use fmi2_conformance::{Fmu, Instance, OK, WARNING};
+use fmi2_import::{Fmu, Instance, OK, WARNING};
 use piezo_models::{ControllerParams, FlexureStage, FlexureStageParams, PiezoController};
 
 /// Communication step of every benchmark: seed 000's 10 kHz sample rate.
@@ -199,8 +199,7 @@ const PLANT_SOURCES: &[&str] = &[
 /// (`target/release` under `cargo bench`) with the committed description.
 /// Panics when the binary is missing or older than its sources.
 pub fn load_controller() -> Fmu {
-    let library =
-        fmi2_conformance::cdylib_path("fmu_controller", &workspace_root(), CONTROLLER_SOURCES);
+    let library = fmi2_import::cdylib_path("fmu_controller", &workspace_root(), CONTROLLER_SOURCES);
     Fmu::load(
         &library,
         include_str!("../../modelDescription/PiezoController.xml"),
@@ -209,7 +208,7 @@ pub fn load_controller() -> Fmu {
 
 /// `libfmu_plant.so`, as [`load_controller`].
 pub fn load_plant() -> Fmu {
-    let library = fmi2_conformance::cdylib_path("fmu_plant", &workspace_root(), PLANT_SOURCES);
+    let library = fmi2_import::cdylib_path("fmu_plant", &workspace_root(), PLANT_SOURCES);
     Fmu::load(
         &library,
         include_str!("../../modelDescription/FlexureStage.xml"),

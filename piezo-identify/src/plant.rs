@@ -1,15 +1,14 @@
 //! Drives a plant FMU, as the identification experiments of seed 000 drove
 //! the real stage: the FMU is unpacked, its binary loaded with dlopen and
-//! stepped through the FMI 2.0 C ABI (the importer of `fmi2-conformance`).
+//! stepped through the FMI 2.0 C ABI (the importer, `fmi2-import`).
 //!
 //! The plant must have inputs `u1`, `u2`, `u3` [V] and outputs `s1`, `s2`,
 //! `s3` [µm] (FlexureStage's interface): s1 reads y, s2 and s3 the two x
 //! sensors, x = (s2 + s3)/2, θ = (s2 − s3)/L.
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use fmi2_conformance::{Fmu, Instance, OK, WARNING};
+use fmi2_import::{FmuArchive, Instance, OK, WARNING};
 use piezo_models::{ControllerParams, PiezoController};
 
 use crate::compare::eq6_command;
@@ -35,9 +34,8 @@ pub enum PlantError {
 /// An unpacked plant FMU with its binary loaded.
 pub struct PlantFmu {
     path: PathBuf,
-    fmu: Fmu,
-    /// Keeps the unpacked binary alive as long as it is loaded.
-    _unpacked: tempfile::TempDir,
+    /// The unpacked FMU with its binary loaded.
+    archive: FmuArchive,
     u: [u32; 3],
     s: [u32; 3],
     /// Parameter values set in initialization mode of every session (a
@@ -86,16 +84,6 @@ pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, 
         .collect()
 }
 
-fn platform_folder() -> &'static str {
-    match (std::env::consts::OS, std::env::consts::ARCH) {
-        ("linux", "x86_64") => "linux64",
-        ("linux", _) => "linux32",
-        ("windows", "x86_64") => "win64",
-        ("macos", _) => "darwin64",
-        _ => "unknown",
-    }
-}
-
 impl PlantFmu {
     /// Unpacks `path` (modelDescription.xml and this platform's binary) and
     /// loads it.
@@ -104,36 +92,8 @@ impl PlantFmu {
             path: path.to_owned(),
             problem,
         };
-        let file = std::fs::File::open(path).map_err(|e| archive_error(e.to_string()))?;
-        let mut zip = zip::ZipArchive::new(file)
-            .map_err(|e| archive_error(format!("not an FMU (zip) archive: {e}")))?;
-        let mut description = String::new();
-        zip.by_name("modelDescription.xml")
-            .map_err(|e| archive_error(format!("modelDescription.xml: {e}")))?
-            .read_to_string(&mut description)
-            .map_err(|e| archive_error(format!("modelDescription.xml: {e}")))?;
-        let identifier = description
-            .split("modelIdentifier=\"")
-            .nth(1)
-            .and_then(|rest| rest.split('"').next())
-            .ok_or_else(|| archive_error("no CoSimulation modelIdentifier".to_owned()))?
-            .to_owned();
-        let inside = format!(
-            "binaries/{}/{identifier}{}",
-            platform_folder(),
-            std::env::consts::DLL_SUFFIX
-        );
-        let unpacked = tempfile::tempdir().map_err(|e| archive_error(e.to_string()))?;
-        let library = unpacked
-            .path()
-            .join(format!("{identifier}{}", std::env::consts::DLL_SUFFIX));
-        let mut binary = zip
-            .by_name(&inside)
-            .map_err(|e| archive_error(format!("{inside}: {e}")))?;
-        let mut out = std::fs::File::create(&library).map_err(|e| archive_error(e.to_string()))?;
-        std::io::copy(&mut binary, &mut out).map_err(|e| archive_error(e.to_string()))?;
-        drop(out);
-        let fmu = Fmu::try_load(&library, &description).map_err(archive_error)?;
+        let archive = FmuArchive::open(path).map_err(|e| archive_error(e.problem))?;
+        let fmu = &archive.fmu;
         let vr = |name: &str| {
             fmu.find(name).map(|v| v.vr).ok_or_else(|| PlantError::Interface {
                 path: path.to_owned(),
@@ -146,8 +106,7 @@ impl PlantFmu {
         let s = [vr("s1")?, vr("s2")?, vr("s3")?];
         Ok(PlantFmu {
             path: path.to_owned(),
-            fmu,
-            _unpacked: unpacked,
+            archive,
             u,
             s,
             parameters: Vec::new(),
@@ -167,6 +126,7 @@ impl PlantFmu {
                 problem,
             };
             let variable = self
+                .archive
                 .fmu
                 .find(name)
                 .ok_or_else(|| problem(format!("no parameter {name}")))?;
@@ -199,14 +159,14 @@ impl PlantFmu {
                 TypedValue::Real(v) if n == name => Some(*v),
                 _ => None,
             })
-            .or_else(|| self.fmu.find(name).and_then(|v| v.start))
+            .or_else(|| self.archive.fmu.find(name).and_then(|v| v.start))
     }
 
     /// A fresh instance at rest, initialized at t = 0 with its start values.
     pub fn session(&self) -> Result<PlantSession<'_>, PlantError> {
         let instance = self
-            .fmu
-            .try_instantiate("identification", &self.fmu.guid, None, false)
+            .archive
+            .instantiate("identification", false)
             .map_err(|log| PlantError::Interface {
                 path: self.path.clone(),
                 problem: format!(
@@ -249,7 +209,7 @@ impl PlantFmu {
         call: &'static str,
         status: u32,
         time: f64,
-        log: &[fmi2_conformance::LogRecord],
+        log: &[fmi2_import::LogRecord],
     ) -> PlantError {
         PlantError::Call {
             path: self.path.clone(),

@@ -18,7 +18,7 @@
 use std::path::Path;
 use std::process::ExitCode;
 
-use fmi2_conformance::{Fmu, OK};
+use fmi2_conformance::{Fmu, FmuUnderTest, OK};
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().collect();

@@ -14,7 +14,7 @@
 use fmi_sys::fmi2 as sys;
 
 use super::{has_message, interfaces};
-use crate::{ERROR, Fmu, Instance, Interface, OK, State};
+use crate::{ERROR, Fmu, FmuUnderTest, Instance, Interface, InterfaceStates, OK, State};
 
 /// Statuses and output bits, in call order.
 type Trace = Vec<u64>;

@@ -5,5 +5,5 @@ fn main() {
     cc::Build::new()
         .file("c/logger_shim.c")
         .warnings_into_errors(true)
-        .compile("conformance_logger");
+        .compile("fmi2_import_logger");
 }

@@ -1,0 +1,168 @@
+"""The compiled co-simulation master, piezo-cosim, from Python.
+
+    python -m demo.master run SCENARIO.toml [--series FILE.parquet|FILE.csv]
+
+The master is a Rust program (piezo-cosim/) shipped inside this package as
+demo/bin/piezo-cosim (`make master` builds and copies it; $PIEZO_COSIM
+overrides the path). Python runs it as a child process, one process per run:
+- a run is then isolated: an FMU that crashes or hangs (any FMU can be loaded)
+  ends its own process, reported as a failed run with its message, never the
+  dask worker that ran it; a timeout can stop it;
+- every run starts from a fresh process, so no global state of an FMU binary
+  can leak from one run into the next: a run is a pure function of its
+  scenario;
+- the CLI users run and the sweeps run are the same binary, with no Python
+  ABI to build against.
+What it costs per run, about 8 ms (the process started from Python, both FMUs
+loaded, initialized and terminated; docs/sweeps.md), is small beside a run of a
+second or more of the loop at 10 kHz (6-10 ms per simulated second).
+
+A scenario is a dict (or a TOML/JSON file) in the format of
+piezo-cosim/src/scenario.rs; `run` hands it to the master as JSON on stdin
+and returns the master's JSON result (metrics, wall time, warnings).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .cosim import COMMANDS, CONTROLLER_INSTANCE, PLANT_INSTANCE, REFERENCES, SENSORS
+
+PACKAGE = Path(__file__).resolve().parent
+REPO = PACKAGE.parent
+#: Where `make master` puts the binary.
+SHIPPED = PACKAGE / "bin" / "piezo-cosim"
+
+
+class MasterError(RuntimeError):
+    """A run that did not complete: the scenario did not fit (exit 2) or an
+    FMU failed (exit 1), with the master's message."""
+
+    def __init__(self, message: str, returncode: int | None = None):
+        super().__init__(message)
+        self.returncode = returncode
+
+
+def binary() -> Path:
+    """The piezo-cosim executable: $PIEZO_COSIM, else demo/bin/piezo-cosim."""
+    override = os.environ.get("PIEZO_COSIM")
+    path = Path(override) if override else SHIPPED
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"{path}: the co-simulation master is not built (run `make master`)")
+    return path
+
+
+def connections() -> list[dict]:
+    """The stage's closed loop as the master's connection table, from
+    demo.cosim's wiring (the same table the master uses by default)."""
+    table = [{"from": f"{CONTROLLER_INSTANCE}.{a}", "to": f"{PLANT_INSTANCE}.{b}"}
+             for a, b in COMMANDS]
+    table += [{"from": f"{PLANT_INSTANCE}.{a}", "to": f"{CONTROLLER_INSTANCE}.{b}"}
+              for a, b in SENSORS]
+    return table
+
+
+def reference_port(name: str) -> str:
+    """The controller input a reference (x_ref, y_ref, theta_ref) drives."""
+    if name not in REFERENCES:
+        raise KeyError(f"{name!r} is not one of {REFERENCES}")
+    return f"{CONTROLLER_INSTANCE}.{name}"
+
+
+def run(scenario: dict | str | Path, series: str | Path | None = None,
+        timeout: float | None = None, cwd: str | Path | None = None) -> dict:
+    """Runs one scenario through piezo-cosim; returns its JSON result.
+
+    `scenario` is a dict (sent as JSON on stdin; relative paths are relative
+    to `cwd`, default the working directory) or a .toml/.json file (paths
+    relative to the file). `series` (.csv or .parquet) records every Real
+    output and signal. Raises MasterError when the run fails and
+    subprocess.TimeoutExpired after `timeout` seconds."""
+    exe = str(binary())
+    with tempfile.TemporaryDirectory(prefix="piezo-cosim-") as scratch:
+        # --parent: the run ends with this process (a killed dask worker
+        # leaves no run behind).
+        args = [exe, "run", "--parent", str(os.getpid())]
+        csv = None
+        if series is not None:
+            series = Path(series)
+            csv = series if series.suffix == ".csv" else Path(scratch) / "series.csv"
+            args += ["--series", str(csv)]
+        if isinstance(scenario, dict):
+            args.append("-")
+            stdin = json.dumps(scenario)
+        else:
+            args.append(str(scenario))
+            stdin = None
+        done = subprocess.run(args, input=stdin, capture_output=True, text=True,
+                              timeout=timeout, cwd=cwd)
+        if done.returncode != 0:
+            message = done.stderr.strip() or f"piezo-cosim exited with {done.returncode}"
+            raise MasterError(message, done.returncode)
+        result = json.loads(done.stdout)
+        if series is not None and csv != series:
+            write_parquet(read_series(csv), series)
+    return result
+
+
+def check(scenario: dict, cwd: str | Path | None = None) -> dict:
+    """Checks a scenario against its FMUs without stepping (`piezo-cosim
+    check`): every connection, signal and parameter resolved, the FMUs
+    initialized. Raises MasterError with the master's message."""
+    done = subprocess.run([str(binary()), "check", "-"], input=json.dumps(scenario),
+                          capture_output=True, text=True, cwd=cwd)
+    if done.returncode != 0:
+        message = done.stderr.strip() or f"piezo-cosim exited with {done.returncode}"
+        raise MasterError(message, done.returncode)
+    return json.loads(done.stdout)
+
+
+def read_series(path: str | Path) -> dict[str, np.ndarray]:
+    """A series CSV written by piezo-cosim, as columns by name."""
+    path = Path(path)
+    with path.open() as f:
+        names = f.readline().strip().split(",")
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return {name: data[:, i] for i, name in enumerate(names)}
+
+
+def write_parquet(columns: dict[str, np.ndarray], path: str | Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.table({k: pa.array(v) for k, v in columns.items()}), str(path))
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    go = sub.add_parser("run", help="run one scenario; print its result as JSON")
+    go.add_argument("scenario", type=Path, help="scenario file (.toml or .json)")
+    go.add_argument("--series", type=Path, help="write the time series (.csv or .parquet)")
+    args = parser.parse_args(argv)
+    if args.series is not None and args.series.suffix not in (".csv", ".parquet"):
+        print(f"{args.series}: name the series .csv or .parquet", file=sys.stderr)
+        return 2
+    started = time.perf_counter()
+    try:
+        result = run(args.scenario, series=args.series)
+    except (MasterError, FileNotFoundError) as e:
+        print(e, file=sys.stderr)
+        return getattr(e, "returncode", None) or 2
+    result["python_wall_s"] = time.perf_counter() - started
+    print(json.dumps(result, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,838 @@
+"""Sweeps and Monte Carlo studies of the closed loop on dask.distributed.
+
+    python -m demo.sweep SPEC.toml [SPEC.toml ...] --out DIR
+                         [--scheduler tcp://HOST:PORT] [--workers N]
+                         [--restart] [--progress auto|bar|lines|none] [--no-report]
+
+A spec (demo/sweeps/*.toml) is data: a scenario template for the compiled
+master (piezo-cosim), the variables of a grid (numbers, or named cases that
+patch the template), optionally a Monte Carlo over the plant's parameters.
+Each expanded run is one dask task that takes its scenario and returns one
+row; the rows land in DIR/<study>.parquet, one per run: every swept value,
+the seed, the metrics, the wall time.
+
+- Runs go to a LocalCluster of N worker processes (default: one per core), or
+  to an existing cluster (`dask scheduler`, `dask worker`) with --scheduler.
+  The FMUs travel with the tasks (scattered to the workers, unpacked into
+  each worker's temporary folder); parameter sets are read here and sent as
+  values, so no shared filesystem is assumed. Workers need this package
+  (with demo/bin/piezo-cosim, `make master`) importable: start them from the
+  repository with PYTHONPATH set to it.
+- A run is a pure function of its scenario (spec, sample seed): its key is a
+  hash of the scenario with the FMUs' contents. A task rescheduled after a
+  worker dies gives the same row, and the table keeps each key once. A run
+  that exceeds the spec's `timeout` is a row with status "timeout" and runs
+  again at the next invocation (a loaded machine, not the run, may be why).
+- Rows are journalled to DIR/<study>.journal.jsonl as they arrive; an
+  interrupted sweep (Ctrl-C, a lost client) is folded into the table, and the
+  same command skips every run already in it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import atexit
+import copy
+import hashlib
+import io
+import itertools
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import tomllib
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import master
+
+#: Columns that describe how a run was executed, not what it computed: they
+#: differ between two executions of the same spec (everything else is equal).
+EXECUTION_COLUMNS = ("wall_s", "task_s", "worker")
+
+#: Seconds between two progress lines.
+PROGRESS_SECONDS = 10.0
+
+
+class SpecError(ValueError):
+    """A malformed spec, with its file and (where it can be found) line."""
+
+
+# --------------------------------------------------------------------------
+# Specs
+
+@dataclass
+class Case:
+    """A named value of a categorical variable: the numbers it defines for
+    expressions, and a patch merged into the scenario template."""
+
+    name: str
+    vars: dict = field(default_factory=dict)
+    patch: dict = field(default_factory=dict)
+
+
+@dataclass
+class Variable:
+    name: str
+    values: list  # numbers, or Case
+
+
+@dataclass
+class Vary:
+    """A group of plant parameters perturbed by a uniform factor in
+    [1 - relative, 1 + relative]."""
+
+    pattern: re.Pattern
+    relative: float
+
+
+@dataclass
+class MonteCarlo:
+    samples: int
+    instance: str
+    vary: list[Vary]
+    seed_parameter: str | None
+
+
+@dataclass
+class Spec:
+    path: Path
+    text: str
+    study: str
+    title: str
+    report: str
+    seed: int
+    timeout: float | None
+    template: dict
+    variables: list[Variable]
+    exclude: list[dict]
+    monte_carlo: MonteCarlo | None
+    report_options: dict
+
+
+def _line_of(text: str, needle: str) -> int | None:
+    for number, line in enumerate(text.splitlines(), 1):
+        if needle in line:
+            return number
+    return None
+
+
+def _fail(spec_path: Path, text: str, needle: str | None, problem: str) -> SpecError:
+    line = _line_of(text, needle) if needle else None
+    where = f"{spec_path}:{line}" if line else f"{spec_path}"
+    return SpecError(f"{where}: {problem}")
+
+
+SPEC_KEYS = {"study", "title", "report", "seed", "timeout", "template", "variable", "exclude",
+             "monte_carlo", "report_options"}
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Reads and checks a spec file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise SpecError(f"{path}: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        # tomllib's message ends with "(at line L, column C)".
+        found = re.search(r"\(at line (\d+), column (\d+)\)", str(e))
+        if found:
+            where = f"{path}:{found.group(1)}:{found.group(2)}"
+        elif "end of document" in str(e):
+            where = f"{path}:{len(text.splitlines())}"
+        else:
+            where = str(path)
+        problem = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", str(e))
+        raise SpecError(f"{where}: {problem}") from None
+
+    def fail(needle, problem):
+        return _fail(path, text, needle, problem)
+
+    unknown = set(data) - SPEC_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise fail(key, f"unknown key {key!r} (known: {', '.join(sorted(SPEC_KEYS))})")
+    for key in ("study", "template"):
+        if key not in data:
+            raise fail(None, f"missing {key!r}")
+    study = data["study"]
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", str(study)):
+        raise fail("study", f"study {study!r}: use letters, digits, '_', '-', '.'")
+    variables = []
+    for entry in data.get("variable", []):
+        name = entry.get("name")
+        extra = set(entry) - {"name", "values"}
+        if extra:
+            key = sorted(extra)[0]
+            raise fail(key, f"variable {name!r}: unknown key {key!r} (a variable has name "
+                            f"and values)")
+        if not name or "values" not in entry:
+            raise fail("[[variable]]", "every [[variable]] needs a name and values")
+        values = entry["values"]
+        if isinstance(values, dict):
+            cases = []
+            for case_name, case in values.items():
+                bad = set(case) - {"vars", "patch"}
+                if bad:
+                    raise fail(case_name, f"case {name}.{case_name}: unknown key "
+                                          f"{sorted(bad)[0]!r} (a case has vars and patch)")
+                cases.append(Case(case_name, dict(case.get("vars", {})),
+                                  dict(case.get("patch", {}))))
+            values = cases
+        elif not isinstance(values, list) or not values:
+            raise fail(name, f"variable {name!r}: values must be a list or a table of cases")
+        variables.append(Variable(name, values))
+    names = [v.name for v in variables]
+    if len(set(names)) != len(names):
+        raise fail(None, "two variables have the same name")
+    exclude = data.get("exclude", [])
+    for rule in exclude:
+        for key in rule:
+            if key not in names:
+                raise fail("exclude", f"exclude names {key!r}, which is not a variable")
+    mc = None
+    if "monte_carlo" in data:
+        m = data["monte_carlo"]
+        bad = set(m) - {"samples", "instance", "vary", "seed_parameter"}
+        if bad:
+            raise fail(sorted(bad)[0], f"monte_carlo: unknown key {sorted(bad)[0]!r}")
+        vary = []
+        for group in m.get("vary", []):
+            try:
+                pattern = re.compile(group["match"])
+            except (KeyError, re.error) as e:
+                raise fail("match", f"monte_carlo.vary: a regular expression `match` is "
+                                    f"needed ({e})") from None
+            relative = float(group.get("relative", 0.0))
+            if not 0.0 <= relative < 1.0:
+                raise fail("relative", f"monte_carlo.vary: relative {relative} outside [0, 1)")
+            vary.append(Vary(pattern, relative))
+        samples = int(m.get("samples", 0))
+        if samples < 1:
+            raise fail("samples", "monte_carlo.samples must be at least 1")
+        mc = MonteCarlo(samples, m.get("instance", master.PLANT_INSTANCE), vary,
+                        m.get("seed_parameter"))
+    timeout = data.get("timeout")
+    return Spec(path=path, text=text, study=study, title=data.get("title", study),
+                report=data.get("report", "none"), seed=int(data.get("seed", 0)),
+                timeout=float(timeout) if timeout is not None else None,
+                template=data["template"], variables=variables, exclude=exclude,
+                monte_carlo=mc, report_options=data.get("report_options", {}))
+
+
+# --------------------------------------------------------------------------
+# Expressions: "= expr" strings in the template and the patches.
+
+_FUNCTIONS = {"min": min, "max": max, "sqrt": math.sqrt, "radians": math.radians,
+              "abs": abs, "log10": math.log10}
+_OPERATORS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b,
+              ast.Mult: lambda a, b: a * b, ast.Div: lambda a, b: a / b,
+              ast.Pow: lambda a, b: a ** b}
+
+
+def evaluate(expression: str, env: dict) -> float:
+    """Arithmetic on numbers and the run's variables (+ - * / **, min, max,
+    sqrt, radians, abs, log10, pi); nothing else is accepted."""
+
+    def ev(node):
+        if isinstance(node, ast.Expression):
+            return ev(node.body)
+        if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+            return node.value
+        if isinstance(node, ast.Name):
+            if node.id in env:
+                return env[node.id]
+            if node.id == "pi":
+                return math.pi
+            raise ValueError(f"unknown name {node.id!r} (known: {', '.join(sorted(env))})")
+        if isinstance(node, ast.BinOp) and type(node.op) in _OPERATORS:
+            return _OPERATORS[type(node.op)](ev(node.left), ev(node.right))
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            value = ev(node.operand)
+            return -value if isinstance(node.op, ast.USub) else value
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id in _FUNCTIONS and not node.keywords):
+            return _FUNCTIONS[node.func.id](*[ev(a) for a in node.args])
+        raise ValueError(f"{ast.unparse(node)!r} is not allowed in an expression")
+
+    try:
+        return ev(ast.parse(expression, mode="eval"))
+    except SyntaxError as e:
+        raise ValueError(f"not an expression ({e.msg})") from None
+
+
+def _fill(value, env: dict, spec: Spec):
+    """The template with every "= expr" string evaluated."""
+    if isinstance(value, dict):
+        return {k: _fill(v, env, spec) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_fill(v, env, spec) for v in value]
+    if isinstance(value, str) and value.startswith("="):
+        try:
+            result = evaluate(value[1:].strip(), env)
+        except (ValueError, ZeroDivisionError, TypeError) as e:
+            raise _fail(spec.path, spec.text, value, f"expression {value!r}: {e}") from None
+        return float(result)
+    return value
+
+
+def _merge(base: dict, patch: dict) -> dict:
+    """`patch` merged into `base`: tables recursively, anything else replaced."""
+    out = dict(base)
+    for key, value in patch.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+# --------------------------------------------------------------------------
+# Expansion
+
+@dataclass
+class Run:
+    """One task: its index, key, the scenario (FMUs by content digest) and
+    the values that identify it in the table."""
+
+    index: int
+    key: str
+    scenario: dict
+    values: dict
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def canonical(value) -> str:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"))
+
+
+def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict) -> dict:
+    """Replaces FMU paths by their content digests (collected in `fmus`) and
+    folds parameter sets into the parameter values."""
+    scenario = copy.deepcopy(scenario)
+    for instance, entry in scenario.get("fmu", {}).items():
+        path = (spec.path.parent / entry["path"]).resolve()
+        if path not in fmus:
+            if not path.is_file():
+                raise _fail(spec.path, spec.text, entry["path"],
+                            f"fmu.{instance}: {path} does not exist (run `make fmus`)")
+            fmus[path] = _digest(path)
+        entry["path"] = f"fmu:{fmus[path]}"
+        values = {}
+        for name in entry.pop("parameter_sets", []):
+            set_path = (spec.path.parent / name).resolve()
+            if set_path not in sets:
+                try:
+                    sets[set_path] = json.loads(set_path.read_text())
+                except (OSError, json.JSONDecodeError) as e:
+                    raise _fail(spec.path, spec.text, name, f"parameter set {set_path}: {e}") \
+                        from None
+            values.update(sets[set_path])
+        values.update(entry.get("parameters", {}))
+        entry["parameters"] = values
+    return scenario
+
+
+def _excluded(point: dict, rules: list[dict]) -> bool:
+    return any(all(point.get(k) == v for k, v in rule.items()) for rule in rules)
+
+
+def _plant_parameters(fmu_path: Path) -> dict:
+    """Start value and declared range (min, max; None when open) of every
+    Real parameter of an FMU (fmpy reads the modelDescription)."""
+    from fmpy import read_model_description
+
+    def bound(value):
+        return None if value is None else float(value)
+
+    description = read_model_description(str(fmu_path))
+    return {v.name: (float(v.start), bound(v.min), bound(v.max))
+            for v in description.modelVariables
+            if v.causality == "parameter" and v.type == "Real" and v.start is not None}
+
+
+def perturbed(nominal: float, factor: float, low, high) -> float:
+    """nominal x factor, kept within the parameter's declared range: outside
+    it the model is not defined (the FMU refuses the value), e.g. a Bouc-Wen
+    exponent n below 1 when its nominal value is 1."""
+    value = nominal * factor
+    if low is not None:
+        value = max(value, low)
+    if high is not None:
+        value = min(value, high)
+    return value
+
+
+def sample_factors(spec: Spec, sample: int, names: dict[int, list[str]]) -> tuple[dict, int]:
+    """The factors of Monte Carlo sample `sample` (a pure function of the
+    spec's seed and the sample number) and the sample's seed."""
+    rng = np.random.default_rng([spec.seed, sample])
+    factors = {}
+    for g, group in enumerate(spec.monte_carlo.vary):
+        for name in names[g]:
+            factors[name] = float(rng.uniform(1.0 - group.relative, 1.0 + group.relative))
+    seed = int(rng.integers(1, 2**31 - 1))
+    return factors, seed
+
+
+def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
+    """Every run of the spec, in a fixed order, and the FMUs by digest."""
+    fmus: dict[Path, str] = {}
+    sets: dict[Path, dict] = {}
+    points = []
+    for combination in itertools.product(*[v.values for v in spec.variables]):
+        point, env, patch = {}, {}, {}
+        for variable, value in zip(spec.variables, combination):
+            if isinstance(value, Case):
+                point[variable.name] = value.name
+                env.update(value.vars)
+                patch = _merge(patch, value.patch)
+            else:
+                point[variable.name] = value
+                if isinstance(value, (int, float)) and not isinstance(value, bool):
+                    env[variable.name] = value
+        if not _excluded(point, spec.exclude):
+            points.append((point, env, patch))
+    if not points:
+        raise _fail(spec.path, spec.text, None, "the grid is empty (every point excluded)")
+
+    mc = spec.monte_carlo
+    vary_names: dict[int, list[str]] = {}
+    nominal_start: dict = {}
+    if mc is not None:
+        plant_entry = spec.template.get("fmu", {}).get(mc.instance)
+        if plant_entry is None:
+            raise _fail(spec.path, spec.text, "monte_carlo",
+                        f"monte_carlo.instance {mc.instance!r} is not an FMU of the template")
+        plant_path = (spec.path.parent / plant_entry["path"]).resolve()
+        nominal_start = _plant_parameters(plant_path)
+        for g, group in enumerate(mc.vary):
+            vary_names[g] = sorted(n for n in nominal_start if group.pattern.search(n))
+            if not vary_names[g]:
+                raise _fail(spec.path, spec.text, group.pattern.pattern,
+                            f"monte_carlo.vary {group.pattern.pattern!r} matches no Real "
+                            f"parameter of {plant_path.name}")
+    samples = range(mc.samples) if mc else [None]
+
+    runs = []
+    filled_points = []
+    for point, env, patch in points:
+        scenario = _fill(_merge(spec.template, patch), {**env}, spec)
+        filled_points.append((point, _resolve_fmus(scenario, spec, fmus, sets)))
+    for sample in samples:
+        factors, seed = (sample_factors(spec, sample, vary_names) if sample is not None
+                         else ({}, None))
+        for point, resolved in filled_points:
+            scenario = copy.deepcopy(resolved)
+            values = dict(point)
+            if sample is not None:
+                parameters = scenario["fmu"][mc.instance]["parameters"]
+                applied = {}
+                for name, factor in factors.items():
+                    start, low, high = nominal_start[name]
+                    nominal = parameters.get(name, start)
+                    parameters[name] = perturbed(nominal, factor, low, high)
+                    # The factor applied, after the range (the swept value).
+                    applied[name] = parameters[name] / nominal if nominal else factor
+                if mc.seed_parameter:
+                    parameters[mc.seed_parameter] = seed
+                values["sample"] = sample
+                values.update({f"factor.{n}": f for n, f in applied.items()})
+            else:
+                seed = _noise_seed(scenario)
+            values["seed"] = seed
+            key = hashlib.sha256(canonical(scenario).encode()).hexdigest()[:32]
+            runs.append(Run(len(runs), key, scenario, values))
+    return runs, {digest: path for path, digest in fmus.items()}
+
+
+def _noise_seed(scenario: dict):
+    """The sensor-noise seed a grid run uses (reported in the table's seed
+    column), when its plant has one."""
+    for entry in scenario.get("fmu", {}).values():
+        seed = entry.get("parameters", {}).get("noise.seed")
+        if seed is not None:
+            return int(seed)
+    return None
+
+
+# --------------------------------------------------------------------------
+# The task (runs on a worker)
+
+_UNPACKED: dict[str, Path] = {}
+_SCRATCH: Path | None = None
+
+
+def _cache_folder() -> Path:
+    """Where this process unpacks FMUs: the dask worker's local directory
+    (dask removes it with the worker, and purges it after a crash), else a
+    folder in the temporary directory."""
+    global _SCRATCH
+    try:
+        from distributed import get_worker
+
+        return Path(get_worker().local_directory) / "fmus"
+    except (ImportError, ValueError):
+        if _SCRATCH is None:
+            _SCRATCH = Path(tempfile.mkdtemp(prefix="piezo-cosim-fmus-"))
+            atexit.register(shutil.rmtree, _SCRATCH, ignore_errors=True)
+        return _SCRATCH
+
+
+def _unpacked(digest: str, data: bytes) -> Path:
+    """The FMU `data` unpacked once per process and digest: its
+    modelDescription.xml, this platform's binaries and its resources."""
+    if digest in _UNPACKED and _UNPACKED[digest].is_dir():
+        return _UNPACKED[digest]
+    from fmpy import platform
+
+    if hashlib.sha256(data).hexdigest() != digest:
+        raise RuntimeError(f"FMU {digest[:12]}: the bytes received do not match its digest")
+    target = _cache_folder() / digest
+    shutil.rmtree(target, ignore_errors=True)
+    target.mkdir(parents=True)
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        wanted = [name for name in archive.namelist()
+                  if name == "modelDescription.xml" or name.startswith("resources/")
+                  or name.startswith(f"binaries/{platform}/")]
+        archive.extractall(target, members=wanted)
+    _UNPACKED[digest] = target
+    return target
+
+
+def flatten_metrics(metrics: dict | None) -> dict:
+    """Ranges [min, max] become two columns <name>_min, <name>_max."""
+    row = {}
+    for name, value in (metrics or {}).items():
+        if isinstance(value, list):
+            base = name[:-len("_range")] if name.endswith("_range") else name
+            row[f"{base}_min"], row[f"{base}_max"] = float(value[0]), float(value[1])
+        else:
+            row[name] = value
+    return row
+
+
+def execute_run(run: Run, fmu_data: dict, timeout: float | None) -> dict:
+    """Runs one scenario through the master; returns its table row. Never
+    raises for a failed run: the row says why (status, error)."""
+    started = time.perf_counter()
+    try:
+        from distributed import get_worker
+
+        worker = get_worker().address
+    except (ImportError, ValueError):
+        worker = "local"
+    row = {"run": run.index, "key": run.key, **run.values}
+    scenario = copy.deepcopy(run.scenario)
+    for entry in scenario["fmu"].values():
+        digest = entry["path"].removeprefix("fmu:")
+        entry["path"] = str(_unpacked(digest, fmu_data[digest]))
+    try:
+        result = master.run(scenario, timeout=timeout)
+        row.update(status="ok", error=None, steps=result["steps"],
+                   simulated_s=result["simulated_s"], warnings=len(result["warnings"]),
+                   wall_s=result["wall_s"])
+        row.update(flatten_metrics(result.get("metrics")))
+    except master.MasterError as e:
+        row.update(status="error", error=str(e)[:2000])
+    except subprocess.TimeoutExpired:
+        # Not a property of the run (a loaded machine can cause it): the row
+        # says so, and the next invocation runs it again.
+        row.update(status="timeout", error=f"no result within {timeout} s")
+    row["task_s"] = time.perf_counter() - started
+    row["worker"] = worker
+    return row
+
+
+# --------------------------------------------------------------------------
+# The table
+
+def table_path(out: Path, study: str) -> Path:
+    return out / f"{study}.parquet"
+
+
+def journal_path(out: Path, study: str) -> Path:
+    return out / f"{study}.journal.jsonl"
+
+
+def read_rows(out: Path, study: str) -> list[dict]:
+    """The rows of the table and of its journal."""
+    import pyarrow.parquet as pq
+
+    rows = []
+    path = table_path(out, study)
+    if path.is_file():
+        rows += pq.read_table(path).to_pylist()
+    journal = journal_path(out, study)
+    if journal.is_file():
+        for line in journal.read_text().splitlines():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError:
+                # The last line of a journal whose writer was killed mid-line.
+                continue
+    return rows
+
+
+def _rows_to_table(rows: list[dict], spec: Spec | None = None):
+    import pyarrow as pa
+
+    # Rows differ in their metrics (a y run has no coupling_y_span, a failed
+    # run none at all): every column any row has, in order of appearance.
+    names = list(dict.fromkeys(name for row in rows for name in row))
+    table = pa.table({name: [row.get(name) for row in rows] for name in names})
+    if spec is not None:
+        meta = {b"study": spec.study.encode(), b"spec": spec.text.encode(),
+                b"title": spec.title.encode(), b"report": spec.report.encode(),
+                b"report_options": json.dumps(spec.report_options).encode()}
+        table = table.replace_schema_metadata(meta)
+    return table
+
+
+def _write_atomically(table, path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    scratch = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    pq.write_table(table, str(scratch))
+    os.replace(scratch, path)
+
+
+def consolidate(out: Path, spec: Spec, keys: dict[str, int]) -> int:
+    """Folds the journal into the table: each run once, in run order.
+    Returns the number of rows."""
+    rows = read_rows(out, spec.study)
+    unique = {}
+    for row in rows:
+        # The table's rows first, then the journal's: a run executed again
+        # (after a timeout) replaces its earlier row.
+        if row["key"] in keys:
+            unique[row["key"]] = row
+    ordered = sorted(unique.values(), key=lambda r: r["run"])
+    if ordered:
+        _write_atomically(_rows_to_table(ordered, spec), table_path(out, spec.study))
+    journal_path(out, spec.study).unlink(missing_ok=True)
+    return len(ordered)
+
+
+class Journal:
+    """Rows as they arrive, one JSON line each, appended to
+    DIR/<study>.journal.jsonl: whatever stops the client (Ctrl-C, a kill, a
+    lost machine), the rows received so far are on disk, and the next
+    consolidation folds them into the table."""
+
+    def __init__(self, out: Path, study: str):
+        self.file = journal_path(out, study).open("a")
+
+    def add(self, row: dict) -> None:
+        self.file.write(json.dumps(row) + "\n")
+        self.file.flush()
+
+    def close(self) -> None:
+        self.file.close()
+
+
+# --------------------------------------------------------------------------
+# Execution
+
+class StaleTable(SpecError):
+    pass
+
+
+def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> None:
+    """Runs the master's check (load, wire, set every parameter, initialize;
+    no step) on one run of every combination of named cases, here, before
+    anything is sent: a spec that does not fit the FMUs fails once, with the
+    master's message, instead of in every task."""
+    seen = set()
+    for run in runs:
+        signature = tuple(sorted((k, v) for k, v in run.values.items()
+                                 if isinstance(v, str)))
+        if signature in seen:
+            continue
+        seen.add(signature)
+        scenario = copy.deepcopy(run.scenario)
+        for entry in scenario["fmu"].values():
+            entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
+        try:
+            master.check(scenario)
+        except master.MasterError as e:
+            cases = ", ".join(f"{k} = {v}" for k, v in signature) or "the template"
+            raise SpecError(f"{spec.path}: the scenario of {cases} does not run: {e}") from None
+
+
+def _progress_lines(done: int, total: int, failed: int, started: float, study: str) -> None:
+    elapsed = time.monotonic() - started
+    rate = done / elapsed if elapsed > 0 else 0.0
+    eta = (total - done) / rate if rate > 0 else float("nan")
+    print(f"sweep {study}: {done}/{total} runs ({100 * done / max(total, 1):.0f} %), "
+          f"{failed} failed, {elapsed:.0f} s elapsed, about {eta:.0f} s to go", flush=True)
+
+
+def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: str = "auto",
+              on_row=None) -> dict:
+    """Runs every run of `spec` not yet in DIR/<study>.parquet on `client`'s
+    cluster. `on_row(row, done)` is called after each row (tests use it to
+    kill a worker mid-sweep). Returns a summary."""
+    from distributed import as_completed
+
+    out.mkdir(parents=True, exist_ok=True)
+    runs, fmus = expand(spec)
+    keys = {run.key: run.index for run in runs}
+    if restart:
+        table_path(out, spec.study).unlink(missing_ok=True)
+        journal_path(out, spec.study).unlink(missing_ok=True)
+    existing = read_rows(out, spec.study)
+    stale = [row for row in existing if row.get("key") not in keys]
+    if stale:
+        raise StaleTable(
+            f"{table_path(out, spec.study)}: {len(stale)} of its {len(existing)} rows are not "
+            f"runs of {spec.path} as it is now (the spec or the FMUs changed): pass --restart "
+            f"to start the table over, or choose another --out")
+    done_keys = {row["key"] for row in existing if row.get("status") != "timeout"}
+    todo = [run for run in runs if run.key not in done_keys]
+    summary = {"study": spec.study, "runs": len(runs), "skipped": len(runs) - len(todo),
+               "executed": 0, "failed": 0, "timeouts": 0, "lost": 0, "interrupted": False}
+    if not todo:
+        summary["rows"] = consolidate(out, spec, keys)
+        return summary
+    check_scenarios(todo, fmus, spec)
+
+    data = {digest: client.scatter(path.read_bytes(), broadcast=True, hash=True)
+            for digest, path in fmus.items()}
+    futures = [client.submit(execute_run, run, data, spec.timeout, key=f"run-{run.key}",
+                             pure=True)
+               for run in todo]
+    mode = progress
+    if mode == "auto":
+        mode = "bar" if sys.stdout.isatty() else "lines"
+    if mode == "bar":
+        from distributed.diagnostics.progressbar import progress as dask_progress
+
+        threading.Thread(target=dask_progress, args=(futures,), kwargs={"multi": False},
+                         daemon=True).start()
+    journal = Journal(out, spec.study)
+    started = last_line = time.monotonic()
+    done = 0
+    try:
+        for future in as_completed(futures):
+            try:
+                row = future.result()
+            except Exception as e:  # noqa: BLE001 - the task did not run (see below)
+                # Not a failed run (those are rows) but a task that could not
+                # run: a worker without the package or the master, a task
+                # whose workers died again and again. It stays out of the
+                # table, so the next invocation runs it again.
+                summary["lost"] += 1
+                if summary["lost"] == 1:
+                    print(f"a run could not be executed: {type(e).__name__}: {e}",
+                          file=sys.stderr, flush=True)
+                continue
+            journal.add(row)
+            done += 1
+            summary["executed"] += 1
+            summary["failed"] += row["status"] == "error"
+            summary["timeouts"] += row["status"] == "timeout"
+            if on_row is not None:
+                on_row(row, done)
+            if mode == "lines" and time.monotonic() - last_line >= PROGRESS_SECONDS:
+                last_line = time.monotonic()
+                _progress_lines(done, len(todo), summary["failed"], started, spec.study)
+    except KeyboardInterrupt:
+        summary["interrupted"] = True
+        client.cancel(futures)
+    finally:
+        journal.close()
+        summary["rows"] = consolidate(out, spec, keys)
+        summary["wall_s"] = time.monotonic() - started
+    if mode == "lines" and not summary["interrupted"]:
+        _progress_lines(done, len(todo), summary["failed"], started, spec.study)
+    return summary
+
+
+def make_client(scheduler: str | None, workers: int | None):
+    """A client of an existing scheduler, or of a LocalCluster of `workers`
+    single-threaded processes (default: one per core)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler, timeout="30s")
+    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                           processes=True, dashboard_address=None)
+    return Client(cluster)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("specs", nargs="+", type=Path, help="sweep spec files (TOML)")
+    parser.add_argument("--out", type=Path, default=Path("out/sweep"),
+                        help="folder of the tables and the report (default out/sweep)")
+    parser.add_argument("--scheduler", help="address of a running dask scheduler "
+                                            "(tcp://HOST:PORT); default: a LocalCluster")
+    parser.add_argument("--workers", type=int, help="LocalCluster worker processes "
+                                                    "(default: one per core)")
+    parser.add_argument("--restart", action="store_true",
+                        help="discard the existing tables of these specs and run everything")
+    parser.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto",
+                        help="dask's progress bar (a terminal), periodic lines, or nothing")
+    parser.add_argument("--no-report", action="store_true", help="do not write report.md")
+    args = parser.parse_args(argv)
+    try:
+        specs = [load_spec(path) for path in args.specs]
+        master.binary()
+    except (SpecError, FileNotFoundError) as e:
+        print(e, file=sys.stderr)
+        return 2
+    timed_out = 0
+    with make_client(args.scheduler, args.workers) as client:
+        print(f"dask: {len(client.scheduler_info()['workers'])} workers "
+              f"({args.scheduler or 'LocalCluster'})", flush=True)
+        for spec in specs:
+            try:
+                summary = run_sweep(spec, args.out, client, args.restart, args.progress)
+            except SpecError as e:
+                print(e, file=sys.stderr)
+                return 2
+            print(f"{spec.study}: {summary['executed']} runs executed "
+                  f"({summary['failed']} failed, {summary['timeouts']} timed out), "
+                  f"{summary['skipped']} already in the table; "
+                  f"{summary['rows']} rows in {table_path(args.out, spec.study)}"
+                  + (f"; {summary['wall_s']:.1f} s" if "wall_s" in summary else ""), flush=True)
+            if summary["interrupted"]:
+                print("interrupted: run the same command again to continue", file=sys.stderr)
+                return 130
+            if summary["timeouts"]:
+                timed_out += summary["timeouts"]
+                print(f"{summary['timeouts']} runs gave no result within {spec.timeout} s: run "
+                      f"the same command again to retry them", file=sys.stderr)
+            if summary["lost"]:
+                print(f"{summary['lost']} runs could not be executed (see above): run the "
+                      f"same command again to retry them", file=sys.stderr)
+                return 1
+    if not args.no_report:
+        from .sweep_report import write_report
+
+        report = write_report(args.out)
+        print(f"report: {report}")
+    # The report shows what is in the tables; a table with timed-out runs is
+    # not complete, and the exit status says so.
+    return 1 if timed_out else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

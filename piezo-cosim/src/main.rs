@@ -1,0 +1,158 @@
+//! `piezo-cosim run SCENARIO`: runs one co-simulation scenario (TOML or JSON,
+//! see `piezo_cosim::scenario`) and prints its result as JSON.
+//!
+//! Exit status: 0 the run completed; 1 an FMU refused a call or failed a
+//! step; 2 the scenario is malformed or does not fit the FMUs.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use piezo_cosim::{RunError, RunOptions, Scenario, run, series};
+use serde_json::json;
+
+#[derive(Parser)]
+#[command(
+    name = "piezo-cosim",
+    version,
+    about = "Co-simulation master for FMI 2.0 co-simulation FMUs"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Runs a scenario; prints {status, steps, wall_s, metrics, warnings} as JSON.
+    Run {
+        /// Scenario file (.toml or .json), or `-` for JSON on stdin (relative
+        /// paths then relative to the working directory).
+        scenario: PathBuf,
+        /// Writes the time series (every Real output and signal) as CSV.
+        #[arg(long, value_name = "FILE.csv")]
+        series: Option<PathBuf>,
+        /// Writes the JSON result to this file instead of stdout.
+        #[arg(long, value_name = "FILE.json")]
+        out: Option<PathBuf>,
+        /// Ends with the process PID that started it (Linux): a run whose
+        /// caller was killed (a dask worker) does not run on as an orphan.
+        #[arg(long, value_name = "PID")]
+        parent: Option<u32>,
+    },
+    /// Checks a scenario against its FMUs without stepping: loads them,
+    /// resolves every connection, signal and parameter, initializes.
+    Check {
+        /// Scenario file (.toml or .json), or `-` for JSON on stdin.
+        scenario: PathBuf,
+    },
+}
+
+/// Asks the kernel to kill this process when its parent ends, then checks
+/// that the parent is still `pid` (it may have ended before the request).
+#[cfg(target_os = "linux")]
+fn exit_with_parent(pid: u32) {
+    // SAFETY: prctl with PR_SET_PDEATHSIG takes a signal number and no pointer.
+    unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) };
+    // SAFETY: getppid has no preconditions.
+    if unsafe { libc::getppid() } as u32 != pid {
+        eprintln!("the parent process {pid} has ended");
+        std::process::exit(1);
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn exit_with_parent(_pid: u32) {}
+
+fn load(path: &Path) -> Result<Scenario, String> {
+    if path.as_os_str() == "-" {
+        let mut text = String::new();
+        std::io::stdin()
+            .read_to_string(&mut text)
+            .map_err(|e| format!("stdin: {e}"))?;
+        Scenario::parse(&text, true, "<stdin>").map_err(|e| e.0)
+    } else {
+        Scenario::from_file(path).map_err(|e| e.0)
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let (scenario, series_path, out, check_only) = match cli.command {
+        Command::Run {
+            scenario,
+            series,
+            out,
+            parent,
+        } => {
+            if let Some(pid) = parent {
+                exit_with_parent(pid);
+            }
+            (scenario, series, out, false)
+        }
+        Command::Check { scenario } => (scenario, None, None, true),
+    };
+    if let Some(path) = &series_path
+        && path.extension().is_none_or(|e| e != "csv")
+    {
+        eprintln!(
+            "{}: the series is written as CSV (name it .csv); `python -m demo.master` also writes Parquet",
+            path.display()
+        );
+        return ExitCode::from(2);
+    }
+    let scenario = match load(&scenario) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::from(2);
+        }
+    };
+    let options = RunOptions {
+        series: series_path.is_some(),
+        check_only,
+    };
+    let output = match run(&scenario, options) {
+        Ok(output) => output,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::from(match e {
+                RunError::Scenario(_) => 2,
+                RunError::Fmu(_) => 1,
+            });
+        }
+    };
+    if let (Some(path), Some(series)) = (&series_path, &output.series)
+        && let Err(e) = series::write_csv(series, path)
+    {
+        eprintln!("{e}");
+        return ExitCode::from(1);
+    }
+    if check_only {
+        println!("{}", json!({"status": "ok", "warnings": output.warnings}));
+        return ExitCode::SUCCESS;
+    }
+    let simulated = output.steps as f64 * scenario.step;
+    let result = json!({
+        "status": "ok",
+        "steps": output.steps,
+        "simulated_s": simulated,
+        "wall_s": output.wall_s,
+        "loop_s": output.loop_s,
+        "realtime_factor": simulated / output.wall_s,
+        "metrics": output.metrics,
+        "warnings": output.warnings,
+    });
+    let text = result.to_string();
+    match out {
+        Some(path) => {
+            if let Err(e) = std::fs::write(&path, text + "\n") {
+                eprintln!("{}: {e}", path.display());
+                return ExitCode::from(1);
+            }
+        }
+        None => println!("{text}"),
+    }
+    ExitCode::SUCCESS
+}

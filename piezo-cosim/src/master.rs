@@ -1,0 +1,538 @@
+//! The master: a fixed-step Jacobi loop over a connection table.
+//!
+//! At each communication point t_k = k·h every FMU's outputs are read; every
+//! input then gets its value at t_k (a connection: the source's output at
+//! t_k; a signal: its trajectory at t_k + preview·h), and every FMU steps from
+//! t_k to t_k+1. This is demo/cosim.py's algorithm, call for call: the
+//! controller samples its inputs at the start of its step and its outputs
+//! hold from the end of it, so the command a plant applies over
+//! [t_k, t_k+1] was computed from its sensors at t_k−1, one sample of compute
+//! delay, as on a DSP that writes its outputs at the next sample; with the
+//! references two samples ahead the command aims at r(t_k+1).
+//!
+//! Nothing in the loop knows what the FMUs are: the scenario's connections,
+//! signals and parameter values are resolved to value references and buffer
+//! indices before the first step, and the loop allocates nothing.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use fmi2_import::{Causality, FmuArchive, Instance, LogRecord, OK, VariableInfo, WARNING};
+
+use crate::metrics::{self, Metrics};
+use crate::scenario::{
+    CONTROLLER, Connection, ParameterValue, Scenario, ScenarioError, split_port,
+};
+
+/// What to keep of a run besides its metrics.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Record the time series: every Real output, every signal, and the
+    /// scenario's `record` list.
+    pub series: bool,
+    /// Stop after initialization: the scenario is checked against the FMUs
+    /// (every variable, connection, signal and parameter value, and the
+    /// FMUs' own checks at fmi2ExitInitializationMode) without a step.
+    pub check_only: bool,
+}
+
+/// The recorded time series: `t` and one column per name.
+#[derive(Clone, Debug, Default)]
+pub struct Series {
+    pub t: Vec<f64>,
+    /// `instance.variable`
+    pub names: Vec<String>,
+    pub columns: Vec<Vec<f64>>,
+}
+
+impl Series {
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| self.columns[i].as_slice())
+    }
+}
+
+/// The result of a run.
+#[derive(Clone, Debug)]
+pub struct RunOutput {
+    pub steps: usize,
+    /// Wall time of the whole run: loading, instantiation, the loop, metrics [s].
+    pub wall_s: f64,
+    /// Wall time of the step loop alone [s].
+    pub loop_s: f64,
+    pub metrics: Option<Metrics>,
+    /// Messages the FMUs logged with status Warning (the first few).
+    pub warnings: Vec<String>,
+    pub series: Option<Series>,
+}
+
+/// Why a run did not complete.
+#[derive(Debug)]
+pub enum RunError {
+    /// The scenario does not fit the FMUs (an unknown variable, a type).
+    Scenario(String),
+    /// An FMU refused a call or failed a step.
+    Fmu(String),
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunError::Scenario(m) | RunError::Fmu(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for RunError {}
+
+impl From<ScenarioError> for RunError {
+    fn from(e: ScenarioError) -> Self {
+        RunError::Scenario(e.0)
+    }
+}
+
+/// How many warning messages a run keeps.
+const KEPT_WARNINGS: usize = 20;
+
+/// Where an input's value comes from at each step.
+#[derive(Clone, Copy, Debug)]
+enum Source {
+    /// Index into the flat buffer of outputs read at t_k.
+    Output(usize),
+    /// Index of a signal (its value at t_k + preview·h).
+    Signal(usize),
+}
+
+/// A value ready for the setter of its variable's type.
+#[derive(Clone, Copy, Debug)]
+enum Typed {
+    Real(f64),
+    Integer(i32),
+    Boolean(bool),
+}
+
+/// One FMU of the run: what it reads and writes at each step.
+struct Slot<'a> {
+    name: String,
+    instance: Instance<'a>,
+    /// Value references read at every step, and where they land in the flat
+    /// output buffer (a contiguous range starting at `first_output`).
+    output_vrs: Vec<u32>,
+    first_output: usize,
+    input_vrs: Vec<u32>,
+    input_sources: Vec<Source>,
+    input_values: Vec<f64>,
+}
+
+/// A loaded FMU of the scenario.
+struct Loaded {
+    name: String,
+    archive: FmuArchive,
+}
+
+impl Loaded {
+    fn variable(&self, variable: &str, port: &str) -> Result<&VariableInfo, RunError> {
+        self.archive.fmu.find(variable).ok_or_else(|| {
+            RunError::Scenario(format!(
+                "{port}: {} has no variable {variable:?}",
+                self.archive.path.display()
+            ))
+        })
+    }
+}
+
+/// The log of an instance as one line.
+fn log_text(log: &[LogRecord]) -> String {
+    if log.is_empty() {
+        return "(nothing logged)".to_owned();
+    }
+    log.iter()
+        .map(|r| format!("[{}] {}", r.category, r.message))
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// Runs `scenario` once.
+pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunError> {
+    let started = Instant::now();
+    let loaded: Vec<Loaded> = scenario
+        .fmu
+        .iter()
+        .map(|(name, spec)| {
+            FmuArchive::open(&spec.path)
+                .map(|archive| Loaded {
+                    name: name.clone(),
+                    archive,
+                })
+                .map_err(|e| RunError::Scenario(e.to_string()))
+        })
+        .collect::<Result<_, _>>()?;
+    let index_of: BTreeMap<&str, usize> = loaded
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (l.name.as_str(), i))
+        .collect();
+    let resolve = |port: &str| -> Result<(usize, &VariableInfo), RunError> {
+        let (instance, variable) = split_port(port)
+            .ok_or_else(|| RunError::Scenario(format!("{port:?} is not `instance.variable`")))?;
+        let slot = *index_of
+            .get(instance)
+            .ok_or_else(|| RunError::Scenario(format!("{port}: no FMU instance {instance:?}")))?;
+        let info = loaded[slot].variable(variable, port)?;
+        if info.kind != "Real" {
+            return Err(RunError::Scenario(format!(
+                "{port} is a {} variable; the master exchanges Real values",
+                info.kind
+            )));
+        }
+        Ok((slot, info))
+    };
+
+    // The outputs read at every step, per FMU, in a flat buffer.
+    let mut read: Vec<Vec<(String, u32)>> = vec![Vec::new(); loaded.len()];
+    let want_output = |port: &str, read: &mut Vec<Vec<(String, u32)>>| -> Result<(), RunError> {
+        let (slot, info) = resolve(port)?;
+        // By name: two names of one value reference (an alias) are two
+        // entries, read twice, so that each has its index.
+        if !read[slot].iter().any(|(name, _)| name == port) {
+            read[slot].push((port.to_owned(), info.vr));
+        }
+        Ok(())
+    };
+    let connections: Vec<Connection> = scenario.connections();
+    for connection in &connections {
+        let (_, info) = resolve(&connection.from)?;
+        if info.causality != Causality::Output {
+            return Err(RunError::Scenario(format!(
+                "connection source {} is not an output",
+                connection.from
+            )));
+        }
+        want_output(&connection.from, &mut read)?;
+    }
+    let metric_ports = match &scenario.metrics {
+        Some(_) => metrics::sensor_ports()
+            .into_iter()
+            .chain(metrics::command_ports())
+            .collect(),
+        None => Vec::new(),
+    };
+    for port in &metric_ports {
+        want_output(port, &mut read)?;
+    }
+    if options.series {
+        for l in &loaded {
+            for v in l.archive.fmu.with_causality(Causality::Output) {
+                if v.kind == "Real" {
+                    want_output(&format!("{}.{}", l.name, v.name), &mut read)?;
+                }
+            }
+        }
+        for port in &scenario.record {
+            want_output(port, &mut read)?;
+        }
+    }
+    let mut output_index: BTreeMap<String, usize> = BTreeMap::new();
+    let mut first_outputs = Vec::with_capacity(loaded.len());
+    let mut total_outputs = 0;
+    for ports in &read {
+        first_outputs.push(total_outputs);
+        for (port, _) in ports {
+            output_index.insert(port.clone(), total_outputs);
+            total_outputs += 1;
+        }
+    }
+
+    // Signals, sampled before the loop at t_k (recorded, and the metrics'
+    // demands) and at t_k + preview·h (what the inputs get).
+    let steps = scenario.steps();
+    let h = scenario.step;
+    let ahead = f64::from(scenario.preview) * h;
+    let times: Vec<f64> = (0..=steps).map(|k| k as f64 * h).collect();
+    let times_ahead: Vec<f64> = times[..steps].iter().map(|t| t + ahead).collect();
+    let mut signal_names = Vec::new();
+    let mut signal_now = Vec::new();
+    let mut signal_ahead = Vec::new();
+    for (port, trajectory) in &scenario.signal {
+        resolve(port)?;
+        let fail = |e: String| RunError::Scenario(format!("signal {port}: {e}"));
+        signal_now.push(trajectory.sample(&times).map_err(fail)?);
+        signal_ahead.push(trajectory.sample(&times_ahead).map_err(fail)?);
+        signal_names.push(port.clone());
+    }
+
+    // Inputs per FMU.
+    let mut inputs: Vec<Vec<(u32, Source)>> = vec![Vec::new(); loaded.len()];
+    let mut driven: BTreeMap<String, String> = BTreeMap::new();
+    let mut add_input = |port: &str, source: Source, by: &str| -> Result<(), RunError> {
+        let (slot, info) = resolve(port)?;
+        if info.causality != Causality::Input {
+            return Err(RunError::Scenario(format!("{port} is not an input")));
+        }
+        if let Some(other) = driven.insert(port.to_owned(), by.to_owned()) {
+            return Err(RunError::Scenario(format!(
+                "{port} is driven twice: by {other} and by {by}"
+            )));
+        }
+        inputs[slot].push((info.vr, source));
+        Ok(())
+    };
+    for connection in &connections {
+        let source = Source::Output(output_index[&connection.from]);
+        add_input(&connection.to, source, &connection.from)?;
+    }
+    for (i, port) in signal_names.iter().enumerate() {
+        add_input(port, Source::Signal(i), "a signal")?;
+    }
+
+    // Parameter values by FMI name, typed by the variable.
+    let mut parameters: Vec<Vec<(u32, Typed)>> = Vec::with_capacity(loaded.len());
+    let mut parameter_value: BTreeMap<String, f64> = BTreeMap::new();
+    for l in &loaded {
+        let spec = &scenario.fmu[&l.name];
+        let mut typed = Vec::new();
+        for (name, value) in spec.parameter_values()? {
+            let port = format!("{}.{name}", l.name);
+            let info = l.variable(&name, &port)?;
+            let value = match (info.kind, value) {
+                ("Real", ParameterValue::Number(v)) => Typed::Real(v),
+                ("Integer", ParameterValue::Number(v))
+                    if v.fract() == 0.0 && v.abs() <= f64::from(i32::MAX) =>
+                {
+                    Typed::Integer(v as i32)
+                }
+                ("Boolean", ParameterValue::Boolean(v)) => Typed::Boolean(v),
+                (kind, value) => {
+                    return Err(RunError::Scenario(format!(
+                        "{port} is a {kind} variable; the scenario gives {value:?}"
+                    )));
+                }
+            };
+            if let Typed::Real(v) = value {
+                parameter_value.insert(port, v);
+            }
+            typed.push((info.vr, value));
+        }
+        parameters.push(typed);
+    }
+    // A parameter's value in this run: the one set, else its start value.
+    let value_of = |port: &str| -> Option<f64> {
+        parameter_value.get(port).copied().or_else(|| {
+            let (instance, variable) = split_port(port)?;
+            let slot = *index_of.get(instance)?;
+            loaded[slot].archive.fmu.find(variable)?.start
+        })
+    };
+
+    // Instantiate and initialize every FMU.
+    let mut slots: Vec<Slot> = Vec::with_capacity(loaded.len());
+    for (i, l) in loaded.iter().enumerate() {
+        let instance = l.archive.instantiate(&l.name, false).map_err(|log| {
+            RunError::Fmu(format!(
+                "{}: fmi2Instantiate returned NULL: {}",
+                l.name,
+                log_text(&log)
+            ))
+        })?;
+        let (vrs, sources): (Vec<u32>, Vec<Source>) = inputs[i].iter().copied().unzip();
+        slots.push(Slot {
+            name: l.name.clone(),
+            instance,
+            output_vrs: read[i].iter().map(|(_, vr)| *vr).collect(),
+            first_output: first_outputs[i],
+            input_values: vec![0.0; vrs.len()],
+            input_vrs: vrs,
+            input_sources: sources,
+        });
+    }
+    let mut warnings = Vec::new();
+    for (slot, typed) in slots.iter_mut().zip(&parameters) {
+        let status = slot.instance.setup(0.0);
+        check(slot, "fmi2SetupExperiment", status, 0.0, &mut warnings)?;
+        let status = slot.instance.enter_init();
+        check(
+            slot,
+            "fmi2EnterInitializationMode",
+            status,
+            0.0,
+            &mut warnings,
+        )?;
+        for (vr, value) in typed {
+            let (call, status) = match *value {
+                Typed::Real(v) => ("fmi2SetReal", slot.instance.set_real(&[*vr], &[v])),
+                Typed::Integer(v) => ("fmi2SetInteger", slot.instance.set_integer(&[*vr], &[v])),
+                Typed::Boolean(v) => ("fmi2SetBoolean", slot.instance.set_boolean(&[*vr], &[v])),
+            };
+            check(slot, call, status, 0.0, &mut warnings)?;
+        }
+        let status = slot.instance.exit_init();
+        check(
+            slot,
+            "fmi2ExitInitializationMode",
+            status,
+            0.0,
+            &mut warnings,
+        )?;
+    }
+
+    if options.check_only {
+        for slot in &mut slots {
+            let status = slot.instance.terminate();
+            check(slot, "fmi2Terminate", status, 0.0, &mut warnings)?;
+        }
+        return Ok(RunOutput {
+            steps: 0,
+            wall_s: started.elapsed().as_secs_f64(),
+            loop_s: 0.0,
+            metrics: None,
+            warnings,
+            series: None,
+        });
+    }
+
+    // What is recorded at every step: outputs by buffer index.
+    let recorded: Vec<(String, usize)> = output_index
+        .iter()
+        .filter(|(port, _)| options.series || metric_ports.contains(port))
+        .map(|(port, &i)| (port.clone(), i))
+        .collect();
+    let mut columns: Vec<Vec<f64>> = recorded
+        .iter()
+        .map(|_| Vec::with_capacity(steps + 1))
+        .collect();
+    let mut outputs = vec![0.0; total_outputs];
+
+    let loop_started = Instant::now();
+    for k in 0..=steps {
+        let t = times[k];
+        for slot in &mut slots {
+            let range = slot.first_output..slot.first_output + slot.output_vrs.len();
+            let status = slot
+                .instance
+                .get_real_into(&slot.output_vrs, &mut outputs[range]);
+            check(slot, "fmi2GetReal", status, t, &mut warnings)?;
+        }
+        for (column, (_, i)) in columns.iter_mut().zip(&recorded) {
+            column.push(outputs[*i]);
+        }
+        if k == steps {
+            break;
+        }
+        for slot in &mut slots {
+            for (value, source) in slot.input_values.iter_mut().zip(&slot.input_sources) {
+                *value = match *source {
+                    Source::Output(i) => outputs[i],
+                    Source::Signal(s) => signal_ahead[s][k],
+                };
+            }
+            if !slot.input_vrs.is_empty() {
+                let status = slot.instance.set_real(&slot.input_vrs, &slot.input_values);
+                check(slot, "fmi2SetReal", status, t, &mut warnings)?;
+            }
+        }
+        for slot in &mut slots {
+            let status = slot.instance.do_step_at(t, h);
+            check(slot, "fmi2DoStep", status, t, &mut warnings)?;
+        }
+    }
+    let loop_s = loop_started.elapsed().as_secs_f64();
+    for slot in &mut slots {
+        let status = slot.instance.terminate();
+        check(slot, "fmi2Terminate", status, times[steps], &mut warnings)?;
+    }
+    drop(slots);
+
+    let metrics = match &scenario.metrics {
+        Some(spec) => {
+            let spacing = match spec.spacing {
+                Some(s) => s,
+                None => {
+                    value_of(&format!("{CONTROLLER}.L")).ok_or_else(|| {
+                        RunError::Scenario(
+                            "metrics need the x sensors' spacing: give metrics.spacing [um] or a controller with parameter L [mm]"
+                                .to_owned(),
+                        )
+                    })? * 1e3
+                }
+            };
+            let mut available: BTreeMap<&str, &[f64]> = BTreeMap::new();
+            for ((port, _), column) in recorded.iter().zip(&columns) {
+                available.insert(port.as_str(), column.as_slice());
+            }
+            for (port, values) in signal_names.iter().zip(&signal_now) {
+                available.insert(port.as_str(), values.as_slice());
+            }
+            let constant = |port: &str| value_of(port).unwrap_or(0.0);
+            Some(metrics::compute(
+                spec, &times, spacing, &available, &constant,
+            ))
+        }
+        None => None,
+    };
+    let series = if options.series {
+        let mut names: Vec<String> = signal_names.clone();
+        let mut data: Vec<Vec<f64>> = signal_now.clone();
+        for ((port, _), column) in recorded.iter().zip(columns) {
+            names.push(port.clone());
+            data.push(column);
+        }
+        Some(Series {
+            t: times,
+            names,
+            columns: data,
+        })
+    } else {
+        None
+    };
+    Ok(RunOutput {
+        steps,
+        wall_s: started.elapsed().as_secs_f64(),
+        loop_s,
+        metrics,
+        warnings,
+        series,
+    })
+}
+
+/// Accepts OK and Warning (keeping the warning's log); anything else ends
+/// the run with the FMU's log.
+#[inline]
+fn check(
+    slot: &mut Slot,
+    call: &'static str,
+    status: u32,
+    t: f64,
+    warnings: &mut Vec<String>,
+) -> Result<(), RunError> {
+    if status == OK {
+        return Ok(());
+    }
+    failed_or_warned(slot, call, status, t, warnings)
+}
+
+#[cold]
+#[inline(never)]
+fn failed_or_warned(
+    slot: &mut Slot,
+    call: &'static str,
+    status: u32,
+    t: f64,
+    warnings: &mut Vec<String>,
+) -> Result<(), RunError> {
+    let log = slot.instance.take_log();
+    if status == WARNING {
+        for record in log {
+            if warnings.len() < KEPT_WARNINGS {
+                warnings.push(format!("{} at t = {t} s: {}", slot.name, record.message));
+            }
+        }
+        return Ok(());
+    }
+    Err(RunError::Fmu(format!(
+        "{}: {call} returned status {status} at t = {t} s: {}",
+        slot.name,
+        log_text(&log)
+    )))
+}

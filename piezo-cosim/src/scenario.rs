@@ -1,0 +1,460 @@
+//! A scenario: everything one closed-loop run is, as data (TOML or JSON).
+//!
+//! ```toml
+//! step = 1e-4            # communication step [s] (default: seed 000's 10 kHz)
+//! duration = 4.0         # simulated time [s]
+//! preview = 2            # samples of reference preview (default 2, as demo/cosim.py)
+//!
+//! [fmu.plant]
+//! path = "../dist/FlexureStage.fmu"     # a .fmu or its unpacked folder
+//! parameter_sets = ["../dist/presets/FlexureStage.xy200s.json"]
+//! parameters = { "noise.enabled" = true, "noise.seed" = 2024 }
+//!
+//! [fmu.controller]
+//! path = "../dist/PiezoController.fmu"
+//! parameters = { decoupling = true, feedback_x = false }
+//!
+//! [signal."controller.y_ref"]          # a trajectory driving an input
+//! offset = 5.0
+//! sines = [{ amplitude = 5.0, frequency = 1.0, phase = -1.5707963267948966 }]
+//!
+//! [metrics]
+//! driven = "y"           # x | y | theta | xy | ytheta
+//! from = 2.0             # start of the measured window [s]
+//! ```
+//!
+//! Without `[[connection]]` entries the FMUs are wired as the stage's closed
+//! loop ([`stage_wiring`]). Relative paths are relative to the scenario file.
+//! Unknown keys are refused, with the file, line and column.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::trajectory::Trajectory;
+
+/// The seed 000 controller's sample period (§2: the DS1103 at 10 kHz).
+pub const DEFAULT_STEP: f64 = 1e-4;
+/// Samples of preview of the references (demo/cosim.py: with 2, the command
+/// applied over [t_k, t_k+1] aims at r(t_k+1), which makes up for the
+/// master's one sample of compute delay).
+pub const DEFAULT_PREVIEW: u32 = 2;
+
+/// Instance names of the stage's closed loop (demo/cosim.py's PLANT_INSTANCE,
+/// CONTROLLER_INSTANCE).
+pub const PLANT: &str = "plant";
+pub const CONTROLLER: &str = "controller";
+
+/// The stage's closed loop as (source, destination) pairs, the table of
+/// demo/cosim.py (COMMANDS, SENSORS; a test keeps the two equal): the
+/// controller's commands drive the plant's amplifier channels, the plant's
+/// sensors feed the controller.
+pub const STAGE_COMMANDS: [(&str, &str); 3] = [("u1", "u1"), ("u2", "u2"), ("u3", "u3")];
+pub const STAGE_SENSORS: [(&str, &str); 3] = [("s1", "s1"), ("s2", "s2"), ("s3", "s3")];
+
+/// One closed-loop run.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Communication step [s].
+    #[serde(default = "default_step")]
+    pub step: f64,
+    /// Simulated time [s]; the run has round(duration / step) steps.
+    pub duration: f64,
+    /// Every signal is given this many steps ahead: r(t_k + preview·step) at t_k.
+    #[serde(default = "default_preview")]
+    pub preview: u32,
+    /// The FMUs, by instance name.
+    pub fmu: BTreeMap<String, FmuSpec>,
+    /// Output-to-input connections; absent: [`stage_wiring`].
+    #[serde(default)]
+    pub connection: Option<Vec<Connection>>,
+    /// Trajectories driving inputs, by `instance.variable`.
+    #[serde(default)]
+    pub signal: BTreeMap<String, Trajectory>,
+    /// The experiment's figures, computed after the run.
+    #[serde(default)]
+    pub metrics: Option<MetricsSpec>,
+    /// Variables (`instance.variable`) recorded in the time series besides
+    /// every Real output and every signal.
+    #[serde(default)]
+    pub record: Vec<String>,
+}
+
+fn default_step() -> f64 {
+    DEFAULT_STEP
+}
+
+fn default_preview() -> u32 {
+    DEFAULT_PREVIEW
+}
+
+/// An FMU and the parameter values it gets in initialization mode.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FmuSpec {
+    /// A `.fmu` file or the folder it is unpacked in.
+    pub path: PathBuf,
+    /// Parameter sets `{ "<FMI name>": value }` (JSON), applied in order.
+    #[serde(default)]
+    pub parameter_sets: Vec<PathBuf>,
+    /// Values by FMI name, applied after the sets (they win).
+    #[serde(default)]
+    pub parameters: BTreeMap<String, ParameterValue>,
+}
+
+/// A parameter value; the variable's own type decides the setter (a whole
+/// number for an Integer, true/false for a Boolean).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum ParameterValue {
+    Boolean(bool),
+    Number(f64),
+}
+
+/// `from` output drives `to` input, both `instance.variable`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Connection {
+    pub from: String,
+    pub to: String,
+}
+
+/// Which experiment of the papers a run is, for its metrics.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Driven {
+    /// A single-axis run on y: tracking in y, coupling in x, x2, x3 (Table 3).
+    Y,
+    /// A single-axis run on x: tracking in x, coupling in y.
+    X,
+    /// A single-axis run on theta_z: tracking in theta, coupling in y.
+    Theta,
+    /// A contour (the circle of eq. 14-15): contour error.
+    Xy,
+    /// y and theta_z together (eq. 16).
+    Ytheta,
+}
+
+/// How the metrics are taken.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MetricsSpec {
+    pub driven: Driven,
+    /// Start of the measured window [s], absolute time (whole cycles after
+    /// the settling ones).
+    pub from: f64,
+    /// Spacing L of the two x sensors [µm]; default: the controller's `L`
+    /// [mm] (its value in this run) × 1000.
+    #[serde(default)]
+    pub spacing: Option<f64>,
+    /// The demanded contour of an `xy` run: a circle.
+    #[serde(default)]
+    pub contour: Option<Circle>,
+}
+
+/// A circle in the xy plane [µm].
+#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Circle {
+    pub centre: [f64; 2],
+    pub radius: f64,
+}
+
+/// Why a scenario cannot be run.
+#[derive(Debug)]
+pub struct ScenarioError(pub String);
+
+impl std::fmt::Display for ScenarioError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ScenarioError {}
+
+/// A variable of an instance, from `instance.variable` (the variable name
+/// may contain dots and brackets: `plant.pzt[1].A`).
+pub fn split_port(port: &str) -> Option<(&str, &str)> {
+    port.split_once('.')
+        .filter(|(instance, variable)| !instance.is_empty() && !variable.is_empty())
+}
+
+/// The stage's closed loop: every command and sensor of [`STAGE_COMMANDS`]
+/// and [`STAGE_SENSORS`] between [`CONTROLLER`] and [`PLANT`].
+pub fn stage_wiring() -> Vec<Connection> {
+    let commands = STAGE_COMMANDS.iter().map(|(from, to)| Connection {
+        from: format!("{CONTROLLER}.{from}"),
+        to: format!("{PLANT}.{to}"),
+    });
+    let sensors = STAGE_SENSORS.iter().map(|(from, to)| Connection {
+        from: format!("{PLANT}.{from}"),
+        to: format!("{CONTROLLER}.{to}"),
+    });
+    commands.chain(sensors).collect()
+}
+
+impl Scenario {
+    /// Reads a `.toml` or `.json` scenario file; relative paths in it become
+    /// relative to its folder.
+    pub fn from_file(path: &Path) -> Result<Scenario, ScenarioError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ScenarioError(format!("{}: {e}", path.display())))?;
+        let json = path.extension().is_some_and(|e| e == "json");
+        let mut scenario = Scenario::parse(&text, json, &path.display().to_string())?;
+        scenario.resolve_paths(path.parent().unwrap_or(Path::new("")));
+        Ok(scenario)
+    }
+
+    /// Parses scenario text; `origin` names it in errors (a file name, `-`).
+    pub fn parse(text: &str, json: bool, origin: &str) -> Result<Scenario, ScenarioError> {
+        let scenario: Scenario = if json {
+            serde_json::from_str(text)
+                .map_err(|e| ScenarioError(format!("{origin}:{}:{}: {e}", e.line(), e.column())))?
+        } else {
+            toml::from_str(text).map_err(|e| {
+                let (line, column) = e
+                    .span()
+                    .map(|span| line_and_column(text, span.start))
+                    .unwrap_or((0, 0));
+                ScenarioError(format!(
+                    "{origin}:{line}:{column}: {}",
+                    e.message().trim_end()
+                ))
+            })?
+        };
+        scenario
+            .validate()
+            .map_err(|e| ScenarioError(format!("{origin}: {e}")))?;
+        Ok(scenario)
+    }
+
+    /// Makes every relative path relative to `base`.
+    pub fn resolve_paths(&mut self, base: &Path) {
+        let resolve = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        };
+        for fmu in self.fmu.values_mut() {
+            resolve(&mut fmu.path);
+            fmu.parameter_sets.iter_mut().for_each(resolve);
+        }
+        for signal in self.signal.values_mut() {
+            if let Some(table) = &mut signal.table {
+                resolve(&mut table.file);
+            }
+        }
+    }
+
+    /// The connections of the run.
+    pub fn connections(&self) -> Vec<Connection> {
+        self.connection.clone().unwrap_or_else(stage_wiring)
+    }
+
+    /// Number of communication steps.
+    pub fn steps(&self) -> usize {
+        (self.duration / self.step).round() as usize
+    }
+
+    /// Checks what does not need the FMUs.
+    fn validate(&self) -> Result<(), String> {
+        if !(self.step.is_finite() && self.step > 0.0) {
+            return Err(format!(
+                "step must be a positive number of seconds, not {}",
+                self.step
+            ));
+        }
+        if !(self.duration.is_finite() && self.duration >= self.step) {
+            return Err(format!(
+                "duration must be at least one step ({} s), not {}",
+                self.step, self.duration
+            ));
+        }
+        if self.duration / self.step > 1e9 {
+            return Err(format!(
+                "{} s at {} s per step is more than 1e9 steps",
+                self.duration, self.step
+            ));
+        }
+        if self.fmu.is_empty() {
+            return Err("no [fmu.<instance>] table".to_owned());
+        }
+        let instance_of = |port: &str, what: &str| -> Result<(), String> {
+            let (instance, _) = split_port(port)
+                .ok_or_else(|| format!("{what} {port:?} is not `instance.variable`"))?;
+            if self.fmu.contains_key(instance) {
+                Ok(())
+            } else {
+                Err(format!(
+                    "{what} {port:?}: no FMU instance {instance:?} (instances: {})",
+                    self.fmu.keys().cloned().collect::<Vec<_>>().join(", ")
+                ))
+            }
+        };
+        for connection in self.connections() {
+            instance_of(&connection.from, "connection source")?;
+            instance_of(&connection.to, "connection destination")?;
+        }
+        for (port, trajectory) in &self.signal {
+            instance_of(port, "signal")?;
+            trajectory
+                .validate()
+                .map_err(|e| format!("signal {port:?}: {e}"))?;
+        }
+        for port in &self.record {
+            instance_of(port, "recorded variable")?;
+        }
+        if let Some(metrics) = &self.metrics {
+            if !metrics.from.is_finite() || metrics.from > self.duration {
+                return Err(format!(
+                    "metrics.from ({}) must lie within the run (duration {} s)",
+                    metrics.from, self.duration
+                ));
+            }
+            if metrics.driven == Driven::Xy && metrics.contour.is_none() {
+                return Err(
+                    "metrics of an xy run need the demanded contour: contour = { centre = [x, y], radius = r }"
+                        .to_owned(),
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// 1-based line and column of a byte offset.
+fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before
+        .rfind('\n')
+        .map_or(before.len(), |i| before.len() - i - 1)
+        + 1;
+    (line, column)
+}
+
+/// Reads a parameter set `{ "<FMI name>": value, ... }` (the format of
+/// dist/presets/*.json).
+pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, ScenarioError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| ScenarioError(format!("{}: {e}", path.display())))?;
+    let map: serde_json::Map<String, serde_json::Value> =
+        serde_json::from_str(&text).map_err(|e| {
+            ScenarioError(format!(
+                "{}:{}:{}: {e}",
+                path.display(),
+                e.line(),
+                e.column()
+            ))
+        })?;
+    map.into_iter()
+        .map(|(name, value)| {
+            let value = match value {
+                serde_json::Value::Bool(b) => ParameterValue::Boolean(b),
+                serde_json::Value::Number(n) => {
+                    ParameterValue::Number(n.as_f64().expect("serde_json numbers convert to f64"))
+                }
+                other => {
+                    return Err(ScenarioError(format!(
+                        "{}: parameter {name}: {other} is neither a number nor a Boolean",
+                        path.display()
+                    )));
+                }
+            };
+            Ok((name, value))
+        })
+        .collect()
+}
+
+impl FmuSpec {
+    /// Every parameter value of this FMU, the sets first, then the
+    /// scenario's own values; a later value of a name replaces an earlier one.
+    pub fn parameter_values(&self) -> Result<BTreeMap<String, ParameterValue>, ScenarioError> {
+        let mut values = BTreeMap::new();
+        for set in &self.parameter_sets {
+            values.extend(read_parameter_set(set)?);
+        }
+        values.extend(self.parameters.iter().map(|(k, v)| (k.clone(), *v)));
+        Ok(values)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = r#"
+duration = 1.0
+[fmu.plant]
+path = "p.fmu"
+[fmu.controller]
+path = "c.fmu"
+"#;
+
+    #[test]
+    fn defaults_are_the_demos_master() {
+        let s = Scenario::parse(MINIMAL, false, "s.toml").unwrap();
+        assert_eq!((s.step, s.preview, s.steps()), (1e-4, 2, 10_000));
+        assert_eq!(s.connections(), stage_wiring());
+        assert_eq!(s.connections().len(), 6);
+    }
+
+    #[test]
+    fn an_unknown_key_names_file_line_and_key() {
+        let text = format!("{MINIMAL}\n[metrics]\ndriven = \"y\"\nfrom = 0.5\nform = 1\n");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(e.starts_with("s.toml:11:"), "{e}");
+        assert!(e.contains("unknown field `form`"), "{e}");
+    }
+
+    #[test]
+    fn a_wrong_type_names_the_line() {
+        let e = Scenario::parse("duration = \"long\"\n", false, "s.toml")
+            .unwrap_err()
+            .0;
+        assert!(e.starts_with("s.toml:1:"), "{e}");
+    }
+
+    #[test]
+    fn json_errors_name_line_and_column() {
+        let e = Scenario::parse("{\n \"duration\": 1.0,\n \"fmu\": 3\n}", true, "s.json")
+            .unwrap_err()
+            .0;
+        assert!(e.starts_with("s.json:3:"), "{e}");
+    }
+
+    #[test]
+    fn ports_must_name_an_instance() {
+        let text = format!("{MINIMAL}\n[signal.\"ctrl.y_ref\"]\noffset = 1.0\n");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(e.contains("no FMU instance \"ctrl\""), "{e}");
+    }
+
+    #[test]
+    fn variable_names_keep_their_dots() {
+        assert_eq!(split_port("plant.pzt[1].A"), Some(("plant", "pzt[1].A")));
+        assert_eq!(split_port("plant"), None);
+        assert_eq!(split_port(".x"), None);
+    }
+
+    #[test]
+    fn xy_metrics_need_the_contour() {
+        let text = format!("{MINIMAL}\n[metrics]\ndriven = \"xy\"\nfrom = 0.5\n");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(e.contains("contour"), "{e}");
+    }
+
+    #[test]
+    fn parameters_accept_integers_reals_and_booleans() {
+        let text = format!(
+            "{MINIMAL}\n[fmu.plant.parameters]\n\"noise.seed\" = 7\n\"noise.enabled\" = true\nL = 73.5\n"
+        );
+        let s = Scenario::parse(&text, false, "s.toml").unwrap();
+        let p = &s.fmu["plant"].parameters;
+        assert_eq!(p["noise.seed"], ParameterValue::Number(7.0));
+        assert_eq!(p["noise.enabled"], ParameterValue::Boolean(true));
+        assert_eq!(p["L"], ParameterValue::Number(73.5));
+    }
+}

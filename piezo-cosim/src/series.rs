@@ -1,0 +1,32 @@
+//! Writing a run's time series.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::master::Series;
+
+/// Writes `series` as CSV: a header `t,<instance.variable>,...` and one row
+/// per communication point, every number in the shortest form that reads
+/// back to the same double.
+pub fn write_csv(series: &Series, path: &Path) -> Result<(), String> {
+    let fail = |e: std::io::Error| format!("{}: {e}", path.display());
+    let file = std::fs::File::create(path).map_err(fail)?;
+    let mut out = std::io::BufWriter::new(file);
+    let mut header = String::from("t");
+    for name in &series.names {
+        header.push(',');
+        header.push_str(name);
+    }
+    writeln!(out, "{header}").map_err(fail)?;
+    let mut line = String::new();
+    for (k, t) in series.t.iter().enumerate() {
+        line.clear();
+        line.push_str(&t.to_string());
+        for column in &series.columns {
+            line.push(',');
+            line.push_str(&column[k].to_string());
+        }
+        writeln!(out, "{line}").map_err(fail)?;
+    }
+    out.flush().map_err(fail)
+}

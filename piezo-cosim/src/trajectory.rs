@@ -1,0 +1,325 @@
+//! Trajectories: the demands a run feeds to inputs, as data.
+//!
+//! A trajectory is a path `p(tau)`, `tau = t - start`, that is either a sum of
+//! sines on an offset, `offset + sum_i a_i sin(2 pi f_i tau + phi_i)`, or a
+//! table of samples read from a CSV file and interpolated linearly. Before
+//! `start` the demand approaches the path's first value from zero by a raised
+//! cosine over `approach` seconds and then holds it (the demo's approach from
+//! rest; with `start = 0` the path starts at once).
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// One input's demand over time.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Trajectory {
+    /// Constant part of the path.
+    #[serde(default)]
+    pub offset: f64,
+    /// Sines added to the offset.
+    #[serde(default)]
+    pub sines: Vec<Sine>,
+    /// Samples of the path instead of offset and sines.
+    #[serde(default)]
+    pub table: Option<TableSource>,
+    /// Time at which the path starts [s].
+    #[serde(default)]
+    pub start: f64,
+    /// Duration of the raised-cosine approach from zero to the path's first
+    /// value [s]; it then holds until `start`. 0: the first value is held
+    /// from t = 0.
+    #[serde(default)]
+    pub approach: f64,
+}
+
+/// `amplitude * sin(2 pi frequency tau + phase)`.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Sine {
+    pub amplitude: f64,
+    /// [Hz]
+    pub frequency: f64,
+    /// [rad]
+    #[serde(default)]
+    pub phase: f64,
+}
+
+/// A column of a CSV file with a time column (`t`, or `t[s]`, ...).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TableSource {
+    pub file: PathBuf,
+    /// The column's header, with or without a `[unit]` suffix.
+    pub column: String,
+    /// The time column's header (default `t`).
+    #[serde(default = "default_time_column")]
+    pub time: String,
+}
+
+fn default_time_column() -> String {
+    "t".to_owned()
+}
+
+impl Trajectory {
+    /// A constant demand.
+    pub fn constant(value: f64) -> Trajectory {
+        Trajectory {
+            offset: value,
+            ..Trajectory::default()
+        }
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        let finite = |v: f64, what: &str| {
+            if v.is_finite() {
+                Ok(())
+            } else {
+                Err(format!("{what} is {v}"))
+            }
+        };
+        finite(self.offset, "offset")?;
+        finite(self.start, "start")?;
+        finite(self.approach, "approach")?;
+        if self.start < 0.0 || self.approach < 0.0 {
+            return Err("start and approach cannot be negative".to_owned());
+        }
+        if self.approach > self.start {
+            return Err(format!(
+                "the approach ({} s) must end by the start of the path ({} s)",
+                self.approach, self.start
+            ));
+        }
+        for sine in &self.sines {
+            finite(sine.amplitude, "a sine's amplitude")?;
+            finite(sine.frequency, "a sine's frequency")?;
+            finite(sine.phase, "a sine's phase")?;
+        }
+        if self.table.is_some() && (self.offset != 0.0 || !self.sines.is_empty()) {
+            return Err("a table replaces offset and sines; give one or the other".to_owned());
+        }
+        Ok(())
+    }
+
+    /// Evaluates the trajectory at `times` (ascending); reads the table file
+    /// if there is one.
+    pub fn sample(&self, times: &[f64]) -> Result<Vec<f64>, String> {
+        let table = match &self.table {
+            Some(source) => Some(Table::read(source)?),
+            None => None,
+        };
+        let path = |tau: f64| match &table {
+            Some(table) => table.at(tau),
+            None => self.sines_at(tau),
+        };
+        let first = path(0.0);
+        Ok(times
+            .iter()
+            .map(|&t| {
+                let tau = t - self.start;
+                if tau >= 0.0 {
+                    path(tau)
+                } else {
+                    self.blend(t) * first
+                }
+            })
+            .collect())
+    }
+
+    fn sines_at(&self, tau: f64) -> f64 {
+        self.sines.iter().fold(self.offset, |sum, s| {
+            sum + s.amplitude * (std::f64::consts::TAU * s.frequency * tau + s.phase).sin()
+        })
+    }
+
+    /// The raised cosine from 0 to 1 over the approach, 1 after it.
+    fn blend(&self, t: f64) -> f64 {
+        if self.approach <= 0.0 {
+            return 1.0;
+        }
+        let s = (t / self.approach).clamp(0.0, 1.0);
+        0.5 * (1.0 - (std::f64::consts::PI * s).cos())
+    }
+}
+
+/// Samples of a path: times from 0 (tau), ascending.
+struct Table {
+    tau: Vec<f64>,
+    value: Vec<f64>,
+}
+
+/// Whether a CSV header names `wanted`, with or without a `[unit]`.
+fn header_matches(header: &str, wanted: &str) -> bool {
+    let header = header.trim();
+    header == wanted
+        || header
+            .strip_prefix(wanted)
+            .is_some_and(|rest| rest.starts_with('[') && rest.ends_with(']'))
+}
+
+impl Table {
+    fn read(source: &TableSource) -> Result<Table, String> {
+        let name = |path: &Path| path.display().to_string();
+        let mut reader = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .from_path(&source.file)
+            .map_err(|e| format!("{}: {e}", name(&source.file)))?;
+        let headers = reader
+            .headers()
+            .map_err(|e| format!("{}: {e}", name(&source.file)))?
+            .clone();
+        let find = |wanted: &str| {
+            headers
+                .iter()
+                .position(|h| header_matches(h, wanted))
+                .ok_or_else(|| {
+                    format!(
+                        "{}: no column {wanted:?} (columns: {})",
+                        name(&source.file),
+                        headers.iter().collect::<Vec<_>>().join(", ")
+                    )
+                })
+        };
+        let (time_column, value_column) = (find(&source.time)?, find(&source.column)?);
+        let mut table = Table {
+            tau: Vec::new(),
+            value: Vec::new(),
+        };
+        for (row, record) in reader.records().enumerate() {
+            let line = row + 2;
+            let record = record.map_err(|e| format!("{}:{line}: {e}", name(&source.file)))?;
+            let number = |column: usize| -> Result<f64, String> {
+                let text = record.get(column).unwrap_or("");
+                text.parse::<f64>().map_err(|_| {
+                    format!(
+                        "{}:{line}: column {:?}: {text:?} is not a number",
+                        name(&source.file),
+                        &headers[column]
+                    )
+                })
+            };
+            let (t, v) = (number(time_column)?, number(value_column)?);
+            if table.tau.last().is_some_and(|&last| t <= last) {
+                return Err(format!(
+                    "{}:{line}: times must increase ({t} after {})",
+                    name(&source.file),
+                    table.tau.last().unwrap()
+                ));
+            }
+            table.tau.push(t);
+            table.value.push(v);
+        }
+        if table.tau.is_empty() {
+            return Err(format!("{}: no samples", name(&source.file)));
+        }
+        Ok(table)
+    }
+
+    /// Linear interpolation; the end values hold outside the table.
+    fn at(&self, tau: f64) -> f64 {
+        let n = self.tau.len();
+        if tau <= self.tau[0] {
+            return self.value[0];
+        }
+        if tau >= self.tau[n - 1] {
+            return self.value[n - 1];
+        }
+        // The first sample later than tau; 1 <= i < n.
+        let i = self.tau.partition_point(|&x| x <= tau);
+        let (t0, t1) = (self.tau[i - 1], self.tau[i]);
+        let w = (tau - t0) / (t1 - t0);
+        self.value[i - 1] + w * (self.value[i] - self.value[i - 1])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::{FRAC_PI_2, PI};
+
+    #[test]
+    fn sine_up_from_bottom_starts_at_its_minimum() {
+        let y = Trajectory {
+            offset: 7.0,
+            sines: vec![Sine {
+                amplitude: 5.0,
+                frequency: 1.0,
+                phase: -FRAC_PI_2,
+            }],
+            ..Trajectory::default()
+        };
+        let v = y.sample(&[0.0, 0.25, 0.5]).unwrap();
+        assert!((v[0] - 2.0).abs() < 1e-12 && (v[1] - 7.0).abs() < 1e-12);
+        assert!((v[2] - 12.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn approach_is_a_raised_cosine_then_holds() {
+        let x = Trajectory {
+            offset: 8.0,
+            start: 1.0,
+            approach: 0.5,
+            sines: vec![Sine {
+                amplitude: 1.0,
+                frequency: 1.0,
+                phase: 0.0,
+            }],
+            ..Trajectory::default()
+        };
+        let v = x.sample(&[0.0, 0.25, 0.5, 0.75, 1.0, 1.25]).unwrap();
+        assert_eq!(v[0], 0.0);
+        assert!((v[1] - 4.0).abs() < 1e-12, "{}", v[1]);
+        assert_eq!(v[2], 8.0);
+        assert_eq!(v[3], 8.0);
+        assert_eq!(v[4], 8.0);
+        assert!((v[5] - (8.0 + (PI / 2.0).sin())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn tables_interpolate_and_hold_their_ends() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("r.csv");
+        std::fs::write(&file, "t[s],y_ref[um]\n0,0\n1,10\n2,30\n").unwrap();
+        let y = Trajectory {
+            table: Some(TableSource {
+                file: file.clone(),
+                column: "y_ref".into(),
+                time: "t".into(),
+            }),
+            ..Trajectory::default()
+        };
+        let v = y.sample(&[0.0, 0.5, 1.0, 1.5, 3.0]).unwrap();
+        assert_eq!(v, vec![0.0, 5.0, 10.0, 20.0, 30.0]);
+    }
+
+    #[test]
+    fn a_bad_table_names_file_line_and_column() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("r.csv");
+        std::fs::write(&file, "t,y\n0,0\n1,ten\n").unwrap();
+        let y = Trajectory {
+            table: Some(TableSource {
+                file,
+                column: "y".into(),
+                time: "t".into(),
+            }),
+            ..Trajectory::default()
+        };
+        let e = y.sample(&[0.0]).unwrap_err();
+        assert!(
+            e.ends_with("r.csv:3: column \"y\": \"ten\" is not a number"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_approach_past_the_start_is_refused() {
+        let t = Trajectory {
+            start: 0.5,
+            approach: 1.0,
+            ..Trajectory::default()
+        };
+        assert!(t.validate().is_err());
+    }
+}

@@ -1,0 +1,276 @@
+//! The master on the workspace's two FMUs, laid out as unpacked FMU folders
+//! from the release cdylibs and the committed modelDescriptions (so that
+//! `cargo test` needs no `make fmus`): the closed loop tracks, a check
+//! stops before the first step, a scenario that does not fit the FMUs is
+//! refused by name, and the step loop allocates nothing.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::path::{Path, PathBuf};
+
+use piezo_cosim::{RunError, RunOptions, Scenario, run};
+
+struct CountingAllocator;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note_allocation() {
+    let _ = COUNTING.try_with(|counting| {
+        if counting.get() {
+            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+        }
+    });
+}
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note_allocation();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: CountingAllocator = CountingAllocator;
+
+fn allocations_of(f: impl FnOnce()) -> u64 {
+    ALLOCATIONS.with(|n| n.set(0));
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    ALLOCATIONS.with(|n| n.get())
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("piezo-cosim lives in the workspace")
+        .to_owned()
+}
+
+const SOURCES: [&str; 4] = [
+    "fmi2-cosim/src",
+    "fmi2-cosim/linker",
+    "piezo-models/src",
+    "piezo-models/presets",
+];
+
+/// An unpacked FMU folder: modelDescription.xml and binaries/<platform>/.
+fn fmu_folder(into: &Path, cdylib: &str, crate_dir: &str, identifier: &str) -> PathBuf {
+    let sources: Vec<&str> = SOURCES.iter().copied().chain([crate_dir]).collect();
+    let library = fmi2_import::cdylib_path(cdylib, &root(), &sources);
+    let folder = into.join(identifier);
+    let binaries = folder
+        .join("binaries")
+        .join(fmi2_import::archive::platform_folder());
+    std::fs::create_dir_all(&binaries).unwrap();
+    std::fs::copy(
+        root()
+            .join("modelDescription")
+            .join(format!("{identifier}.xml")),
+        folder.join("modelDescription.xml"),
+    )
+    .unwrap();
+    std::fs::copy(
+        &library,
+        binaries.join(format!("{identifier}{}", std::env::consts::DLL_SUFFIX)),
+    )
+    .unwrap();
+    folder
+}
+
+struct Fmus {
+    _dir: tempfile::TempDir,
+    plant: PathBuf,
+    controller: PathBuf,
+}
+
+fn fmus() -> Fmus {
+    let dir = tempfile::tempdir().unwrap();
+    let plant = fmu_folder(dir.path(), "fmu_plant", "fmu-plant/src", "FlexureStage");
+    let controller = fmu_folder(
+        dir.path(),
+        "fmu_controller",
+        "fmu-controller/src",
+        "PiezoController",
+    );
+    Fmus {
+        _dir: dir,
+        plant,
+        controller,
+    }
+}
+
+/// Seed 000's Fig. 7a conditions: a 1 Hz y sine of 5 um about y = 7 um,
+/// x held at 8 um, PI on y, after an approach from rest.
+fn y_sine(fmus: &Fmus, duration: f64, extra: &str) -> Scenario {
+    let text = format!(
+        r#"
+duration = {duration}
+[fmu.plant]
+path = "{plant}"
+parameters = {{ "noise.enabled" = true, "noise.seed" = 2024 }}
+[fmu.controller]
+path = "{controller}"
+parameters = {{ feedback_x = false, feedback_theta = false, decoupling = false }}
+[signal."controller.y_ref"]
+offset = 7.0
+start = 1.0
+approach = 0.5
+sines = [{{ amplitude = 5.0, frequency = 1.0, phase = -1.5707963267948966 }}]
+[signal."controller.x_ref"]
+offset = 8.0
+start = 1.0
+approach = 0.5
+[metrics]
+driven = "y"
+from = {from}
+{extra}
+"#,
+        from = if duration > 2.0 { 2.0 } else { duration / 2.0 },
+        plant = fmus.plant.display(),
+        controller = fmus.controller.display(),
+    );
+    Scenario::parse(&text, false, "y_sine.toml").unwrap()
+}
+
+#[test]
+fn the_closed_loop_tracks_a_y_sine() {
+    let fmus = fmus();
+    let output = run(&y_sine(&fmus, 3.0, ""), RunOptions::default()).unwrap();
+    assert_eq!(output.steps, 30_000);
+    let m = output.metrics.unwrap();
+    let rms = m["tracking_rms"].as_f64().unwrap();
+    // demo's test_closed_loop: measured 0.0189 um (noise 0.01 um RMS alone).
+    assert!(rms > 0.005 && rms < 0.03, "tracking RMS {rms} um");
+    assert!((m["demand_span"].as_f64().unwrap() - 10.0).abs() < 1e-6);
+    // Without decoupling, y drags the x sensors (Table 3: ~2 um spans).
+    assert!(m["coupling_x2_span"].as_f64().unwrap() > 0.5);
+    assert_eq!(m["samples"], 10_001);
+}
+
+#[test]
+fn series_hold_every_output_and_signal() {
+    let fmus = fmus();
+    let options = RunOptions {
+        series: true,
+        check_only: false,
+    };
+    let output = run(&y_sine(&fmus, 0.01, ""), options).unwrap();
+    let series = output.series.unwrap();
+    assert_eq!(series.t.len(), 101);
+    for name in [
+        "controller.y_ref",
+        "controller.x_ref",
+        "plant.s1",
+        "plant.theta_z",
+        "controller.u1",
+        "controller.e_y",
+    ] {
+        assert_eq!(series.column(name).map(<[f64]>::len), Some(101), "{name}");
+    }
+    // Jacobi with one sample of compute delay: the plant's first command
+    // reaches it one step after the controller computed it.
+    let u1 = series.column("controller.u1").unwrap();
+    assert_eq!(u1[0], 0.0);
+}
+
+#[test]
+fn a_check_initializes_without_a_step() {
+    let fmus = fmus();
+    let options = RunOptions {
+        series: false,
+        check_only: true,
+    };
+    let output = run(&y_sine(&fmus, 3.0, ""), options).unwrap();
+    assert_eq!(output.steps, 0);
+    assert!(output.metrics.is_none());
+}
+
+#[test]
+fn a_scenario_that_does_not_fit_is_refused_by_name() {
+    let fmus = fmus();
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario.signal.insert(
+        "controller.z_ref".into(),
+        piezo_cosim::trajectory::Trajectory::constant(1.0),
+    );
+    let error = run(&scenario, RunOptions::default()).unwrap_err();
+    assert!(
+        matches!(&error, RunError::Scenario(m) if m.contains("controller.z_ref") && m.contains("no variable")),
+        "{error}"
+    );
+
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario.connection = Some(vec![piezo_cosim::scenario::Connection {
+        from: "plant.s1".into(),
+        to: "controller.y_ref".into(),
+    }]);
+    let error = run(&scenario, RunOptions::default()).unwrap_err();
+    assert!(error.to_string().contains("driven twice"), "{error}");
+
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario
+        .fmu
+        .get_mut("controller")
+        .unwrap()
+        .parameters
+        .insert(
+            "hysteresis_model".into(),
+            piezo_cosim::scenario::ParameterValue::Number(1.5),
+        );
+    let error = run(&scenario, RunOptions::default()).unwrap_err();
+    assert!(
+        error.to_string().contains("hysteresis_model is a Integer"),
+        "{error}"
+    );
+}
+
+#[test]
+fn a_failing_fmu_ends_the_run_with_its_log() {
+    let fmus = fmus();
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario.fmu.get_mut("plant").unwrap().parameters.insert(
+        "mode.theta.frequency".into(),
+        piezo_cosim::scenario::ParameterValue::Number(-1.0),
+    );
+    let error = run(&scenario, RunOptions::default()).unwrap_err();
+    let RunError::Fmu(message) = error else {
+        panic!("an FMU error expected, got {error}");
+    };
+    assert!(message.starts_with("plant: fmi2"), "{message}");
+    assert!(message.contains("mode.theta.frequency"), "{message}");
+}
+
+#[test]
+fn the_step_loop_allocates_nothing() {
+    let fmus = fmus();
+    let short = y_sine(&fmus, 0.2, "");
+    let long = y_sine(&fmus, 0.6, "");
+    run(&short, RunOptions::default()).unwrap();
+    let a = allocations_of(|| {
+        run(&short, RunOptions::default()).unwrap();
+    });
+    let b = allocations_of(|| {
+        run(&long, RunOptions::default()).unwrap();
+    });
+    // Loading, wiring and metrics allocate a fixed number of times; 4000
+    // more steps add none.
+    assert_eq!(a, b, "allocations: {a} for 2000 steps, {b} for 6000");
+}

@@ -1,0 +1,255 @@
+"""The compiled co-simulation master (piezo-cosim) against the fmpy master of
+demo/cosim.py.
+
+Both masters load the same FMU binaries and make the same FMI calls in the
+same order, so every signal must agree to 1e-12 um (V for the commands):
+what differs is only who keeps the loop, how parameters are applied (by FMI
+name, from parameter sets or the scenario) and how the references reach the
+controller. The references are handed to piezo-cosim as a table sampled at
+the very times the master asks for (t_k for the record, t_k + 2h for the
+controller), so the comparison does not depend on how an experiment writes
+its trajectory.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from demo import cosim, master
+from demo.cosim import (
+    CONTROLLER_OUTPUTS,
+    PLANT_OUTPUTS,
+    REFERENCES,
+    SAMPLE_PERIOD,
+    Fmu,
+    simulate,
+)
+from demo.experiments import START, experiments, metrics
+from tests.conftest import REPO_ROOT
+
+PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
+CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
+PRESETS = REPO_ROOT / "dist" / "presets"
+PREVIEW = 2
+TOLERANCE = 1e-12
+
+
+@pytest.fixture(scope="module", autouse=True)
+def built():
+    for path in (PLANT, CONTROLLER):
+        if not path.is_file():
+            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
+    try:
+        master.binary()
+    except FileNotFoundError as e:
+        pytest.fail(str(e), pytrace=False)
+
+
+def reference_table(reference, duration: float, folder) -> dict:
+    """The references as piezo-cosim signals: a CSV sampled at t_k = k·h and
+    at t_k + preview·h, computed as demo/cosim.py computes those times."""
+    steps = round(duration / SAMPLE_PERIOD)
+    t = np.arange(steps + 1) * SAMPLE_PERIOD
+    times = np.unique(np.concatenate([t, t[:-1] + PREVIEW * SAMPLE_PERIOD]))
+    values = np.asarray(reference(times), dtype=float)
+    path = folder / "references.csv"
+    with path.open("w") as f:
+        f.write("t," + ",".join(REFERENCES) + "\n")
+        for time, row in zip(times, values):
+            f.write(",".join(repr(float(v)) for v in (time, *row)) + "\n")
+    return {master.reference_port(name): {"table": {"file": str(path), "column": name}}
+            for name in REFERENCES}
+
+
+def compare(series: dict, run) -> dict:
+    """Largest difference of every signal the fmpy master records."""
+    worst = {}
+    for name in PLANT_OUTPUTS:
+        worst[f"plant.{name}"] = np.max(np.abs(series[f"plant.{name}"] - run.plant[name]))
+    for name in CONTROLLER_OUTPUTS:
+        worst[f"controller.{name}"] = np.max(
+            np.abs(series[f"controller.{name}"] - run.controller[name]))
+    for i, name in enumerate(REFERENCES):
+        worst[f"controller.{name}"] = np.max(
+            np.abs(series[f"controller.{name}"] - run.references[:, i]))
+    assert np.array_equal(series["t"], run.t)
+    return worst
+
+
+# One experiment of each seed: seed 000's Table 3 y run with decoupling
+# (seed 000's method, FlexureStage as it starts), and seed 001's coupling run
+# on the XY200S parameter set with seed 001's method (plant parameters from
+# the preset file, controller parameters by name).
+EXPERIMENTS = ("fig10_y_decoupled", "s001_xy200s_seed001_coupling_x_decoupled")
+
+
+@pytest.mark.parametrize("key", EXPERIMENTS)
+def test_master_equals_the_fmpy_master_on_every_signal(key, tmp_path):
+    chosen = {e.key: e for e in experiments()}
+    if key not in chosen:
+        pytest.fail(f"demo.experiments has no experiment {key!r}: pick the reference "
+                    f"experiments of this test again", pytrace=False)
+    experiment = chosen[key]
+    with Fmu(PLANT) as plant, Fmu(CONTROLLER) as controller:
+        spacing_um = float(controller.variables["L"].start) * 1e3
+        run = simulate(plant, controller, experiment.reference(), experiment.duration,
+                       plant_parameters=experiment.plant,
+                       controller_parameters=experiment.controller, preview=PREVIEW)
+    plant_entry = {"path": str(PLANT), "parameters": experiment.plant}
+    if "xy200s" in key:
+        # The same values, as the preset file plus the run's own settings.
+        preset = json.loads((PRESETS / "FlexureStage.xy200s.json").read_text())
+        assert {**preset, **experiment.plant} == experiment.plant
+        plant_entry = {"path": str(PLANT),
+                       "parameter_sets": [str(PRESETS / "FlexureStage.xy200s.json")],
+                       "parameters": {k: v for k, v in experiment.plant.items()
+                                      if k not in preset or preset[k] != v}}
+    metric_spec = {"driven": experiment.driven, "from": START + experiment.measure_from}
+    scenario = {
+        "step": SAMPLE_PERIOD, "duration": experiment.duration, "preview": PREVIEW,
+        "fmu": {cosim.PLANT_INSTANCE: plant_entry,
+                cosim.CONTROLLER_INSTANCE: {"path": str(CONTROLLER),
+                                            "parameters": experiment.controller}},
+        "connection": master.connections(),
+        "signal": reference_table(experiment.reference(), experiment.duration, tmp_path),
+        "metrics": metric_spec,
+    }
+    result = master.run(scenario, series=tmp_path / "series.csv")
+    worst = compare(master.read_series(tmp_path / "series.csv"), run)
+    assert max(worst.values()) <= TOLERANCE, {k: v for k, v in worst.items() if v > 0}
+
+    # The metrics are demo/experiments.py's, from the same samples.
+    expected = metrics(experiment, run, spacing_um)
+    got = result["metrics"]
+    for name, value in expected.items():
+        if isinstance(value, tuple):
+            assert got[name] == pytest.approx(list(value), abs=TOLERANCE), name
+        else:
+            assert got[name] == pytest.approx(value, abs=TOLERANCE, rel=1e-12), name
+
+
+def test_sine_signals_are_the_python_formula(tmp_path):
+    """Signals written as data (offset, sines, start, approach) against the
+    same formula evaluated in Python, through both masters."""
+    y_path = {"offset": 3.0, "sines": [{"amplitude": 3.0, "frequency": 2.0,
+                                       "phase": -math.pi / 2}]}
+    x_ramp = {"offset": 6.0, "start": 0.3, "approach": 0.3}
+
+    def reference(t):
+        t = np.asarray(t, dtype=float)
+        y = 3.0 + 3.0 * np.array([math.sin(2 * math.pi * 2.0 * tau - math.pi / 2) for tau in t])
+        blend = 0.5 * (1 - np.cos(np.pi * np.clip(t / 0.3, 0, 1)))
+        x = np.where(t >= 0.3, 6.0, blend * 6.0)
+        return np.column_stack([x, y, np.zeros_like(t)])
+
+    duration = 0.8
+    controller_parameters = {"feedback_x": False, "feedback_theta": False, "decoupling": True}
+    with Fmu(PLANT) as plant, Fmu(CONTROLLER) as controller:
+        run = simulate(plant, controller, reference, duration,
+                       controller_parameters=controller_parameters)
+    scenario = {
+        "duration": duration,
+        "fmu": {"plant": {"path": str(PLANT)},
+                "controller": {"path": str(CONTROLLER), "parameters": controller_parameters}},
+        "signal": {"controller.y_ref": y_path, "controller.x_ref": x_ramp,
+                   "controller.theta_ref": {"offset": 0.0}},
+    }
+    master.run(scenario, series=tmp_path / "s.csv")
+    worst = compare(master.read_series(tmp_path / "s.csv"), run)
+    assert max(worst.values()) <= TOLERANCE, {k: v for k, v in worst.items() if v > 0}
+
+
+def test_the_masters_share_the_stage_wiring():
+    """piezo-cosim's default connections are demo/cosim.py's table."""
+    source = (REPO_ROOT / "piezo-cosim" / "src" / "scenario.rs").read_text()
+
+    def pairs(name):
+        found = re.search(rf"pub const {name}: \[\(&str, &str\); \d+\] = \[(.*?)\];", source)
+        assert found, f"{name} not found in piezo-cosim/src/scenario.rs"
+        return tuple(re.findall(r'\("(\w+)", "(\w+)"\)', found.group(1)))
+
+    assert pairs("STAGE_COMMANDS") == cosim.COMMANDS
+    assert pairs("STAGE_SENSORS") == cosim.SENSORS
+    for constant, value in (("PLANT", cosim.PLANT_INSTANCE),
+                            ("CONTROLLER", cosim.CONTROLLER_INSTANCE)):
+        assert f'pub const {constant}: &str = "{value}";' in source
+
+
+def run_cli(*args, input=None):
+    return subprocess.run([str(master.binary()), *args], capture_output=True, text=True,
+                          input=input)
+
+
+def test_the_example_scenario_runs_as_documented():
+    """piezo-cosim/examples/table3_y.toml (the run docs/sweeps.md times),
+    with its relative paths, from any working directory."""
+    example = REPO_ROOT / "piezo-cosim" / "examples" / "table3_y.toml"
+    done = subprocess.run([str(master.binary()), "run", str(example)], capture_output=True,
+                          text=True, cwd="/")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert (result["status"], result["steps"], result["simulated_s"]) == ("ok", 40000, 4.0)
+    metrics = result["metrics"]
+    assert metrics["samples"] == 20001  # t = 2..4 s at 10 kHz
+    assert metrics["demand_span"] == pytest.approx(10.0, abs=1e-9)
+    for name in ("tracking_rms", "tracking_max", "coupling_x2_span", "coupling_x3_span"):
+        assert math.isfinite(metrics[name]) and metrics[name] > 0, name
+
+
+def test_a_malformed_scenario_names_file_line_and_problem(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(f'duration = 1.0\n[fmu.plant]\npath = "{PLANT}"\nparamters = {{}}\n')
+    done = run_cli("run", str(path))
+    assert done.returncode == 2
+    assert done.stderr.startswith(f"{path}:4:"), done.stderr
+    assert "unknown field `paramters`" in done.stderr
+
+
+def test_an_unknown_parameter_is_refused_by_name(tmp_path):
+    scenario = {"duration": 0.01, "fmu": {
+        "plant": {"path": str(PLANT), "parameters": {"pzt[4].A": 1.0}},
+        "controller": {"path": str(CONTROLLER)}}}
+    with pytest.raises(master.MasterError, match=r"plant\.pzt\[4\]\.A.*no variable") as e:
+        master.run(scenario)
+    assert e.value.returncode == 2
+
+
+def test_a_value_the_fmu_refuses_fails_the_run_with_its_log():
+    scenario = {"duration": 0.01, "fmu": {
+        "plant": {"path": str(PLANT), "parameters": {"mode.theta.frequency": -790.0}},
+        "controller": {"path": str(CONTROLLER)}}}
+    with pytest.raises(master.MasterError) as e:
+        master.run(scenario)
+    assert e.value.returncode == 1
+    assert "fmi2ExitInitializationMode" in str(e.value) or "fmi2SetReal" in str(e.value)
+    assert "mode.theta.frequency" in str(e.value), str(e.value)
+
+
+def test_series_as_parquet_from_python(tmp_path):
+    import pyarrow.parquet as pq
+
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(f"""
+duration = 0.05
+[fmu.plant]
+path = "{PLANT}"
+[fmu.controller]
+path = "{CONTROLLER}"
+[signal."controller.y_ref"]
+offset = 1.0
+""")
+    out = tmp_path / "s.parquet"
+    done = subprocess.run([sys.executable, "-m", "demo.master", "run", str(scenario),
+                           "--series", str(out)], capture_output=True, text=True, cwd=REPO_ROOT)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["steps"] == 500
+    table = pq.read_table(out)
+    assert table.num_rows == 501
+    assert {"t", "controller.y_ref", "plant.s1", "controller.u1"} <= set(table.column_names)

@@ -1,0 +1,349 @@
+"""Sweeps on dask.distributed (demo/sweep.py): a LocalCluster, an existing
+scheduler with two worker processes on 127.0.0.1, a worker killed mid-sweep,
+an interrupted sweep continued, a timed-out run run again, and the same table
+whatever the number of workers.
+
+The spec is small and its runs short (8 runs of 0.3-0.6 s of the loop at
+10 kHz, a two-sample Monte Carlo over a grid of four), so that the cluster's
+start-up dominates and the file stays lean; the reliability assertions do
+not depend on the runs' length.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from demo import master, sweep
+from tests.conftest import REPO_ROOT
+
+PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
+CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
+DASK = Path(sys.executable).parent / "dask"
+
+SPEC = f"""
+study = "small"
+seed = 7
+
+[monte_carlo]
+samples = 2
+seed_parameter = "noise.seed"
+[[monte_carlo.vary]]
+match = '^pzt\\[1\\]\\.(A|beta)$'
+relative = 0.10
+[[monte_carlo.vary]]
+match = '^amplifier\\.gain$'
+relative = 0.03
+
+[template]
+duration = "= 0.2 + 2 / frequency"
+[template.fmu.plant]
+path = "{PLANT}"
+parameters = {{ "noise.enabled" = true }}
+[template.fmu.controller]
+path = "{CONTROLLER}"
+[template.metrics]
+driven = "y"
+from = "= 0.2 + 1 / frequency"
+[template.signal."controller.y_ref"]
+offset = 6.0
+sines = [{{ amplitude = "= amplitude", frequency = "= frequency" }}]
+[template.signal."controller.x_ref"]
+offset = 6.0
+start = 0.2
+approach = 0.2
+
+[[variable]]
+name = "frequency"
+values = [5.0, 10.0]
+[[variable]]
+name = "decoupling"
+[variable.values.off]
+patch.fmu.controller.parameters = {{ decoupling = false }}
+[variable.values.on]
+patch.fmu.controller.parameters = {{ decoupling = true }}
+[[variable]]
+name = "amplitude"
+values = [2.0]
+"""
+
+RUNS = 8
+
+
+@pytest.fixture(scope="module")
+def spec_path(tmp_path_factory):
+    for path in (PLANT, CONTROLLER):
+        if not path.is_file():
+            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
+    try:
+        master.binary()
+    except FileNotFoundError as e:
+        pytest.fail(str(e), pytrace=False)
+    path = tmp_path_factory.mktemp("spec") / "small.toml"
+    path.write_text(SPEC)
+    return path
+
+
+def rows_of(out: Path) -> list[dict]:
+    import pyarrow.parquet as pq
+
+    return pq.read_table(out / "small.parquet").to_pylist()
+
+
+def results(rows: list[dict]) -> list[dict]:
+    """The rows without the columns that describe the execution."""
+    return [{k: v for k, v in r.items() if k not in sweep.EXECUTION_COLUMNS} for r in rows]
+
+
+def local_sweep(spec_path, out, workers, **kwargs):
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        return sweep.run_sweep(sweep.load_spec(spec_path), out, client, progress="none",
+                               **kwargs)
+
+
+@pytest.fixture(scope="module")
+def reference_table(spec_path, tmp_path_factory):
+    """The spec's table from a LocalCluster of one worker."""
+    out = tmp_path_factory.mktemp("one-worker")
+    summary = local_sweep(spec_path, out, workers=1)
+    assert summary["executed"] == RUNS and summary["failed"] == 0, summary
+    return rows_of(out)
+
+
+def test_a_local_cluster_sweep_makes_one_row_per_run(spec_path, reference_table):
+    rows = reference_table
+    assert [r["run"] for r in rows] == list(range(RUNS))
+    assert len({r["key"] for r in rows}) == RUNS
+    assert all(r["status"] == "ok" and r["error"] is None for r in rows)
+    # Every swept value, the seed, the metrics, the wall time.
+    first = rows[0]
+    for column in ("frequency", "decoupling", "amplitude", "sample", "seed",
+                   "factor.pzt[1].A", "factor.pzt[1].beta", "factor.amplifier.gain",
+                   "tracking_rms", "tracking_max", "coupling_x2_span", "coupling_x3_min",
+                   "wall_s", "task_s", "worker"):
+        assert column in first, column
+    factors = [r["factor.pzt[1].A"] for r in rows]
+    assert all(0.9 <= f <= 1.1 for f in factors)
+    # The four grid points of a sample share its plant and its seed.
+    assert len({(r["sample"], r["factor.pzt[1].A"], r["seed"]) for r in rows}) == 2
+    # A row is what the master gives for that run directly.
+    spec = sweep.load_spec(spec_path)
+    runs, fmus = sweep.expand(spec)
+    scenario = runs[5].scenario
+    for entry in scenario["fmu"].values():
+        entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
+    direct = master.run(scenario)["metrics"]
+    assert rows[5]["tracking_rms"] == direct["tracking_rms"]
+    assert rows[5]["coupling_x2_min"] == direct["coupling_x2_range"][0]
+
+
+def test_the_same_spec_gives_the_same_table_on_two_workers(spec_path, reference_table,
+                                                          tmp_path):
+    summary = local_sweep(spec_path, tmp_path, workers=2)
+    assert summary["executed"] == RUNS
+    rows = rows_of(tmp_path)
+    assert len({r["worker"] for r in rows}) == 2, "both workers ran runs"
+    assert results(rows) == results(reference_table)
+
+
+def test_an_interrupted_sweep_continues_where_it_stopped(tmp_path):
+    """Ctrl-C (SIGINT) to `python -m demo.sweep` once the first rows are in;
+    the same command again runs only what is missing."""
+    spec_path = tmp_path / "longer.toml"
+    spec_path.write_text(SPEC.replace("samples = 2", "samples = 12"))
+    runs = 12 * 4
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    command = [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(out),
+               "--workers", "1", "--progress", "none", "--no-report"]
+    child = subprocess.Popen(command, cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    journal = sweep.journal_path(out, "small")
+    deadline = time.monotonic() + 120
+    try:
+        while not (journal.is_file() and journal.read_text().count("\n") >= 2):
+            if child.poll() is not None or time.monotonic() > deadline:
+                pytest.fail("no rows journalled: " + child.communicate()[1])
+            time.sleep(0.01)
+        child.send_signal(signal.SIGINT)
+        stdout, stderr = child.communicate(timeout=120)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+    assert child.returncode == 130, (stdout, stderr)
+    assert "interrupted" in stderr
+    assert not journal.exists(), "the journal is folded into the table"
+    first = rows_of(out)
+    assert 2 <= len(first) < runs, len(first)
+    done = subprocess.run(command, cwd=REPO_ROOT, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert f"{runs - len(first)} runs executed" in done.stdout, done.stdout
+    assert f"{len(first)} already in the table" in done.stdout, done.stdout
+    rows = rows_of(out)
+    assert [r["run"] for r in rows] == list(range(runs))
+    # The rows of the first part are kept as they were, not run again.
+    kept = {r["key"]: r for r in rows}
+    assert all(kept[r["key"]] == r for r in first)
+
+
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """`dask scheduler` and two `dask worker` processes on 127.0.0.1. They
+    stop themselves if left behind: the scheduler after 60 s without work,
+    the workers 30 s after losing it; the fixture stops them anyway."""
+    folder = tmp_path_factory.mktemp("cluster")
+    scheduler_file = folder / "scheduler.json"
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    processes = []
+
+    def start(*args):
+        log = open(folder / f"{len(processes)}.log", "w")
+        processes.append(subprocess.Popen([str(DASK), *args], cwd=REPO_ROOT, env=env,
+                                          stdout=log, stderr=subprocess.STDOUT))
+
+    try:
+        # Port 0 for its HTTP server too (health checks, even without the
+        # dashboard): 8787 may belong to a user's cluster or another test's.
+        start("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+              "--dashboard-address", "127.0.0.1:0", "--scheduler-file", str(scheduler_file),
+              "--idle-timeout", "60s")
+        deadline = time.monotonic() + 60
+        while not scheduler_file.is_file():
+            if time.monotonic() > deadline or processes[0].poll() is not None:
+                pytest.fail("the dask scheduler did not start: "
+                            + (folder / "0.log").read_text())
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        for _ in range(2):
+            start("worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
+                  "--host", "127.0.0.1", "--death-timeout", "30s", "--lifetime", "600s")
+        from distributed import Client
+
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address
+    finally:
+        for process in reversed(processes):
+            if process.poll() is None:
+                process.terminate()
+        for process in processes:
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+def test_a_sweep_on_a_scheduler_with_two_workers(spec_path, reference_table, dask_cluster,
+                                                 tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    done = subprocess.run(
+        [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(tmp_path),
+         "--scheduler", dask_cluster, "--progress", "lines", "--no-report"],
+        cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "dask: 2 workers" in done.stdout
+    assert f"sweep small: {RUNS}/{RUNS} runs (100 %)" in done.stdout, done.stdout
+    rows = rows_of(tmp_path)
+    assert len({r["worker"] for r in rows}) == 2
+    assert results(rows) == results(reference_table)
+
+
+def test_killing_a_worker_mid_sweep_loses_and_duplicates_no_run(spec_path, reference_table,
+                                                               dask_cluster, tmp_path):
+    from distributed import Client
+
+    killed = {}
+    with Client(dask_cluster, timeout="30s") as client:
+        client.wait_for_workers(2, timeout=60)
+        pids = client.run(os.getpid)
+
+        def kill_one(row, done):
+            if not killed and row["worker"] in pids:
+                # The other worker process: it is running or about to run a task.
+                victim = next(a for a in pids if a != row["worker"])
+                os.kill(pids[victim], signal.SIGKILL)
+                killed.update(address=victim, after=done)
+
+        summary = sweep.run_sweep(sweep.load_spec(spec_path), tmp_path, client,
+                                  progress="none", on_row=kill_one)
+        # The nanny restarts the worker, for the next test's sake.
+        client.wait_for_workers(2, timeout=60)
+    assert killed and killed["after"] < RUNS, killed
+    assert summary["executed"] == RUNS and summary["failed"] == 0, summary
+    rows = rows_of(tmp_path)
+    assert [r["run"] for r in rows] == list(range(RUNS))
+    assert results(rows) == results(reference_table)
+
+
+def test_a_run_that_timed_out_is_run_again(spec_path, reference_table, tmp_path):
+    """A run over the spec's timeout is a row saying so (a loaded machine,
+    not the run, may be why); the next invocation runs it again, and its
+    result replaces that row."""
+    import pyarrow.parquet as pq
+
+    spec = sweep.load_spec(spec_path)
+    runs, fmus = sweep.expand(spec)
+    data = {digest: path.read_bytes() for digest, path in fmus.items()}
+    slow = copy.deepcopy(runs[3])
+    slow.scenario["duration"] = 60.0  # about 0.3 s of the master at least
+    row = sweep.execute_run(slow, data, timeout=0.05)
+    assert row["status"] == "timeout" and row["key"] == runs[3].key, row
+    assert row["error"] == "no result within 0.05 s"
+    table = [dict(r) for r in reference_table]
+    table[3] = row
+    pq.write_table(sweep._rows_to_table(table, spec), sweep.table_path(tmp_path, "small"))
+    summary = local_sweep(spec_path, tmp_path, workers=1)
+    assert (summary["executed"], summary["skipped"], summary["timeouts"]) == (1, RUNS - 1, 0)
+    assert results(rows_of(tmp_path)) == results(reference_table)
+
+
+def test_a_stale_table_is_not_mixed_with_new_runs(spec_path, reference_table, tmp_path):
+    """A table made by another spec (or other FMUs) is refused, not extended."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    stale = [dict(r, key="0" * 32) for r in reference_table[:1]]
+    pq.write_table(pa.Table.from_pylist(stale), tmp_path / "small.parquet")
+    with pytest.raises(sweep.StaleTable, match="--restart"):
+        sweep.run_sweep(sweep.load_spec(spec_path), tmp_path, client=None)
+
+
+def test_spec_errors_name_the_file_and_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SPEC.replace('duration = "= 0.2 + 2 / frequency"',
+                                'duration = "= 0.2 + 2 / frequncy"'))
+    runs = None
+    with pytest.raises(sweep.SpecError) as e:
+        runs = sweep.expand(sweep.load_spec(bad))
+    assert runs is None
+    line = SPEC.splitlines().index('duration = "= 0.2 + 2 / frequency"') + 1
+    assert str(e.value).startswith(f"{bad}:{line}: "), str(e.value)
+    assert "unknown name 'frequncy'" in str(e.value)
+    bad.write_text("study = 'x'\n[template]\nduration = = 1.0\nstep = 1e-4\n")
+    with pytest.raises(sweep.SpecError, match=rf"^{bad}:3:12: Invalid value$"):
+        sweep.load_spec(bad)
+    bad.write_text("study = 'x'\n[template]\nduration = 1.0\n[[variable]]\nname = 'f'\n"
+                   "valuess = [1.0]\n")
+    with pytest.raises(sweep.SpecError, match=rf"^{bad}:6: variable 'f': unknown key 'valuess'"):
+        sweep.load_spec(bad)
+
+
+def test_expressions_accept_arithmetic_only():
+    assert sweep.evaluate("max(1 / f, 0.5) + 2 ** 2", {"f": 4.0}) == 4.5
+    for text in ("__import__('os')", "f.real", "[1][0]", "open('x')"):
+        with pytest.raises(ValueError):
+            sweep.evaluate(text, {"f": 1.0})
