@@ -174,11 +174,9 @@ impl FlexureStage {
     /// [`STATES`] order. Where one changes sign, ḣ changes branch.
     pub fn switching_functions(&self) -> [f64; NUMBER_OF_SWITCHING_FUNCTIONS] {
         let mut g = [0.0; NUMBER_OF_SWITCHING_FUNCTIONS];
-        for i in 0..3 {
-            g[i] = self.actuators[i].hysteretic_state();
-        }
-        for k in 0..4 {
-            g[3 + k] = self.couplings[k].hysteretic_state();
+        let models = self.actuators.iter().chain(&self.couplings);
+        for (value, model) in g.iter_mut().zip(models) {
+            *value = model.hysteretic_state();
         }
         g
     }
