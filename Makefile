@@ -33,33 +33,20 @@ all: fmus
 # fmi-sys generates its FMI 2.0 bindings with bindgen, which needs libclang.
 system-deps:
 	@if ! ldconfig -p | grep -q 'libclang[-0-9.]*\.so'; then \
-	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	    echo "installing libclang-dev (needed by bindgen)"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libclang-dev >/dev/null; \
-	  else \
-	    echo "libclang is missing: install it (Debian/Ubuntu: apt-get install libclang-dev)" >&2; exit 1; \
-	  fi; \
+	  packaging/apt-install.sh "bindgen needs libclang" libclang-dev || exit 1; \
 	fi
 	@# fmi2-conformance's memory test runs 10,000 FMU lifetimes under valgrind.
 	@if ! command -v valgrind >/dev/null; then \
-	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	    echo "installing valgrind (memory test of the FMUs)"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq valgrind >/dev/null; \
-	  else \
-	    echo "valgrind is missing: install it (Debian/Ubuntu: apt-get install valgrind); the memory test will fail" >&2; \
-	  fi; \
+	  packaging/apt-install.sh "the memory test of the FMUs runs under it" valgrind \
+	    || echo "without valgrind the memory test will fail" >&2; \
 	fi
 
 # tests/test_windows_binaries.py runs the win64 binaries under wine. Not fatal
 # here: without wine that test fails and says why.
 wine:
 	@if ! command -v wine64 >/dev/null && [ ! -x /usr/lib/wine/wine64 ] && ! command -v wine >/dev/null; then \
-	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
-	    echo "installing wine64 (runs the win64 binaries in the tests)"; \
-	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq wine64 >/dev/null; \
-	  else \
-	    echo "wine is missing: install it (Debian/Ubuntu: apt-get install wine64); tests/test_windows_binaries.py will fail" >&2; \
-	  fi; \
+	  packaging/apt-install.sh "runs the win64 binaries in the tests" wine64 \
+	    || echo "without wine tests/test_windows_binaries.py will fail" >&2; \
 	fi
 
 $(VENV)/.installed: tests/requirements.txt

@@ -120,15 +120,10 @@ build_windows() {
         fi
     fi
     if ! command -v "$MINGW_CC" >/dev/null; then
-        if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
-            echo "installing gcc-mingw-w64-x86-64 (the win64 linker)"
-            apt-get update -qq &&
-                DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gcc-mingw-w64-x86-64 \
-                    >/dev/null || true
-        fi
+        "$ROOT/packaging/apt-install.sh" "the win64 linker" gcc-mingw-w64-x86-64 || true
         if ! command -v "$MINGW_CC" >/dev/null; then
             loud "NO win64 BINARIES in the FMUs" \
-                "$MINGW_CC is missing and apt-get could not install it (needs root)" \
+                "$MINGW_CC is missing and could not be installed (the reason is above)" \
                 "install it: apt-get install gcc-mingw-w64-x86-64" \
                 "tests/test_windows_binaries.py will fail"
             return 0
