@@ -24,6 +24,7 @@ from demo import experiments as ex
 from demo.cosim import Fmu, simulate
 from demo.paper import CIRCLE, TABLE_3, TRACKING, Y_THETA, rows
 from tests.conftest import REPO_ROOT
+from tests.docs_figures import doc_rows, stale_rows, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -72,6 +73,17 @@ def test_every_numbered_figure_is_at_or_under_the_papers(results):
     missed = [f"{r.where} {r.what}: {r.simulated} against {r.paper} ({r.rule})"
               for r in table if not r.met]
     assert not missed, "\n".join(missed)
+
+
+def test_docs_seed000_prints_these_figures(results):
+    """docs/seed000.md's table is this measurement: every number of every row
+    as measured here (tests/docs_figures.py says within what), so a figure
+    left stale after a change of the models or presets fails."""
+    measured = table_rows(
+        f"| {r.what} | {r.paper} | {r.simulated} | {r.rule} | {'met' if r.met else 'missed'} "
+        f"| {r.where} |" for r in rows(results))
+    problems = stale_rows(doc_rows("seed000.md"), measured, 1, "docs/seed000.md")
+    assert not problems, "\n".join(problems)
 
 
 def test_the_single_axis_runs_start_from_rest_with_the_held_axes_at_zero(results):

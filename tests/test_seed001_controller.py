@@ -16,6 +16,7 @@ import pytest
 
 from demo.cosim import Fmu, simulate
 from tests.conftest import REPO_ROOT
+from tests.docs_figures import doc_rows, stale_rows, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -102,7 +103,7 @@ def seed001_results(fmus):
 
 def test_seed_001_feedforward_linearity_beats_the_papers(seed001_results):
     """Seed 001 eq. (17)-(18): eta = max |d_e - d| / amplitude; the paper:
-    8 % for x at 1.25 um, 5.5 % for y at 2 um (measured here: 4.7 %, 3.7 %)."""
+    8 % for x at 1.25 um, 5.5 % for y at 2 um (measured: docs/seed001.md)."""
     from demo.experiments import S001_LINEARITY_UM, S001_STAGES, s001_key
 
     for stage in S001_STAGES:
@@ -130,3 +131,14 @@ def test_seed_001_decoupling_beats_the_papers_reduction_and_seed_000s(
         print(f"{stage} {key}: reduction by seed 000's method {reductions['seed000']:.1f} %, "
               f"by seed 001's {reductions['seed001']:.1f} % (paper {paper} %)")
         assert reductions["seed001"] > paper
+
+
+def test_docs_seed001_prints_these_figures(seed001_results):
+    """docs/seed001.md's two tables are this measurement (the tables `make
+    demo`'s report prints): a figure left stale fails here."""
+    from demo.report import seed001_section
+
+    measured = table_rows(seed001_section(seed001_results))
+    assert len(measured) == 16
+    problems = stale_rows(doc_rows("seed001.md"), measured, 2, "docs/seed001.md")
+    assert not problems, "\n".join(problems)

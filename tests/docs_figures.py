@@ -1,0 +1,87 @@
+"""The figures of docs/*.md against the ones a test measures again.
+
+A document's table is the record of a measurement; the tests that run the
+same measurement anyway (the closed loop of seed 000's experiments, seed 001's
+runs) compare each row they produce with the row the document prints, so a
+figure left stale after a change of the models or presets fails the test that
+measured it.
+
+Rows are matched by their leading label cells; every other cell must hold
+the same numbers. A number matches when it is within 1 % of the printed one
+or within one unit of its last printed digit, whichever is wider: the runs
+are deterministic, so only a real change, or a last-bit difference of a C
+library's exp/pow between machines, moves them.
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import re
+
+REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
+DOCS = REPO_ROOT / "docs"
+
+NUMBER = re.compile(r"[-+−]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+−]?\d+)?")
+RELATIVE = 0.01
+
+
+def table_rows(lines) -> list[list[str]]:
+    """The cells of every row of every Markdown table in `lines` (header and
+    separator rows left out)."""
+    rows = []
+    for line in lines:
+        line = line.strip()
+        if not (line.startswith("|") and line.endswith("|")):
+            continue
+        cells = [cell.strip() for cell in line[1:-1].split("|")]
+        if all(re.fullmatch(r":?-{3,}:?", cell) for cell in cells):
+            rows.pop()  # the header row just read
+        else:
+            rows.append(cells)
+    return rows
+
+
+def doc_rows(name: str) -> list[list[str]]:
+    path = DOCS / name
+    return table_rows(path.read_text(encoding="utf-8").splitlines())
+
+
+def numbers(text: str) -> list[tuple[float, float]]:
+    """(value, unit of the last printed digit) of every number in `text`."""
+    found = []
+    for literal in NUMBER.findall(text):
+        literal = literal.replace("−", "-")
+        mantissa, _, exponent = literal.lower().partition("e")
+        decimals = len(mantissa.partition(".")[2])
+        unit = 10.0 ** (-decimals + (int(exponent) if exponent else 0))
+        found.append((float(literal), unit))
+    return found
+
+
+def same_numbers(printed: str, measured: str) -> bool:
+    a, b = numbers(printed), numbers(measured)
+    if len(a) != len(b):
+        return False
+    return all(
+        math.isclose(p, m, rel_tol=RELATIVE, abs_tol=unit * (1 + 1e-9))
+        for (p, unit), (m, _) in zip(a, b)
+    )
+
+
+def stale_rows(documented: list[list[str]], measured: list[list[str]], key_cells: int,
+               document: str) -> list[str]:
+    """What differs between the document's rows and the measured ones, matched
+    by their first `key_cells` cells; every measured row must be documented."""
+    by_key = {tuple(row[:key_cells]): row for row in documented}
+    problems = []
+    for row in measured:
+        key = tuple(row[:key_cells])
+        printed = by_key.get(key)
+        if printed is None:
+            problems.append(f"{document}: no row {' | '.join(key)!r}; measured: {' | '.join(row)}")
+            continue
+        for index, (p, m) in enumerate(zip(printed, row)):
+            if index >= key_cells and not same_numbers(p, m):
+                problems.append(f"{document}: {' | '.join(key)}: printed {p!r}, measured {m!r}")
+    return problems
