@@ -49,14 +49,16 @@ def test_a_held_lock_is_reported_as_held():
             held.append(handle)
         assert held, "none of apt's locks exists on this machine"
         started = time.monotonic()
-        result = run("a test", "valgrind", env={"APT_LOCK_TIMEOUT": "2"})
+        result = run("a test", "valgrind", env={"APT_LOCK_TIMEOUT": "3"})
         elapsed = time.monotonic() - started
     finally:
         for handle in held:
             handle.close()
     assert result.returncode == 1, result.stdout + result.stderr
+    # bash counts its SECONDS in whole seconds from its start: a 3 s wait
+    # lasts between 2 and 3 s.
     assert elapsed >= 2.0, f"gave up after {elapsed:.2f} s instead of waiting"
-    assert "lock is still held after 2 s" in result.stderr, result.stderr
+    assert "lock is still held after 3 s" in result.stderr, result.stderr
     assert "needs root" not in result.stderr
 
 
