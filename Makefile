@@ -35,7 +35,7 @@ system-deps:
 	@if ! ldconfig -p | grep -q 'libclang[-0-9.]*\.so'; then \
 	  packaging/apt-install.sh "bindgen needs libclang" libclang-dev || exit 1; \
 	fi
-	@# fmi2-conformance's memory test runs 10,000 FMU lifetimes under valgrind.
+	@# fmi2-conformance's memory test runs FMU lifetimes under valgrind.
 	@if ! command -v valgrind >/dev/null; then \
 	  packaging/apt-install.sh "the memory test of the FMUs runs under it" valgrind \
 	    || echo "without valgrind the memory test will fail" >&2; \
