@@ -324,14 +324,25 @@ const BOUC_WEN_MAX_DU: f64 = 0.01;
 impl PiezoController {
     pub fn new(params: ControllerParams) -> Result<Self, ParamError> {
         params.validate()?;
+        // Only the selected Bouc-Wen models are settled on their exercised
+        // loops: the settling is most of a construction's cost (about 3.5 ms
+        // for the five), and the others never run (the selectors are fixed
+        // while running, see `set_tuning`), so they stay virgin.
+        let unused = BoucWenModels {
+            rest_cycle: 0.0,
+            ..params.bouc_wen
+        };
+        let selected = |yes: bool| if yes { &params.bouc_wen } else { &unused };
+        let feedforward_models = selected(params.hysteresis_model == HysteresisModel::BoucWen);
+        let coupling_models = selected(params.decoupling_model == DecouplingModel::ModelBased);
         Ok(PiezoController {
             models: [
                 ModifiedInversePi::new(params.y_model),
                 ModifiedInversePi::new(params.x_model),
                 ModifiedInversePi::new(params.x_model),
             ],
-            bouc_wen: BoucWenFeedforward::new(&params.bouc_wen, BOUC_WEN_MAX_DU),
-            coupling: CouplingEstimator::new(&params.bouc_wen, BOUC_WEN_MAX_DU),
+            bouc_wen: BoucWenFeedforward::new(feedforward_models, BOUC_WEN_MAX_DU),
+            coupling: CouplingEstimator::new(coupling_models, BOUC_WEN_MAX_DU),
             params,
             previous_references: None,
             pi_x: PiController::default(),
@@ -347,9 +358,14 @@ impl PiezoController {
     }
 
     /// The parameters that may change while running: switches and gains.
-    /// Turning an axis's feedback off empties its integrator.
+    /// Turning an axis's feedback off empties its integrator. The model
+    /// selectors (`hysteresis_model`, `decoupling_model`) are not among them:
+    /// they keep the values the controller was built with (build a new
+    /// controller to change them).
     pub fn set_tuning(&mut self, tuning: impl FnOnce(&mut ControllerParams)) {
+        let selectors = (self.params.hysteresis_model, self.params.decoupling_model);
         tuning(&mut self.params);
+        (self.params.hysteresis_model, self.params.decoupling_model) = selectors;
         for (on, pi) in [
             (self.params.feedback_x, &mut self.pi_x),
             (self.params.feedback_y, &mut self.pi_y),
