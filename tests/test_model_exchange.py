@@ -30,6 +30,18 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from conftest import LogCapture
+from tests.docs_figures import doc_rows, stale_rows
+
+#: The rows of docs/fmi.md's fmpy table that these tests measure again (the
+#: solver and the span are the rows' key).
+CVODE_ROW = "CVode, relative tolerance 1e-11 (absolute: 1e-11 × each state's nominal, as fmpy sets it)"
+EULER_ROWS = ("forward Euler, 2 µs steps", "forward Euler, 1 µs steps")
+
+
+def assert_documented(rows: list[list[str]]) -> None:
+    """docs/fmi.md prints what was measured (within 1 % or the last digit)."""
+    assert not stale_rows(doc_rows("fmi.md"), rows, 2, "docs/fmi.md"), stale_rows(
+        doc_rows("fmi.md"), rows, 2, "docs/fmi.md")
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
 DIST = REPO_ROOT / "dist"
@@ -117,6 +129,7 @@ def test_cvode_matches_co_simulation():
           f"(y at the end {me['y'][-1]:.6f} um)")
     assert worst < 1e-6
     assert me["y"][-1] > 1.0, "the stage moved"
+    assert_documented([[CVODE_ROW, "50 ms", f"{worst:.1e} µm"]])
 
 
 def test_forward_euler_converges_to_co_simulation():
@@ -136,6 +149,7 @@ def test_forward_euler_converges_to_co_simulation():
     print(f"Euler vs Co-Simulation: 2 us {differences[0]:.3f} um, 1 us {differences[1]:.3f} um")
     assert 0.4 < differences[1] / differences[0] < 0.6, differences
     assert differences[1] < 0.5
+    assert_documented([[row, "10 ms", f"{d:.2f} µm"] for row, d in zip(EULER_ROWS, differences)])
 
 
 def test_model_exchange_refuses_sensor_noise():
