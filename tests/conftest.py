@@ -45,6 +45,20 @@ def require_fmu() -> pathlib.Path:
     return FMU_PATH
 
 
+def require_closed_loop_build() -> None:
+    """Fails (never skips) unless both FMUs and the compiled master
+    (`demo.master.binary()`, from `make master`) are built."""
+    from demo import master
+
+    for path in (REPO_ROOT / "dist" / "FlexureStage.fmu", REPO_ROOT / "dist" / "PiezoController.fmu"):
+        if not path.is_file():
+            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
+    try:
+        master.binary()
+    except FileNotFoundError as e:
+        pytest.fail(str(e), pytrace=False)
+
+
 @dataclass
 class LogRecord:
     instance_name: str

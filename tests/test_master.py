@@ -32,7 +32,7 @@ from demo.cosim import (
     simulate,
 )
 from demo.experiments import START, experiments, metrics
-from tests.conftest import REPO_ROOT
+from tests.conftest import REPO_ROOT, require_closed_loop_build
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -43,13 +43,7 @@ TOLERANCE = 1e-12
 
 @pytest.fixture(scope="module", autouse=True)
 def built():
-    for path in (PLANT, CONTROLLER):
-        if not path.is_file():
-            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
-    try:
-        master.binary()
-    except FileNotFoundError as e:
-        pytest.fail(str(e), pytrace=False)
+    require_closed_loop_build()
 
 
 def reference_table(reference, duration: float, folder) -> dict:

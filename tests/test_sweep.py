@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from demo import master, sweep
-from tests.conftest import REPO_ROOT
+from tests.conftest import REPO_ROOT, require_closed_loop_build
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -80,13 +80,7 @@ RUNS = 8
 
 @pytest.fixture(scope="module")
 def spec_path(tmp_path_factory):
-    for path in (PLANT, CONTROLLER):
-        if not path.is_file():
-            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
-    try:
-        master.binary()
-    except FileNotFoundError as e:
-        pytest.fail(str(e), pytrace=False)
+    require_closed_loop_build()
     path = tmp_path_factory.mktemp("spec") / "small.toml"
     path.write_text(SPEC)
     return path
