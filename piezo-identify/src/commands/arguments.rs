@@ -1,0 +1,277 @@
+//! Arguments shared by the subcommands (columns, search, protocol) and the loading of records and plant FMUs.
+
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+
+use piezo_identify::data::{ColumnsUsed, read_record_with_columns};
+use piezo_identify::plant::{PlantFmu, read_parameter_set};
+use piezo_identify::protocol::{Plan, PlanOptions};
+use piezo_identify::segments::SegmentOptions;
+use piezo_identify::validation::displacement_offset;
+use piezo_identify::{Column, FitOptions, ReadOptions, Record, Sampling, read_record};
+
+/// Where the record is cut, what is left out of fit and score, and the
+/// report file: the same for `inverse-pi` and `bouc-wen`.
+#[derive(Args)]
+pub(crate) struct ProtocolArgs {
+    /// Fit on this fraction of FILE (0 < F < 1) and score the rest, the
+    /// models' state carried over from the fit part.
+    #[arg(long, allow_negative_numbers = true, value_parser = fraction, conflicts_with = "validate_from")]
+    pub(crate) split: Option<f64>,
+    /// Fit on FILE before this time [s] and score the rest (as --split).
+    #[arg(long, allow_negative_numbers = true, value_parser = seconds)]
+    pub(crate) validate_from: Option<f64>,
+    /// Also score on this file (same columns and sampling), the models run
+    /// from rest at its first sample; read before the fit.
+    #[arg(long, conflicts_with = "plant")]
+    pub(crate) validate: Option<PathBuf>,
+    /// Seconds at the start of the --validate file not scored [default: the
+    /// settling time and the first loading, as at the start of FILE].
+    #[arg(long, allow_negative_numbers = true, value_parser = seconds, requires = "validate")]
+    pub(crate) validate_warm_up: Option<f64>,
+    /// Seconds at the start of FILE not fitted [default: the settling time
+    /// and the first loading, up to the input's second turning point].
+    #[arg(long, allow_negative_numbers = true, value_parser = seconds)]
+    pub(crate) warm_up: Option<f64>,
+    /// Seconds after each voltage step (and after the start) not fitted nor
+    /// scored.
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.1, value_parser = seconds)]
+    pub(crate) settle: f64,
+    /// Shortest held input that counts as a rest segment [s].
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.5, value_parser = seconds)]
+    pub(crate) min_rest: f64,
+    /// Fit and score rest segments and steps too (no detection).
+    #[arg(long)]
+    pub(crate) keep_rest_and_steps: bool,
+    /// Write everything (plan, choices, fits, errors) as JSON.
+    #[arg(long)]
+    pub(crate) report: Option<PathBuf>,
+}
+
+/// A number of seconds: finite and not negative.
+pub(crate) fn seconds(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!(
+            "give a number of seconds, 0 or more (got {text:?})"
+        )),
+    }
+}
+
+/// A fraction strictly between 0 and 1.
+pub(crate) fn fraction(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
+        _ => Err(format!(
+            "give a fraction between 0 and 1, e.g. 0.5 (got {text:?})"
+        )),
+    }
+}
+
+/// "auto" or a value of the parser's kind.
+pub(crate) fn auto_or<T>(
+    text: &str,
+    parse: impl Fn(&str) -> Option<T>,
+    what: &str,
+) -> Result<Option<T>, String> {
+    if text.trim() == "auto" {
+        Ok(None)
+    } else {
+        parse(text.trim())
+            .map(Some)
+            .ok_or_else(|| format!("give \"auto\" or {what} (got {text:?})"))
+    }
+}
+
+#[derive(Args)]
+pub(crate) struct ColumnArgs {
+    /// Input (command voltage) column: 0-based index or header name.
+    #[arg(long, default_value = "0")]
+    pub(crate) input: String,
+    /// Output (displacement) column: 0-based index or header name.
+    #[arg(long, default_value = "1")]
+    pub(crate) output: String,
+    /// Sample rate [Hz] (or give --time).
+    #[arg(long, conflicts_with = "time")]
+    pub(crate) rate: Option<f64>,
+    /// Time column [s]: 0-based index or header name (or give --rate).
+    #[arg(long)]
+    pub(crate) time: Option<String>,
+}
+
+impl ColumnArgs {
+    pub(crate) fn read_options(&self) -> Result<ReadOptions, String> {
+        let sampling = match (&self.time, self.rate) {
+            (Some(time), None) => Sampling::TimeColumn(Column::parse(time)),
+            (None, Some(rate)) => Sampling::Rate(rate),
+            _ => return Err("give the sampling: --rate HZ or --time COLUMN".to_owned()),
+        };
+        Ok(ReadOptions {
+            input: Column::parse(&self.input),
+            output: Column::parse(&self.output),
+            sampling,
+        })
+    }
+}
+
+#[derive(Args)]
+pub(crate) struct SearchArgs {
+    /// Random starts of the Nelder-Mead search (seed 000: 30).
+    #[arg(long, default_value_t = 30)]
+    pub(crate) starts: usize,
+    /// Seed of the random initial values.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// Nelder-Mead iterations per start at most.
+    #[arg(long, default_value_t = 2000)]
+    pub(crate) max_iterations: u64,
+    /// The search uses every N-th sample (the final linear solve and F use all).
+    #[arg(long)]
+    pub(crate) decimation: Option<usize>,
+    /// Seconds at the start of each record that run the models but are not
+    /// fitted nor scored (a start-up transient).
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.0, value_parser = seconds)]
+    pub(crate) warm_up: f64,
+    /// Constant backlash weights (k = 0) instead of seed 000 eq. (4)'s
+    /// w_h = k·ẏ + b: for a record whose single frequency and amplitude make
+    /// the rate a function of position and direction (k not identifiable).
+    #[arg(long)]
+    pub(crate) rate_independent: bool,
+    /// Half width [samples] of a centred moving average applied to the
+    /// displacement of every record before fitting and evaluation (0: none).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) smooth: usize,
+}
+
+impl SearchArgs {
+    pub(crate) fn options(&self, sample_period: f64, default_decimation: usize) -> FitOptions {
+        FitOptions {
+            starts: self.starts,
+            seed: self.seed,
+            max_iterations: self.max_iterations,
+            decimation: self.decimation.unwrap_or(default_decimation),
+            warm_up_samples: (self.warm_up / sample_period).round() as usize,
+            rate_dependent: !self.rate_independent,
+            ..FitOptions::default()
+        }
+    }
+}
+
+pub(crate) fn read(path: &Path, options: &ReadOptions) -> Result<Record, String> {
+    read_record(path, options).map_err(|e| e.to_string())
+}
+
+pub(crate) fn resolve_offset(text: &str, y: &[f64], warm_up_samples: usize) -> Result<f64, String> {
+    if text == "auto" {
+        Ok(displacement_offset(y, warm_up_samples))
+    } else {
+        text.parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("--offset {text}: give a number [µm] or \"auto\""))
+    }
+}
+
+/// A record file with the columns it was read from.
+pub(crate) struct Loaded {
+    pub(crate) name: String,
+    pub(crate) record: Record,
+    pub(crate) columns: Option<ColumnsUsed>,
+}
+
+pub(crate) fn load(path: &Path, columns: &ColumnArgs) -> Result<Loaded, String> {
+    let (record, used) =
+        read_record_with_columns(path, &columns.read_options()?).map_err(|e| e.to_string())?;
+    Ok(Loaded {
+        name: path.display().to_string(),
+        record,
+        columns: Some(used),
+    })
+}
+
+impl ProtocolArgs {
+    pub(crate) fn plan_options(&self, default_warm_up: Option<f64>) -> PlanOptions {
+        PlanOptions {
+            segments: SegmentOptions {
+                settle_seconds: self.settle,
+                min_rest_seconds: self.min_rest,
+            },
+            warm_up_seconds: self.warm_up.or(default_warm_up),
+            detect_segments: !self.keep_rest_and_steps,
+        }
+    }
+
+    /// The first scored sample (the record's length when nothing is split).
+    pub(crate) fn fit_end(&self, record: &Record) -> Result<usize, String> {
+        let n = record.input.len();
+        let dt = record.sample_period;
+        match (self.split, self.validate_from) {
+            (Some(fraction), _) => Ok(((fraction * n as f64).round() as usize).clamp(1, n - 1)),
+            (None, Some(t)) => {
+                let at = (t / dt).round() as usize;
+                if at == 0 || at >= n {
+                    Err(format!(
+                        "--validate-from {t}: the record runs from 0 to {:.3} s; give a time inside it",
+                        n as f64 * dt
+                    ))
+                } else {
+                    Ok(at)
+                }
+            }
+            (None, None) => Ok(n),
+        }
+    }
+
+    /// The plan of `loaded`, with its error named after the file.
+    pub(crate) fn plan(
+        &self,
+        loaded: &Loaded,
+        default_warm_up: Option<f64>,
+    ) -> Result<Plan, String> {
+        let record = &loaded.record;
+        Plan::new(
+            &record.input,
+            record.sample_period,
+            self.fit_end(record)?,
+            &self.plan_options(default_warm_up),
+        )
+        .map_err(|e| format!("{}: {e}", loaded.name))
+    }
+
+    /// The validation file's scored samples, refusing a file with none.
+    pub(crate) fn validation_scored(
+        &self,
+        plan: &Plan,
+        validation: &Loaded,
+    ) -> Result<(Vec<usize>, Vec<bool>), String> {
+        let record = &validation.record;
+        let warm_up = self
+            .validate_warm_up
+            .map(|s| (s / record.sample_period).round() as usize);
+        let (segments, scored) =
+            plan.validation_scored(&record.input, warm_up, !self.keep_rest_and_steps);
+        if !scored.iter().any(|s| *s) {
+            return Err(format!(
+                "{}: no sample is left to score after its warm-up ({}), rest segments and settling after steps; give a shorter --validate-warm-up",
+                validation.name,
+                match warm_up {
+                    Some(n) => format!("{n} samples"),
+                    None => "the settling time and the first loading".to_owned(),
+                }
+            ));
+        }
+        Ok((segments.steps, scored))
+    }
+}
+
+/// Opens a plant FMU, loaded with the parameter set at `parameters` if given.
+pub(crate) fn open_plant(path: &Path, parameters: Option<&Path>) -> Result<PlantFmu, String> {
+    let plant = PlantFmu::open(path).map_err(|e| e.to_string())?;
+    match parameters {
+        Some(set) => plant
+            .with_parameters(&read_parameter_set(set)?)
+            .map_err(|e| e.to_string()),
+        None => Ok(plant),
+    }
+}

@@ -1,0 +1,385 @@
+//! `piezo-identify bouc-wen`: the asymmetric Bouc-Wen model (seed 001 eq. 3-4) by GA-PSO and Levenberg-Marquardt.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use piezo_identify::bouc_wen_fit::{SHAPE_PARAMETERS, default_shape_bounds, wide_shape_bounds};
+use piezo_identify::gapso::{Bounds, GaPsoOptions};
+use piezo_identify::plant::{ParameterValue, RecordAxis, sine_records};
+use piezo_identify::protocol::{
+    BoucWenProtocolFit, BoucWenSettings, ForwardErrors, identify_bouc_wen_protocol,
+};
+
+use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, open_plant};
+use super::progress::Reporter;
+use super::report::{
+    describe, describe_columns, pad, print_extrapolation, print_figure, print_plan, range_excess,
+    write_json,
+};
+
+#[derive(Args)]
+pub(crate) struct BoucWenArgs {
+    /// Identification record (or --plant).
+    #[arg(required_unless_present = "plant", conflicts_with = "plant")]
+    pub(crate) file: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) columns: ColumnArgs,
+    #[command(flatten)]
+    pub(crate) protocol: ProtocolArgs,
+    /// Drive this plant FMU (FlexureStage's interface) instead of reading a
+    /// file: a sine from 0 V to --peak at --frequency on one axis.
+    #[arg(long)]
+    pub(crate) plant: Option<PathBuf>,
+    /// Parameter set the plant is loaded with (JSON by FMI name).
+    #[arg(long, requires = "plant")]
+    pub(crate) plant_parameters: Option<PathBuf>,
+    /// Axis the plant run drives: y (u1) or x (u2 = u3).
+    #[arg(long, default_value = "y", value_parser = ["x", "y"])]
+    pub(crate) drive: String,
+    /// Displacement the plant run fits: the driven axis's (H_XX, H_YY) or
+    /// the other axis's (the coupling H_XY, H_YX of eq. 8).
+    #[arg(long, default_value = "driven", value_parser = ["driven", "coupled"])]
+    pub(crate) read: String,
+    /// Frequency of the plant run's sine [Hz] (seed 001 §5.2: 2).
+    #[arg(long, default_value_t = 2.0)]
+    pub(crate) frequency: f64,
+    /// Peak command of the plant run's sine [V] (seed 001 §5.2: 10).
+    #[arg(long, default_value_t = 10.0)]
+    pub(crate) peak: f64,
+    /// Periods of the plant run; the first is the warm-up unless --warm-up.
+    #[arg(long, default_value_t = 3.0)]
+    pub(crate) periods: f64,
+    /// Sample rate of the plant run [Hz].
+    #[arg(long, default_value_t = 10_000.0)]
+    pub(crate) plant_rate: f64,
+    /// Particles of the swarm.
+    #[arg(long, default_value_t = 40)]
+    pub(crate) population: usize,
+    /// GA-PSO generations at most.
+    #[arg(long, default_value_t = 150)]
+    pub(crate) generations: usize,
+    /// Seed of GA-PSO's random stream.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) seed: u64,
+    /// GA-PSO evaluates every N-th sample (refinement and errors use all);
+    /// default: at most about 3000 samples and at least 100 per fastest
+    /// cycle for a file, 10 for a plant run.
+    #[arg(long)]
+    pub(crate) decimation: Option<usize>,
+    /// Half width [samples] of a centred moving average of the fitted
+    /// displacement (0: none); the errors are always against the measured one.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) smooth: usize,
+    /// Take the output as zero at rest instead of fitting a sensor offset.
+    #[arg(long)]
+    pub(crate) no_offset: bool,
+    /// Accept only models whose every branch rises with the input on the
+    /// record: models with an inverse, as feedforward (eq. 6) needs.
+    #[arg(long)]
+    pub(crate) monotone: bool,
+    /// Stop at the GA-PSO optimum, as seed 001 does.
+    #[arg(long)]
+    pub(crate) no_refine: bool,
+    /// Search box of the scaled shape, e.g. "beta=0:10,gamma=-10:10,n=1:3,delta=-2:2"
+    /// (u scaled by max|u|, y by its span, A = 1; any subset).
+    #[arg(long)]
+    pub(crate) bounds: Option<String>,
+    /// Start from the wide box (ten times the default in beta, gamma, delta;
+    /// n up to 5) before --bounds: for loops unlike a plain piezo's, such as
+    /// the XY200S's.
+    #[arg(long)]
+    pub(crate) wide_bounds: bool,
+    /// Write the fitted model (piezo_models::BoucWenParams and the sensor
+    /// offset) as JSON.
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+}
+
+/// Parses `name=lo:hi` pairs into `bounds` (the shape of
+/// `bouc_wen_fit::SHAPE_PARAMETERS`).
+pub(crate) fn parse_shape_bounds(text: &str, bounds: &mut Bounds) -> Result<(), String> {
+    for item in text.split(',').map(str::trim).filter(|i| !i.is_empty()) {
+        let problem = |why: &str| format!("--bounds {item}: {why}");
+        let (name, range) = item
+            .split_once('=')
+            .ok_or_else(|| problem("write name=lower:upper"))?;
+        let index = SHAPE_PARAMETERS
+            .iter()
+            .position(|p| *p == name.trim())
+            .ok_or_else(|| {
+                problem(&format!(
+                    "the parameters are {}",
+                    SHAPE_PARAMETERS.join(", ")
+                ))
+            })?;
+        let (lo, hi) = range
+            .split_once(':')
+            .ok_or_else(|| problem("write name=lower:upper"))?;
+        let number = |t: &str| {
+            t.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| problem(&format!("{t:?} is not a finite number")))
+        };
+        let (lo, hi) = (number(lo)?, number(hi)?);
+        if lo >= hi {
+            return Err(problem("lower must be below upper"));
+        }
+        bounds.lower[index] = lo;
+        bounds.upper[index] = hi;
+    }
+    Ok(())
+}
+
+/// The identification record of `bouc-wen`: a file or a plant run, and the
+/// defaults that differ between them (decimation, warm-up seconds).
+pub(crate) fn bouc_wen_record(
+    args: &BoucWenArgs,
+) -> Result<(Loaded, Option<usize>, Option<f64>), String> {
+    if let Some(path) = &args.plant {
+        // The run starts from a stage never cycled (FlexureStage's
+        // `rest_cycle_voltage` = 0): every hysteretic state at h = 0, the
+        // state the fitted model starts from. A stage resting after a cycle
+        // sits on that cycle's loop, which a model started from h = 0 reaches
+        // only after several periods (Bouc-Wen minor loops do not close).
+        let plant = open_plant(path, args.plant_parameters.as_deref())?
+            .with_parameters(&[("rest_cycle_voltage".to_owned(), ParameterValue::Number(0.0))])
+            .map_err(|e| e.to_string())?;
+        let axis = if args.drive == "x" {
+            RecordAxis::X
+        } else {
+            RecordAxis::Y
+        };
+        for (name, value) in [
+            ("--frequency", args.frequency),
+            ("--peak", args.peak),
+            ("--periods", args.periods),
+            ("--plant-rate", args.plant_rate),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(format!("{name} must be positive (got {value})"));
+            }
+        }
+        let (driven, coupled) = sine_records(
+            &plant,
+            axis,
+            args.frequency,
+            args.peak,
+            args.periods,
+            args.plant_rate,
+        )
+        .map_err(|e| e.to_string())?;
+        let record = if args.read == "coupled" {
+            coupled
+        } else {
+            driven
+        };
+        let name = format!(
+            "{} driving {} with a {} Hz sine 0..{} V, reading the {} displacement",
+            path.display(),
+            args.drive,
+            args.frequency,
+            args.peak,
+            args.read
+        );
+        // A plant run has no rest and no step and its first period is the
+        // warm-up; 1000 samples per period searched at the default rate.
+        Ok((
+            Loaded {
+                name,
+                record,
+                columns: None,
+            },
+            Some(10),
+            Some(1.0 / args.frequency),
+        ))
+    } else {
+        let path = args.file.as_ref().expect("clap requires a file or --plant");
+        Ok((load(path, &args.columns)?, None, None))
+    }
+}
+
+pub(crate) fn print_forward_errors(
+    part: &str,
+    e: &ForwardErrors,
+    refined: bool,
+    scored_line: bool,
+) {
+    println!("{part}, {} samples:", e.bouc_wen.samples);
+    if refined {
+        print_figure("Bouc-Wen", &e.bouc_wen, "um");
+        print_figure("GA-PSO only", &e.gapso, "um");
+    } else {
+        print_figure("Bouc-Wen", &e.bouc_wen, "um");
+    }
+    print_figure("classical P-I", &e.classical, "um");
+    print_figure("straight line", &e.line, "um");
+    if scored_line {
+        print_figure("best line here", &e.best_line, "um");
+    }
+}
+
+pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
+    let (loaded, default_decimation, default_warm_up) = bouc_wen_record(args)?;
+    // The validation file is read before the fit: a typo costs nothing.
+    let validation = match &args.protocol.validate {
+        Some(path) => Some(load(path, &args.columns)?),
+        None => None,
+    };
+    let plan = args.protocol.plan(&loaded, default_warm_up)?;
+    let validation_scored = match &validation {
+        Some(v) => Some(args.protocol.validation_scored(&plan, v)?),
+        None => None,
+    };
+    let mut bounds = if args.wide_bounds {
+        wide_shape_bounds()
+    } else {
+        default_shape_bounds()
+    };
+    if let Some(text) = &args.bounds {
+        parse_shape_bounds(text, &mut bounds)?;
+    }
+    let settings = BoucWenSettings {
+        gapso: GaPsoOptions {
+            population: args.population,
+            generations: args.generations,
+            seed: args.seed,
+            ..GaPsoOptions::default()
+        },
+        bounds,
+        decimation: args.decimation.or(default_decimation),
+        smoothing: args.smooth,
+        fit_offset: !args.no_offset,
+        monotone: args.monotone,
+        refine: !args.no_refine,
+    };
+    if settings.decimation == Some(0) {
+        return Err("--decimation: give a whole number of samples, 1 or more".to_owned());
+    }
+    let record = &loaded.record;
+    let dt = record.sample_period;
+    println!("{}", describe(record, &loaded.name));
+    if let Some(columns) = &loaded.columns {
+        println!("columns: {}", describe_columns(columns));
+    }
+    print_plan(&plan, &loaded.name);
+
+    let reporter = Reporter::new();
+    let fit = identify_bouc_wen_protocol(record, &plan, &settings, &|e| reporter.event(e))
+        .map_err(|e| format!("{}: {e}", loaded.name))?;
+    reporter.finish();
+    print_bouc_wen_fit(&fit, &settings);
+
+    println!(
+        "\nerrors of the displacement each model gives for the measured input (RMS, largest; % of the fit part's stroke {:.6} um):",
+        fit.stroke
+    );
+    let refined = fit.identification.refinement_kept;
+    print_forward_errors("fit part", &fit.fit_errors, refined, false);
+    if let Some(unseen) = &fit.unseen {
+        print_forward_errors("scored part (not seen by the fit)", unseen, refined, true);
+        print_extrapolation(
+            "input",
+            range_excess(
+                &record.input,
+                &pad(&plan.fitted(), plan.samples),
+                &plan.scored(),
+            ),
+        );
+    }
+    let mut validation_errors = None;
+    if let (Some(v), Some((_, scored))) = (&validation, &validation_scored) {
+        println!("\n{}", describe(&v.record, &v.name));
+        let errors = fit.errors_on(
+            &v.record.input,
+            &v.record.output,
+            v.record.sample_period,
+            scored,
+        );
+        print_forward_errors(
+            "validation file (models from rest at its start)",
+            &errors,
+            refined,
+            true,
+        );
+        validation_errors = Some(errors);
+    }
+    println!("time: {:.2} s", fit.seconds);
+
+    let best = fit.identification.best();
+    if let Some(out) = &args.out {
+        write_json(
+            out,
+            &serde_json::json!({
+                "model": "asymmetric Bouc-Wen (seed 001 eq. 3-4): displacement from voltage, plus the sensor offset",
+                "params": best.params,
+                "sensor_offset_um": best.offset,
+                "sample_period_s": dt,
+                "columns": loaded.columns,
+            }),
+        )?;
+        println!("model written to {}", out.display());
+    }
+    if let Some(path) = &args.protocol.report {
+        write_json(
+            path,
+            &serde_json::json!({
+                "record": loaded.name,
+                "columns": loaded.columns,
+                "plan": plan,
+                "settings": settings,
+                "options": fit.options,
+                "identification": fit.identification,
+                "classical": fit.classical,
+                "line": fit.line,
+                "stroke": fit.stroke,
+                "fit_errors": fit.fit_errors,
+                "unseen": fit.unseen,
+                "validation": validation.as_ref().map(|v| serde_json::json!({
+                    "file": v.name,
+                    "errors": validation_errors,
+                })),
+                "seconds": fit.seconds,
+            }),
+        )?;
+        println!("report written to {}", path.display());
+    }
+    Ok(())
+}
+
+pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSettings) {
+    let identification = &fit.identification;
+    println!(
+        "\nGA-PSO: {} particles, {} generations ({} evaluations), seed {}, every {} sample(s): {:.2} s; eq. (5) RMS {:.6} um on the fitted samples",
+        settings.gapso.population,
+        identification.history.len(),
+        identification.gapso_evaluations,
+        settings.gapso.seed,
+        fit.options.decimation,
+        identification.gapso_seconds,
+        identification.gapso.rms
+    );
+    if settings.refine {
+        println!(
+            "Levenberg-Marquardt inside the search box: {} evaluations, {:.2} s, RMS {} um: {}",
+            identification.refinement_evaluations,
+            identification.refinement_seconds,
+            identification
+                .refinement_rms
+                .map_or("(no usable result)".to_owned(), |r| format!("{r:.6}")),
+            if identification.refinement_kept {
+                "kept (lower on the fit part)"
+            } else {
+                "not kept (no lower on the fit part)"
+            }
+        );
+    }
+    let best = identification.best();
+    let p = &best.params;
+    println!(
+        "model: p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}; sensor offset {:.6} um",
+        p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta, best.offset
+    );
+}

@@ -1,0 +1,137 @@
+//! `piezo-identify compare`: seed 000's model comparison (F of eq. 7 and evaluation time).
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use piezo_identify::StartResult;
+use piezo_identify::compare::{
+    IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE, compare_inverse_models, synthetic_plant_record,
+};
+use piezo_identify::validation::{centred_moving_average, shifted};
+
+use super::arguments::{ColumnArgs, SearchArgs, read, resolve_offset};
+use super::progress::progress_bar;
+use super::report::{describe, print_starts};
+
+#[derive(Args)]
+pub(crate) struct CompareArgs {
+    /// Record to compare on (or --synthetic).
+    #[arg(required_unless_present = "synthetic")]
+    pub(crate) file: Option<PathBuf>,
+    /// Generate the record: seed 000 eq. (6) driving the simulated stage's y
+    /// actuator for 10 s at 10 kHz.
+    #[arg(long, conflicts_with = "file")]
+    pub(crate) synthetic: bool,
+    #[command(flatten)]
+    pub(crate) columns: ColumnArgs,
+    #[command(flatten)]
+    pub(crate) search: SearchArgs,
+    /// Displacement offset [µm] for a file, or "auto" (as for inverse-pi).
+    /// The synthetic record starts de-energized at 0 and is not shifted.
+    #[arg(long, default_value = "auto", allow_negative_numbers = true)]
+    pub(crate) offset: String,
+    /// Timed passes over the record per model (the median is reported).
+    #[arg(long, default_value_t = 31)]
+    pub(crate) repetitions: usize,
+}
+
+/// Decimation of the synthetic 10 kHz record for the search: 500 Hz, 250
+/// samples per period of eq. (6)'s fastest (1 Hz) component.
+pub(crate) const SYNTHETIC_DECIMATION: usize = 20;
+
+pub(crate) fn compare(args: &CompareArgs) -> Result<(), String> {
+    let (record, name, offset, default_decimation) = if args.synthetic {
+        let record = synthetic_plant_record(IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE)
+            .map_err(|e| format!("stage preset: {e}"))?;
+        (
+            record,
+            "synthetic: seed 000 eq. (6) on FlexureStage y, 10 s at 10 kHz".to_owned(),
+            0.0,
+            SYNTHETIC_DECIMATION,
+        )
+    } else {
+        let path = args
+            .file
+            .as_ref()
+            .expect("clap requires a file without --synthetic");
+        let record = read(path, &args.columns.read_options()?)?;
+        let warm_up = (args.search.warm_up / record.sample_period).round() as usize;
+        let smoothed = centred_moving_average(&record.output, args.search.smooth);
+        let offset = resolve_offset(&args.offset, &smoothed, warm_up)?;
+        (record, path.display().to_string(), offset, 1)
+    };
+    let options = args
+        .search
+        .options(record.sample_period, default_decimation);
+    let y = shifted(
+        &centred_moving_average(&record.output, args.search.smooth),
+        offset,
+    );
+    let u = &record.input;
+    println!("{}", describe(&record, &name));
+    println!(
+        "displacement offset {offset:.6} um; search on every {} sample(s) ({:.1} Hz); F on all {} scored samples",
+        options.decimation,
+        1.0 / (record.sample_period * options.decimation as f64),
+        y.len() - options.warm_up_samples
+    );
+    let bar = progress_bar(3 * options.starts, "fitting three models");
+    let tick = |_: &StartResult| bar.inc(1);
+    let comparison = compare_inverse_models(
+        &y,
+        u,
+        record.sample_period,
+        &options,
+        args.repetitions,
+        &tick,
+    )
+    .map_err(|e| format!("{name}: {e}"))?;
+    bar.finish_and_clear();
+
+    println!(
+        "\nbest of {} random starts each (seed {}); F = sum of squared voltage errors (eq. 7)",
+        options.starts, options.seed
+    );
+    println!(
+        "{:<44} {:>6} {:>14} {:>12} {:>12} {:>16}",
+        "model", "params", "F [V^2]", "RMS [V]", "max [V]", "eval [ns/sample]"
+    );
+    for s in &comparison.summaries {
+        println!(
+            "{:<44} {:>6} {:>14.6e} {:>12.6} {:>12.6} {:>16.2}",
+            s.name,
+            s.parameter_count,
+            s.objective,
+            s.rms_volts,
+            s.max_abs_volts,
+            s.evaluation.median_ns_per_sample
+        );
+    }
+    println!(
+        "\nevaluation time: median of {} streaming passes over the record (fastest..slowest):",
+        args.repetitions
+    );
+    for s in &comparison.summaries {
+        println!(
+            "  {:<44} {:.2}..{:.2} ns/sample",
+            s.name, s.evaluation.fastest_ns_per_sample, s.evaluation.slowest_ns_per_sample
+        );
+    }
+    println!("\nrandom starts of each model:");
+    let fits = [
+        &comparison.proposed.starts,
+        &comparison.traditional_six.starts,
+        &comparison.traditional_ten.starts,
+    ];
+    for (s, starts) in comparison.summaries.iter().zip(fits) {
+        println!("{}", s.name);
+        print_starts(starts, options.max_iterations);
+    }
+    let p = &comparison.proposed.params;
+    println!(
+        "\nproposed model: c = {:.6} um, u1max = {:.6} um, ws = {:?}, a = {:?}",
+        p.c, p.u1max, p.ws, p.a
+    );
+    Ok(())
+}

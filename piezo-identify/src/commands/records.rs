@@ -1,0 +1,119 @@
+//! `piezo-identify lab-record` and `xy200s-preset`: records and parameter sets written from the simulated stage and the printed tables.
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::arguments::seconds;
+use super::report::write_json;
+
+#[derive(Args)]
+pub(crate) struct LabRecordArgs {
+    /// Sample rate [Hz].
+    #[arg(long, default_value_t = 5000.0)]
+    pub(crate) rate: f64,
+    /// Command range: unipolar 0.5..9.5 V or bipolar -2..8 V.
+    #[arg(long, default_value = "unipolar", value_parser = ["unipolar", "bipolar"])]
+    pub(crate) drive: String,
+    /// Frequency of the sine [Hz].
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) frequency: f64,
+    /// Sweep the sine's amplitude from 100 % to 20 % and back over this many
+    /// seconds (0: a plain sine).
+    #[arg(long, default_value_t = 0.0, value_parser = seconds)]
+    pub(crate) sweep: f64,
+    /// Seconds at rest (0 V) before the step onto the sine.
+    #[arg(long, default_value_t = 2.0, value_parser = seconds)]
+    pub(crate) rest: f64,
+    /// Seconds of sine after the step.
+    #[arg(long, default_value_t = 8.0, value_parser = seconds)]
+    pub(crate) seconds: f64,
+    /// Sensor offset [um].
+    #[arg(long, default_value_t = -42.7, allow_negative_numbers = true)]
+    pub(crate) sensor_offset: f64,
+    /// Sensor noise [um RMS].
+    #[arg(long, default_value_t = 0.02)]
+    pub(crate) noise: f64,
+    /// Seed of the sensor noise.
+    #[arg(long, default_value_t = 7)]
+    pub(crate) noise_seed: u32,
+    /// The record file to write (comma-separated, with a header).
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+}
+
+#[derive(Args)]
+pub(crate) struct Xy200sPresetArgs {
+    /// Write the stage parameters (piezo_models::FlexureStageParams) here.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// Write the conversion of each printed model (fit RMS, scaling) here.
+    #[arg(long)]
+    pub(crate) report: Option<PathBuf>,
+}
+
+pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), String> {
+    use piezo_identify::lab_records::{Drive, Excitation, LabRecordSpec, lab_record};
+    let spec = LabRecordSpec {
+        sample_rate: args.rate,
+        drive: if args.drive == "bipolar" {
+            Drive::Bipolar
+        } else {
+            Drive::Unipolar
+        },
+        excitation: if args.sweep > 0.0 {
+            Excitation::SweptSine {
+                frequency: args.frequency,
+                envelope_period: args.sweep,
+            }
+        } else {
+            Excitation::Sine {
+                frequency: args.frequency,
+            }
+        },
+        rest_seconds: args.rest,
+        excitation_seconds: args.seconds,
+        sensor_offset_um: args.sensor_offset,
+        noise_rms_um: args.noise,
+        noise_seed: args.noise_seed,
+    };
+    let record = lab_record(&spec).map_err(|e| e.to_string())?;
+    let mut text = String::from("time_s,command_V,displacement_um\n");
+    for (n, (u, y)) in record.input.iter().zip(&record.output).enumerate() {
+        text.push_str(&format!("{},{u},{y}\n", n as f64 * record.sample_period));
+    }
+    std::fs::write(&args.out, text).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    println!(
+        "{}: {} samples at {} Hz (columns time_s, command_V, displacement_um)",
+        args.out.display(),
+        record.input.len(),
+        args.rate
+    );
+    Ok(())
+}
+
+pub(crate) fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), String> {
+    let preset = piezo_identify::xy200s::xy200s_preset().map_err(|e| e.to_string())?;
+    for model in &preset.models {
+        let p = &model.identified;
+        println!(
+            "{}: printed model spans {:.3} um on the 2 Hz 0..150 V run; rate-independent fit RMS {:.4} um ({:.3} %); output scaled by {:.4}",
+            model.name,
+            model.printed_span_um,
+            model.rms_um,
+            100.0 * model.rms_um / model.printed_span_um,
+            model.stroke_scale
+        );
+        println!(
+            "    p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}",
+            p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta
+        );
+    }
+    write_json(&args.out, &preset.stage)?;
+    println!("stage parameters written to {}", args.out.display());
+    if let Some(report) = &args.report {
+        write_json(report, &preset.models)?;
+        println!("conversion report written to {}", report.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,167 @@
+//! What the subcommands print and write: record and plan descriptions, error figures, JSON.
+
+use std::path::Path;
+
+use piezo_identify::data::ColumnsUsed;
+use piezo_identify::protocol::{ErrorFigures, Plan};
+use piezo_identify::{Record, StartResult};
+
+pub(crate) fn describe(record: &Record, path: &str) -> String {
+    format!(
+        "{path}: {} samples, {:.2} s at {:.6} Hz",
+        record.input.len(),
+        record.input.len() as f64 * record.sample_period,
+        1.0 / record.sample_period
+    )
+}
+
+/// "input column 0 \"volts\", output column 4, time column 2, tab-separated,
+/// header on line 1".
+pub(crate) fn describe_columns(columns: &ColumnsUsed) -> String {
+    let mut text = format!("input {}, output {}", columns.input, columns.output);
+    if let Some(time) = &columns.time {
+        text.push_str(&format!(", time {time}"));
+    }
+    text.push_str(&format!(", {}-separated", columns.separator.name()));
+    match columns.header_line {
+        Some(line) => text.push_str(&format!(", header on line {line}")),
+        None => text.push_str(", no header"),
+    }
+    text
+}
+
+/// Sample ranges as times, at most six of them.
+pub(crate) fn describe_ranges(ranges: &[std::ops::Range<usize>], dt: f64) -> String {
+    if ranges.is_empty() {
+        return "none".to_owned();
+    }
+    let mut parts: Vec<String> = ranges
+        .iter()
+        .take(6)
+        .map(|r| format!("{:.3}-{:.3} s", r.start as f64 * dt, r.end as f64 * dt))
+        .collect();
+    if ranges.len() > 6 {
+        parts.push(format!("and {} more", ranges.len() - 6));
+    }
+    parts.join(", ")
+}
+
+pub(crate) fn print_plan(plan: &Plan, name: &str) {
+    let dt = plan.sample_period;
+    if plan.has_scored_part() {
+        println!(
+            "fit part: {:.3}-{:.3} s (samples 0..{}); scored part: {:.3}-{:.3} s (samples {}..{}), the models' state carried over from the fit part",
+            0.0,
+            plan.fit_end as f64 * dt,
+            plan.fit_end,
+            plan.fit_end as f64 * dt,
+            plan.samples as f64 * dt,
+            plan.fit_end,
+            plan.samples
+        );
+    } else {
+        println!(
+            "fit part: the whole of {name} (give --split or --validate-from to score a part of it)"
+        );
+    }
+    let steps: Vec<String> = plan
+        .segments
+        .steps
+        .iter()
+        .map(|s| format!("{:.3} s", *s as f64 * dt))
+        .collect();
+    println!(
+        "rest segments: {}; voltage steps: {}",
+        describe_ranges(&plan.segments.rests, dt),
+        if steps.is_empty() {
+            "none".to_owned()
+        } else {
+            steps.join(", ")
+        }
+    );
+    let fitted = plan.fitted().iter().filter(|f| **f).count();
+    println!(
+        "left out of the fit (warm-up: settling {:.3} s and first loading; rests; settling after steps): {}; {fitted} of {} samples fitted",
+        plan.thresholds.settle_samples as f64 * dt,
+        describe_ranges(&plan.fit_excluded, dt),
+        plan.fit_end
+    );
+    if plan.has_scored_part() {
+        let scored = plan.scored().iter().filter(|s| **s).count();
+        println!(
+            "left out of the score (rests, settling after steps): {}; {scored} of {} samples scored",
+            describe_ranges(&plan.scored_excluded, dt),
+            plan.samples - plan.fit_end
+        );
+    }
+}
+
+/// How far the values at the scored samples reach beyond those at the
+/// fitted ones, as a fraction of the fitted span (0 inside).
+pub(crate) fn range_excess(values: &[f64], fitted: &[bool], scored: &[bool]) -> f64 {
+    let range = |flags: &[bool]| {
+        values
+            .iter()
+            .zip(flags)
+            .filter(|(_, f)| **f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (v, _)| {
+                (lo.min(*v), hi.max(*v))
+            })
+    };
+    let (fit_low, fit_high) = range(fitted);
+    let (low, high) = range(scored);
+    let span = fit_high - fit_low;
+    if span.is_nan() || span <= 0.0 || !low.is_finite() {
+        return 0.0;
+    }
+    ((fit_low - low).max(high - fit_high) / span).max(0.0)
+}
+
+pub(crate) fn print_extrapolation(what: &str, excess: f64) {
+    if excess > 0.01 {
+        println!(
+            "note: the scored {what} reaches {:.1} % of the fitted span beyond the fitted range; the models extrapolate there",
+            100.0 * excess
+        );
+    }
+}
+
+/// `flags` of the fit part, extended with `false` to `len` samples.
+pub(crate) fn pad(flags: &[bool], len: usize) -> Vec<bool> {
+    let mut padded = flags.to_vec();
+    padded.resize(len, false);
+    padded
+}
+
+pub(crate) fn print_figure(name: &str, e: &ErrorFigures, unit: &str) {
+    println!(
+        "  {name:<16} RMS {:.6} {unit} ({:.3} %), largest {:.6} {unit} ({:.3} %)",
+        e.rms, e.rms_percent, e.max_abs, e.max_percent
+    );
+}
+
+/// One line on the spread of the random starts.
+pub(crate) fn print_starts(starts: &[StartResult], max_iterations: u64) {
+    let mut objectives: Vec<f64> = starts.iter().map(|s| s.objective).collect();
+    objectives.sort_by(f64::total_cmp);
+    let mut iterations: Vec<u64> = starts.iter().map(|s| s.iterations).collect();
+    iterations.sort_unstable();
+    let best = objectives[0];
+    println!(
+        "  starts: F on the searched samples best {:.6e}, median {:.6e}, worst {:.6e}; {} of {} within 0.1 % of the best; \
+         iterations median {} ({} stopped at the cap of {max_iterations})",
+        best,
+        objectives[objectives.len() / 2],
+        objectives[objectives.len() - 1],
+        objectives.iter().filter(|f| **f <= best * 1.001).count(),
+        starts.len(),
+        iterations[iterations.len() / 2],
+        iterations.iter().filter(|i| **i >= max_iterations).count()
+    );
+}
+
+pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), String> {
+    let json = serde_json::to_string_pretty(value)
+        .map_err(|e| format!("cannot serialise {}: {e}", path.display()))?;
+    std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))
+}

@@ -1,0 +1,188 @@
+//! `piezo-identify stage` and `decoupling`: seed 000's identification of a whole stage and of one decoupling compensation (eq. 11, Table 2).
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use piezo_identify::decoupling::fit_compensation;
+use piezo_identify::stage::{StageConditions, identify_stage};
+use piezo_identify::{Column, ReadOptions, Sampling};
+
+use super::arguments::{SearchArgs, open_plant, read};
+use super::progress::progress_bar;
+
+#[derive(Args)]
+pub(crate) struct StageArgs {
+    /// The plant FMU to identify (FMI 2.0 co-simulation, inputs u1..u3 [V],
+    /// outputs s1..s3 [um], parameter L [mm]).
+    #[arg(long, default_value = "dist/FlexureStage.fmu")]
+    pub(crate) plant: PathBuf,
+    /// Parameter set the plant is loaded with (JSON by FMI name, as
+    /// `flexure-stage-parameters xy200s` writes); default its start values.
+    #[arg(long)]
+    pub(crate) plant_parameters: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) search: SearchArgs,
+    /// Scale of the single-axis runs relative to seed 000's (10 um sines,
+    /// x at half of a 12.74 um stroke for the rotation run, 10 um for an
+    /// unused cutoff): the stage's strokes over seed 000's.
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) scale: f64,
+    /// The stage does not rotate (its x actuators move together): no
+    /// rotation run, D4 stays zero.
+    #[arg(long)]
+    pub(crate) no_rotation: bool,
+    /// Demands of the held translations, "X,Y" in um: x during the y run, y
+    /// during the x run (seed 000 §5: 0,0). A stage whose commands cannot go
+    /// below 0 V cancels a coupling only from a held axis above its rest.
+    #[arg(long, default_value = "0,0", allow_hyphen_values = true)]
+    pub(crate) held: String,
+    /// Command range of the controller, "MIN,MAX" in V (seed 000's E-505:
+    /// -2,12).
+    #[arg(long, default_value = "-2,12", allow_hyphen_values = true)]
+    pub(crate) command_range: String,
+    /// Factor on the §3.2 PI gains for the single-axis runs (1 for seed
+    /// 000's stage; the inverse of the stage's um per volt relative to it).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) gain_scale: f64,
+    /// Rounds of decoupling runs: the second refits what the first leaves.
+    #[arg(long, default_value_t = 2)]
+    pub(crate) rounds: usize,
+    /// Write the controller preset (JSON) here.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// Write everything measured (fits, compensations per round) here as JSON.
+    #[arg(long)]
+    pub(crate) report: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub(crate) struct DecouplingArgs {
+    /// Record with a driving-demand column and a coupling-error column.
+    pub(crate) file: PathBuf,
+    /// Driving demand column (y_d or x_d [um], theta_zd [mdeg]): index or header.
+    #[arg(long, default_value = "0")]
+    pub(crate) demand: String,
+    /// Coupling error column (demand - measurement of the coupled channel) [um].
+    #[arg(long, default_value = "1")]
+    pub(crate) error: String,
+}
+
+/// Decimation of the plant's 10 kHz eq. (6) records for the search (500 Hz).
+pub(crate) const STAGE_DECIMATION: usize = 20;
+
+pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
+    if args.search.smooth != 0 {
+        return Err(
+            "--smooth: the stage's records are simulated and not smoothed; leave it out".to_owned(),
+        );
+    }
+    let plant = open_plant(&args.plant, args.plant_parameters.as_deref())?;
+    let options = args
+        .search
+        .options(piezo_identify::stage::SAMPLE_PERIOD, STAGE_DECIMATION);
+    let bar = progress_bar(options.starts, "");
+    let step = |message: &str| {
+        bar.reset();
+        bar.set_message(message.to_owned());
+        if bar.is_hidden() {
+            eprintln!("{message}");
+        }
+    };
+    let tick = |_: usize| bar.inc(1);
+    let range: Vec<f64> = args
+        .command_range
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .filter(|v| v.len() == 2 && v[0] < v[1])
+        .ok_or_else(|| {
+            format!(
+                "--command-range {}: give MIN,MAX in V with MIN < MAX, e.g. -2,12",
+                args.command_range
+            )
+        })?;
+    let held: Vec<f64> = args
+        .held
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .filter(|v| v.len() == 2)
+        .ok_or_else(|| format!("--held {}: give X,Y in um, e.g. 0,0", args.held))?;
+    for (name, value) in [("--gain-scale", args.gain_scale), ("--scale", args.scale)] {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(format!("{name} {value}: give a positive factor"));
+        }
+    }
+    let conditions = StageConditions {
+        gain_scale: args.gain_scale,
+        command_range: (range[0], range[1]),
+        held_um: [held[0], held[1]],
+        ..StageConditions::scaled(args.scale, !args.no_rotation)
+    };
+    let identified = identify_stage(&plant, &options, args.rounds, &conditions, &step, &tick)
+        .map_err(|e| format!("{}: {e}", args.plant.display()))?;
+    bar.finish_and_clear();
+    for (name, fit) in [("x", &identified.x_fit), ("y", &identified.y_fit)] {
+        println!(
+            "{name} inverse model on eq. (6): F = {:.6e} V^2, RMS {:.6} V, max {:.6} V",
+            fit.f, fit.rms_v, fit.max_v
+        );
+    }
+    for (name, rms) in &identified.bouc_wen_fits {
+        println!("{name} Bouc-Wen model on seed 001's 2 Hz sine: eq. (5) RMS {rms:.6} um");
+    }
+    for (round, compensations) in identified.rounds.iter().enumerate() {
+        println!("decoupling round {}:", round + 1);
+        for (i, c) in compensations.iter().enumerate() {
+            println!(
+                "  D{}: dk {:+.6}, db {:+.6} um, p {:+.4}, q {:+.4}; coupling span {:.4} um -> residual span {:.4} um (RMS {:.4})",
+                i + 1,
+                c.dk,
+                c.db,
+                c.p,
+                c.q,
+                c.error_span,
+                c.residual_span,
+                c.residual_rms
+            );
+        }
+    }
+    let json = serde_json::to_string_pretty(&identified.controller)
+        .map_err(|e| format!("cannot serialise the preset: {e}"))?;
+    std::fs::write(&args.out, json + "\n").map_err(|e| format!("{}: {e}", args.out.display()))?;
+    println!("controller preset written to {}", args.out.display());
+    if let Some(path) = &args.report {
+        let json = serde_json::to_string_pretty(&identified)
+            .map_err(|e| format!("cannot serialise the report: {e}"))?;
+        std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+        println!("identification report written to {}", path.display());
+    }
+    Ok(())
+}
+
+pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
+    let options = ReadOptions {
+        input: Column::parse(&args.demand),
+        output: Column::parse(&args.error),
+        // The fit is static: the sampling does not matter.
+        sampling: Sampling::Rate(1.0),
+    };
+    let record = read(&args.file, &options)?;
+    let c = fit_compensation(&record.input, &record.output)
+        .map_err(|e| format!("{}: {e}", args.file.display()))?;
+    println!(
+        "{}: {} pairs; D(f) = clamp({:.6}*f {:+.6}, q = {:.6}, p = {:.6})",
+        args.file.display(),
+        record.input.len(),
+        c.dk,
+        c.db,
+        c.q,
+        c.p
+    );
+    println!(
+        "coupling error span {:.6} um; residual span {:.6} um, RMS {:.6} um",
+        c.error_span, c.residual_span, c.residual_rms
+    );
+    Ok(())
+}
