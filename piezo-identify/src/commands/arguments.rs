@@ -1,4 +1,5 @@
-//! Arguments shared by the subcommands (columns, search, protocol) and the loading of records and plant FMUs.
+//! Arguments shared by the subcommands (columns, search, protocol) and the
+//! loading of records and plant FMUs.
 
 use std::path::{Path, PathBuf};
 

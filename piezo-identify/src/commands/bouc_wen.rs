@@ -1,4 +1,5 @@
-//! `piezo-identify bouc-wen`: the asymmetric Bouc-Wen model (seed 001 eq. 3-4) by GA-PSO and Levenberg-Marquardt.
+//! `piezo-identify bouc-wen`: the asymmetric Bouc-Wen model (seed 001 eq. 3-4)
+//! by GA-PSO and Levenberg-Marquardt.
 
 use std::path::PathBuf;
 

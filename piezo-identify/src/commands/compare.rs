@@ -1,4 +1,5 @@
-//! `piezo-identify compare`: seed 000's model comparison (F of eq. 7 and evaluation time).
+//! `piezo-identify compare`: seed 000's model comparison (F of eq. 7 and
+//! evaluation time).
 
 use std::path::PathBuf;
 

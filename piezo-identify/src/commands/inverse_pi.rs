@@ -1,4 +1,5 @@
-//! `piezo-identify inverse-pi`: the modified inverse P-I model (seed 000 eq. 3-5) with its baselines.
+//! `piezo-identify inverse-pi`: the modified inverse P-I model (seed 000 eq.
+//! 3-5) with its baselines.
 
 use std::path::PathBuf;
 

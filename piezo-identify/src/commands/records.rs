@@ -1,4 +1,5 @@
-//! `piezo-identify lab-record` and `xy200s-preset`: records and parameter sets written from the simulated stage and the printed tables.
+//! `piezo-identify lab-record` and `xy200s-preset`: records and parameter sets
+//! written from the simulated stage and the printed tables.
 
 use std::path::PathBuf;
 

@@ -1,4 +1,5 @@
-//! What the subcommands print and write: record and plan descriptions, error figures, JSON.
+//! What the subcommands print and write: record and plan descriptions, error
+//! figures, JSON.
 
 use std::path::Path;
 

@@ -1,4 +1,5 @@
-//! `piezo-identify stage` and `decoupling`: seed 000's identification of a whole stage and of one decoupling compensation (eq. 11, Table 2).
+//! `piezo-identify stage` and `decoupling`: seed 000's identification of a
+//! whole stage and of one decoupling compensation (eq. 11, Table 2).
 
 use std::path::PathBuf;
 
