@@ -67,9 +67,11 @@ PLANT_PARAMETERS = {"noise.enabled": True, "noise.seed": 2024}
 ALL_FEEDBACK = {"feedback_x": True, "feedback_y": True, "feedback_theta": True}
 
 # The two methods, selected by PiezoController's Integer parameters.
-SEED_000_METHOD = {"hysteresis_model": 1, "decoupling_model": 1}
-SEED_001_METHOD = {"hysteresis_model": 2, "decoupling_model": 2}
-METHODS = {"seed000": SEED_000_METHOD, "seed001": SEED_001_METHOD}
+#: Modified inverse P-I feedforward with piecewise-linear decoupling (seed 000).
+INVERSE_PI_PIECEWISE = {"hysteresis_model": 1, "decoupling_model": 1}
+#: Inverse asymmetric Bouc-Wen feedforward with model-based decoupling (seed 001).
+INVERSE_BOUC_WEN_MODEL_BASED = {"hysteresis_model": 2, "decoupling_model": 2}
+METHODS = {"inverse_pi_piecewise": INVERSE_PI_PIECEWISE, "inverse_bouc_wen_model_based": INVERSE_BOUC_WEN_MODEL_BASED}
 # Seed 001 §5.2-5.3: 2 Hz sines, feedforward only; linearity at 1.25 um (x)
 # and 2 um (y) amplitude, coupling with a 2 um sine on one axis.
 S001_HZ = 2.0

@@ -27,7 +27,7 @@ def load(name: str) -> dict:
 @pytest.mark.parametrize(
     "fmu, preset",
     [
-        ("FlexureStage", "FlexureStage.seed000.json"),
+        ("FlexureStage", "FlexureStage.3dof.json"),
         ("PiezoController", "PiezoController.stage.json"),
     ],
 )
