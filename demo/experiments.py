@@ -44,22 +44,42 @@ from pathlib import Path
 
 import numpy as np
 
-APPROACH_TIME = 0.5
-SETTLE_TIME = 0.5
+#: The conditions shared with piezo-identify's `stage` procedure, which fits
+#: the decoupling on these same single-axis runs: one file, read by both.
+CONDITIONS_FILE = Path(__file__).resolve().parent / "experiment_conditions.json"
+
+
+def _load_conditions(path: Path = CONDITIONS_FILE) -> dict:
+    conditions = json.loads(path.read_text())
+    shapes = (conditions["approach"]["shape"], conditions["single_axis"]["sine_start"])
+    if shapes != ("raised_cosine", "bottom"):
+        raise ValueError(f"{path}: approach shape and sine start {shapes}: only "
+                         "('raised_cosine', 'bottom') are implemented")
+    return conditions
+
+
+_CONDITIONS = _load_conditions()
+_SINGLE_AXIS = _CONDITIONS["single_axis"]
+_HOMES = _CONDITIONS["homes_um"]
+
+APPROACH_TIME = _CONDITIONS["approach"]["time_s"]
+SETTLE_TIME = _CONDITIONS["approach"]["settle_time_s"]
 START = APPROACH_TIME + SETTLE_TIME
-SINE_HZ = 1.0
+SINE_HZ = _SINGLE_AXIS["sine_frequency_hz"]
 #: Single-axis sines: cycles run before the two that are measured. The
 #: plant's Bouc-Wen minor loops need about four cycles to settle when an
 #: actuator starts cycling about a new point (the offset left shrinks by
 #: about 0.35 per cycle): the paper's steady figures are taken after three.
-SETTLING_CYCLES = 3
-MEASURED_CYCLES = 2
+SETTLING_CYCLES = _SINGLE_AXIS["settling_cycles"]
+MEASURED_CYCLES = _SINGLE_AXIS["measured_cycles"]
 #: Peak-to-peak of the x and y sines, from 0 (seed 000 §5: 10 um).
-TRANSLATION_SPAN_UM = 10.0
+TRANSLATION_SPAN_UM = _SINGLE_AXIS["translation_span_um"]
+#: Demands of the held translations (x during a y run, y during an x run).
+HELD_UM = (_SINGLE_AXIS["held_um"]["x"], _SINGLE_AXIS["held_um"]["y"])
 #: x demand whenever the platform rotates: half the x stroke (§2: 12.74 um),
 #: the home §3.2 defines for rotation.
-ROTATION_X_UM = 12.74 / 2.0
-ROTATION_AMPLITUDE_DEG = 9.2e-3
+ROTATION_X_UM = _HOMES["rotation"]["x"]
+ROTATION_AMPLITUDE_DEG = _SINGLE_AXIS["rotation_amplitude_deg"]
 ROTATION_AMPLITUDE_RAD = math.radians(ROTATION_AMPLITUDE_DEG)
 #: Plant parameters of every run: sensor noise on, seeded (LK-H050 class).
 PLANT_PARAMETERS = {"noise.enabled": True, "noise.seed": 2024}
@@ -143,15 +163,16 @@ class Experiment:
 
 
 def single_axis(axis: str, frequency: float = SINE_HZ, span: float = TRANSLATION_SPAN_UM,
-                held: float = 0.0, rotation_rad: float = ROTATION_AMPLITUDE_RAD):
+                held: float | None = None, rotation_rad: float = ROTATION_AMPLITUDE_RAD):
     """Seed 000 §5's single-axis run: the driven axis's sine from rest, the
-    other translation demanded at `held` (the paper: 0); a rotation runs about
-    x at half stroke."""
+    other translation demanded at `held` (default HELD_UM, the paper's 0); a
+    rotation runs about x at half stroke."""
     if axis == "y":
-        return pose(x=held, y=sine_from(0.0, span, frequency))
+        return pose(x=HELD_UM[0] if held is None else held, y=sine_from(0.0, span, frequency))
     if axis == "x":
-        return pose(x=sine_from(0.0, span, frequency), y=held)
-    return pose(x=ROTATION_X_UM, y=held, theta=rotation_sine(rotation_rad, frequency))
+        return pose(x=sine_from(0.0, span, frequency), y=HELD_UM[1] if held is None else held)
+    return pose(x=ROTATION_X_UM, y=0.0 if held is None else held,
+                theta=rotation_sine(rotation_rad, frequency))
 
 
 def single_axis_timing(frequency: float = SINE_HZ) -> tuple[float, float]:
@@ -275,9 +296,9 @@ CONDITIONS = [
 
 #: A pose in the middle of both strokes, x at its rotation home: where the
 #: packaged closed loop (demo.systems) parks the stage.
-MID_STROKE = (ROTATION_X_UM, 12.22 / 2.0, 0.0)
+MID_STROKE = (_HOMES["mid_stroke"]["x"], _HOMES["mid_stroke"]["y"], 0.0)
 #: Seed 001's single-axis homes on FlexureStage (its runs about a home).
-S001_HOME = (8.0, 7.0, 0.0)
+S001_HOME = (_HOMES["single_axis_flexure"]["x"], _HOMES["single_axis_flexure"]["y"], 0.0)
 
 # The stages seed 001's experiments run on: FlexureStage as it starts, and
 # its XY200S parameter set with the controller identified on it (both sets
@@ -286,7 +307,7 @@ S001_HOME = (8.0, 7.0, 0.0)
 S001_STAGES = {
     "flexure": {"home": S001_HOME, "plant": None, "controller": None},
     "xy200s": {
-        "home": (90.0, 85.0, 0.0),
+        "home": (_HOMES["single_axis_xy200s"]["x"], _HOMES["single_axis_xy200s"]["y"], 0.0),
         "plant": "FlexureStage.xy200s.json",
         "controller": "PiezoController.xy200s.json",
     },

@@ -15,20 +15,17 @@ import numpy as np
 import pytest
 
 from demo.cosim import Fmu, simulate
+from demo.experiments import S001_HOME, S001_HZ, pose, trajectory
 from tests.conftest import REPO_ROOT
 from tests.docs_figures import doc_rows, stale_rows, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
-HOME_X, HOME_Y = 8.0, 7.0
+HOME_X, HOME_Y, _ = S001_HOME
 
-
-def reference(t):
-    """Raised-cosine approach to the home over 0.5 s, hold, then from t = 1 s
-    the 2 Hz, 2 um sine on y."""
-    approach = np.where(t < 0.5, 0.5 * (1 - np.cos(np.pi * np.minimum(t, 0.5) / 0.5)), 1.0)
-    sine = np.where(t > 1.0, 2.0 * np.sin(2 * np.pi * 2.0 * (t - 1.0)), 0.0)
-    return np.column_stack((HOME_X * approach, HOME_Y * approach + sine, np.zeros_like(t)))
+#: Raised-cosine approach to the home, hold, then the 2 Hz, 2 um sine on y
+#: (the demo's approach and timing, demo/experiment_conditions.json).
+reference = trajectory(pose(x=HOME_X, y=lambda tau: HOME_Y + 2.0 * np.sin(2 * np.pi * S001_HZ * tau)))
 
 
 def seed001_parameters(decoupling: bool) -> dict:
