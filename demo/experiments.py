@@ -253,7 +253,7 @@ def experiments() -> list[Experiment]:
                 f"{axis} sine, PI on all axes{' + decoupling' if decoupling else ''}",
                 "Table 3 (feedback on all axes)", single_axis(axis), *single_axis_timing(),
                 {**ALL_FEEDBACK, "decoupling": decoupling}, axis))
-    runs += seed001_experiments()
+    runs += feedforward_xy_experiments()
     return runs
 
 
@@ -329,7 +329,7 @@ def s001_key(stage: str, method: str, rest: str) -> str:
     return f"{prefix}_{method}_{rest}"
 
 
-def seed001_experiments() -> list[Experiment]:
+def feedforward_xy_experiments() -> list[Experiment]:
     """Seed 001 §5.2-5.3 on both stages, by both methods: feedforward only
     (no feedback, as seed 001), 2 Hz sines about the stage's single-axis
     home; for the linearity runs the other axis is demanded at 0 (seed 001:

@@ -123,7 +123,7 @@ def _coupling(results: dict, stage: str, method: str, driven: str) -> tuple[floa
     return a, b, 100.0 * (1.0 - b / a)
 
 
-def seed001_section(results: dict) -> list[str]:
+def feedforward_xy_section(results: dict) -> list[str]:
     """Seed 001's experiments beside its figures, and both methods side by
     side on both stages."""
     lines = [
@@ -237,7 +237,7 @@ def write_report(path: Path, results: dict, context: dict) -> None:
         a = results[f"allfb_{axis}_coupled"][key]
         b = results[f"allfb_{axis}_decoupled"][key]
         lines.append(f"| {name} | {a:.4f} um | {b:.4f} um |")
-    lines += seed001_section(results)
+    lines += feedforward_xy_section(results)
     f8a, f8b = results["fig8_y_10hz_ff"], results["fig8_y_10hz_ffpi"]
     lines += [
         "",
