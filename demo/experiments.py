@@ -261,14 +261,18 @@ def experiments() -> list[Experiment]:
 CONDITIONS = [
     "Demands as seed 000 prints them, absolute from the de-energized rest (every stack at "
     "0 V on its working loop, every reading 0): a single-axis sine drives its axis from 0 to "
-    "10 um (y = 5 - 5 cos 2 pi t) with the other axes demanded at 0; a rotation runs "
-    "+-9.2e-3 deg about x at half its stroke (6.37 um), the home §3.2 defines for rotation, "
+    f"{TRANSLATION_SPAN_UM:g} um (y = {TRANSLATION_SPAN_UM / 2:g} - {TRANSLATION_SPAN_UM / 2:g} "
+    "cos 2 pi t) with the other axes demanded at 0; a rotation runs "
+    f"+-{ROTATION_AMPLITUDE_DEG:g} deg about x at half its stroke ({ROTATION_X_UM:g} um), the "
+    "home §3.2 defines for rotation, "
     "y at 0. The stacks go below 0 V where the demand needs it: the PI E-505 takes -2..12 V "
     "(-20..120 V at the stacks), the controller's command range.",
-    "Single-axis sines at 1 Hz (seed 000 does not print the frequency of Fig. 6-7; 1 Hz is "
+    f"Single-axis sines at {SINE_HZ:g} Hz (seed 000 does not print the frequency of Fig. 6-7; "
+    f"{SINE_HZ:g} Hz is "
     "the fastest component of its identification signal eq. (6) and Fig. 8's 'higher "
     "frequency' is 10 Hz). Each run starts at rest; the reference reaches the trajectory's "
-    "start by a raised cosine over 0.5 s and holds 0.5 s; t = 0 in the figures is the start "
+    f"start by a raised cosine over {APPROACH_TIME:g} s and holds {SETTLE_TIME:g} s; t = 0 in "
+    "the figures is the start "
     "of the trajectory.",
     f"Single-axis figures are taken over {MEASURED_CYCLES} cycles after {SETTLING_CYCLES} "
     "settling cycles: the plant's Bouc-Wen minor loops need about four cycles to settle when "
