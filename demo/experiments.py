@@ -361,25 +361,28 @@ def feedforward_xy_experiments() -> list[Experiment]:
             return columns
 
         for method, selectors in METHODS.items():
+            def run(rest, title, figure, path, axis, decoupling, method=method,
+                    selectors=selectors):
+                return Experiment(
+                    s001_key(stage, method, rest), f"{title} ({method}, {stage})", figure,
+                    path, *single_axis_timing(S001_HZ),
+                    {**base, **NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis,
+                    plant=plant)
+
             for axis in ("x", "y"):
                 amplitude = S001_LINEARITY_UM[axis]
-                runs.append(Experiment(
-                    s001_key(stage, method, f"linearity_{axis}"),
-                    f"{axis} 2 Hz sine of {amplitude} um, feedforward only ({method}'s method, "
-                    f"{stage})",
-                    "seed 001 §5.2", path(axis, amplitude, True), *single_axis_timing(S001_HZ),
-                    {**base, **NO_FEEDBACK, **selectors, "decoupling": False}, axis,
-                    plant=plant))
+                runs.append(run(
+                    f"linearity_{axis}",
+                    f"{axis} {S001_HZ:g} Hz sine of {amplitude} um, feedforward only",
+                    "seed 001 §5.2", path(axis, amplitude, True), axis, False))
             for axis in ("y", "x"):
                 for decoupling in (False, True):
                     tag = "decoupled" if decoupling else "coupled"
-                    runs.append(Experiment(
-                        s001_key(stage, method, f"coupling_{axis}_{tag}"),
-                        f"{axis} 2 Hz sine of 2 um, other axis held, feedforward only"
-                        f"{' + decoupling' if decoupling else ''} ({method}'s method, {stage})",
-                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), *single_axis_timing(S001_HZ),
-                        {**base, **NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis,
-                        plant=plant))
+                    runs.append(run(
+                        f"coupling_{axis}_{tag}",
+                        f"{axis} {S001_HZ:g} Hz sine of {S001_COUPLING_UM:g} um, other axis held, "
+                        f"feedforward only{' + decoupling' if decoupling else ''}",
+                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), axis, decoupling))
     return runs
 
 
