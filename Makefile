@@ -117,17 +117,17 @@ rust-test: system-deps
 systems: fmus venv
 	$(PY) -m demo.systems --dist $(DIST)
 
-python-test: fmus venv systems wine master
+python-test: fmus venv systems wine master fingerprints-tool
 	$(PY) -m pytest tests -q -rP
 
 test: lint rust-test python-test
 
 # The main job: seed 000's experiments in closed loop (CSV, PNG, report.md in
 # out/demo), then the plant's fingerprints beside the paper (out/plant).
-demo: fmus venv systems
+demo: fmus venv systems fingerprints-tool
 	$(PY) -m demo --out out/demo
-	$(PY) tests/fingerprint_report.py --fmu $(DIST)/FlexureStage.fmu --out out/plant
-	@echo "report: out/demo/report.md (plant: out/plant/index.html)"
+	$(RELEASE)/plant-fingerprints --fmu $(DIST)/FlexureStage.fmu --out out/plant
+	@echo "report: out/demo/report.md (plant: out/plant/report.md)"
 
 # Re-identifies the controller on the plant (seed 000 §3.1 and §4) and bakes
 # the result into PiezoController's start values. Run after a plant change.
@@ -174,6 +174,13 @@ identify: system-deps
 	mkdir -p out/identify
 	$(RELEASE)/piezo-identify compare --synthetic | tee out/identify/compare.txt
 	piezo-identify/benches/figures.sh $(RELEASE)/piezo-identify | tee out/identify/figures.md
+
+# The plant's calibration fingerprints measured through its FMU (procedures
+# and targets: piezo-models/src/fingerprint.rs); make demo and
+# tests/test_plant_fingerprints.py run it.
+.PHONY: fingerprints-tool
+fingerprints-tool: system-deps
+	$(CARGO) build --release --locked -p piezo-identify --bin plant-fingerprints
 
 # The co-simulation master (piezo-cosim/), shipped inside the Python package
 # as demo/bin/piezo-cosim: `python -m demo.master` and the sweeps' dask

@@ -21,15 +21,13 @@ of the amplifier and the structure is the feedback's job.
 
 from __future__ import annotations
 
-import ctypes
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
+
+from demo.fmu import Fmu, Instance, RealPort  # noqa: F401 (the demo's and tests' import path)
+
 
 #: The closed loop's wiring, the one table every master that builds the loop
 #: reads: this module's fmpy master, the SSP package and the container FMU that
@@ -53,102 +51,6 @@ CONTROLLER_OUTPUTS = (
 )
 #: The seed 000 controller's sample rate (§2).
 SAMPLE_PERIOD = 1e-4
-
-
-class Fmu:
-    """An FMU extracted once, instantiated as often as needed."""
-
-    def __init__(self, path: str | Path):
-        self.path = str(path)
-        self.description = read_model_description(self.path)
-        self.unzipdir = extract(self.path, unzipdir=tempfile.mkdtemp(prefix="cosim-"))
-        self.variables = {v.name: v for v in self.description.modelVariables}
-
-    def vr(self, name: str) -> int:
-        try:
-            return self.variables[name].valueReference
-        except KeyError:
-            raise KeyError(f"{Path(self.path).name} has no variable {name!r}") from None
-
-    def instance(self, name: str, parameters: dict | None = None) -> "Slave":
-        """Instantiates, applies `parameters` (by name, any FMI type) in
-        initialization mode, and leaves the instance ready to step at t = 0."""
-        d = self.description
-        slave = FMU2Slave(
-            guid=d.guid,
-            unzipDirectory=self.unzipdir,
-            modelIdentifier=d.coSimulation.modelIdentifier,
-            instanceName=name,
-        )
-        slave.instantiate()
-        try:
-            slave.setupExperiment(startTime=0.0)
-            slave.enterInitializationMode()
-            for key, value in (parameters or {}).items():
-                variable = self.variables.get(key)
-                if variable is None:
-                    raise KeyError(f"{Path(self.path).name} has no parameter {key!r}")
-                if variable.type == "Boolean":
-                    slave.setBoolean([variable.valueReference], [bool(value)])
-                elif variable.type == "Integer":
-                    slave.setInteger([variable.valueReference], [int(value)])
-                else:
-                    slave.setReal([variable.valueReference], [float(value)])
-            slave.exitInitializationMode()
-        except BaseException:
-            slave.freeInstance()
-            raise
-        return Slave(self, slave)
-
-    def close(self) -> None:
-        shutil.rmtree(self.unzipdir, ignore_errors=True)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-
-class Slave:
-    """An initialized instance with preallocated value-reference and value
-    buffers for the names it exchanges at every step (fmpy's convenience
-    setters build new ctypes arrays on every call)."""
-
-    def __init__(self, fmu: Fmu, slave: FMU2Slave):
-        self.fmu = fmu
-        self.slave = slave
-
-    def real_port(self, names) -> "RealPort":
-        return RealPort(self.slave, [self.fmu.vr(n) for n in names])
-
-    def do_step(self, t: float, h: float) -> None:
-        self.slave.fmi2DoStep(self.slave.component, t, h, 1)
-
-    def free(self) -> None:
-        try:
-            self.slave.terminate()
-        finally:
-            self.slave.freeInstance()
-
-
-class RealPort:
-    """A fixed list of Real variables read or written together."""
-
-    def __init__(self, slave: FMU2Slave, vrs: list[int]):
-        self.slave = slave
-        self.n = len(vrs)
-        self.vrs = (fmi2ValueReference * self.n)(*vrs)
-        self.values = (fmi2Real * self.n)()
-        self.view = np.ctypeslib.as_array(self.values)
-
-    def get(self) -> np.ndarray:
-        self.slave.fmi2GetReal(self.slave.component, self.vrs, self.n, self.values)
-        return self.view
-
-    def set(self, values) -> None:
-        self.view[:] = values
-        self.slave.fmi2SetReal(self.slave.component, self.vrs, self.n, self.values)
 
 
 @dataclass
@@ -243,15 +145,15 @@ def simulate(
             controller_inputs[:n_references] = ahead[k]
             controller_inputs[n_references:] = plant_log[k, sensors]
             ctrl_in.set(controller_inputs)
-            p.do_step(t[k], step_sizes[k])
-            c.do_step(t[k], step_sizes[k])
+            p.do_step_at(t[k], step_sizes[k])
+            c.do_step_at(t[k], step_sizes[k])
             if progress is not None and k % 1000 == 999:
                 progress(1000)
         if progress is not None:
             progress(steps % 1000)
     finally:
-        c.free()
-        p.free()
+        c.free(terminate=True)
+        p.free(terminate=True)
     return Run(
         t=t,
         references=references,

@@ -44,22 +44,42 @@ from pathlib import Path
 
 import numpy as np
 
-APPROACH_TIME = 0.5
-SETTLE_TIME = 0.5
+#: The conditions shared with piezo-identify's `stage` procedure, which fits
+#: the decoupling on these same single-axis runs: one file, read by both.
+CONDITIONS_FILE = Path(__file__).resolve().parent / "experiment_conditions.json"
+
+
+def _load_conditions(path: Path = CONDITIONS_FILE) -> dict:
+    conditions = json.loads(path.read_text())
+    shapes = (conditions["approach"]["shape"], conditions["single_axis"]["sine_start"])
+    if shapes != ("raised_cosine", "bottom"):
+        raise ValueError(f"{path}: approach shape and sine start {shapes}: only "
+                         "('raised_cosine', 'bottom') are implemented")
+    return conditions
+
+
+_CONDITIONS = _load_conditions()
+_SINGLE_AXIS = _CONDITIONS["single_axis"]
+_HOMES = _CONDITIONS["homes_um"]
+
+APPROACH_TIME = _CONDITIONS["approach"]["time_s"]
+SETTLE_TIME = _CONDITIONS["approach"]["settle_time_s"]
 START = APPROACH_TIME + SETTLE_TIME
-SINE_HZ = 1.0
+SINE_HZ = _SINGLE_AXIS["sine_frequency_hz"]
 #: Single-axis sines: cycles run before the two that are measured. The
 #: plant's Bouc-Wen minor loops need about four cycles to settle when an
 #: actuator starts cycling about a new point (the offset left shrinks by
 #: about 0.35 per cycle): the paper's steady figures are taken after three.
-SETTLING_CYCLES = 3
-MEASURED_CYCLES = 2
+SETTLING_CYCLES = _SINGLE_AXIS["settling_cycles"]
+MEASURED_CYCLES = _SINGLE_AXIS["measured_cycles"]
 #: Peak-to-peak of the x and y sines, from 0 (seed 000 §5: 10 um).
-TRANSLATION_SPAN_UM = 10.0
+TRANSLATION_SPAN_UM = _SINGLE_AXIS["translation_span_um"]
+#: Demands of the held translations (x during a y run, y during an x run).
+HELD_UM = (_SINGLE_AXIS["held_um"]["x"], _SINGLE_AXIS["held_um"]["y"])
 #: x demand whenever the platform rotates: half the x stroke (§2: 12.74 um),
 #: the home §3.2 defines for rotation.
-ROTATION_X_UM = 12.74 / 2.0
-ROTATION_AMPLITUDE_DEG = 9.2e-3
+ROTATION_X_UM = _HOMES["rotation"]["x"]
+ROTATION_AMPLITUDE_DEG = _SINGLE_AXIS["rotation_amplitude_deg"]
 ROTATION_AMPLITUDE_RAD = math.radians(ROTATION_AMPLITUDE_DEG)
 #: Plant parameters of every run: sensor noise on, seeded (LK-H050 class).
 PLANT_PARAMETERS = {"noise.enabled": True, "noise.seed": 2024}
@@ -67,9 +87,11 @@ PLANT_PARAMETERS = {"noise.enabled": True, "noise.seed": 2024}
 ALL_FEEDBACK = {"feedback_x": True, "feedback_y": True, "feedback_theta": True}
 
 # The two methods, selected by PiezoController's Integer parameters.
-SEED_000_METHOD = {"hysteresis_model": 1, "decoupling_model": 1}
-SEED_001_METHOD = {"hysteresis_model": 2, "decoupling_model": 2}
-METHODS = {"seed000": SEED_000_METHOD, "seed001": SEED_001_METHOD}
+#: Modified inverse P-I feedforward with piecewise-linear decoupling (seed 000).
+INVERSE_PI_PIECEWISE = {"hysteresis_model": 1, "decoupling_model": 1}
+#: Inverse asymmetric Bouc-Wen feedforward with model-based decoupling (seed 001).
+INVERSE_BOUC_WEN_MODEL_BASED = {"hysteresis_model": 2, "decoupling_model": 2}
+METHODS = {"inverse_pi_piecewise": INVERSE_PI_PIECEWISE, "inverse_bouc_wen_model_based": INVERSE_BOUC_WEN_MODEL_BASED}
 # Seed 001 §5.2-5.3: 2 Hz sines, feedforward only; linearity at 1.25 um (x)
 # and 2 um (y) amplitude, coupling with a 2 um sine on one axis.
 S001_HZ = 2.0
@@ -141,15 +163,16 @@ class Experiment:
 
 
 def single_axis(axis: str, frequency: float = SINE_HZ, span: float = TRANSLATION_SPAN_UM,
-                held: float = 0.0, rotation_rad: float = ROTATION_AMPLITUDE_RAD):
+                held: float | None = None, rotation_rad: float = ROTATION_AMPLITUDE_RAD):
     """Seed 000 §5's single-axis run: the driven axis's sine from rest, the
-    other translation demanded at `held` (the paper: 0); a rotation runs about
-    x at half stroke."""
+    other translation demanded at `held` (default HELD_UM, the paper's 0); a
+    rotation runs about x at half stroke."""
     if axis == "y":
-        return pose(x=held, y=sine_from(0.0, span, frequency))
+        return pose(x=HELD_UM[0] if held is None else held, y=sine_from(0.0, span, frequency))
     if axis == "x":
-        return pose(x=sine_from(0.0, span, frequency), y=held)
-    return pose(x=ROTATION_X_UM, y=held, theta=rotation_sine(rotation_rad, frequency))
+        return pose(x=sine_from(0.0, span, frequency), y=HELD_UM[1] if held is None else held)
+    return pose(x=ROTATION_X_UM, y=0.0 if held is None else held,
+                theta=rotation_sine(rotation_rad, frequency))
 
 
 def single_axis_timing(frequency: float = SINE_HZ) -> tuple[float, float]:
@@ -230,7 +253,7 @@ def experiments() -> list[Experiment]:
                 f"{axis} sine, PI on all axes{' + decoupling' if decoupling else ''}",
                 "Table 3 (feedback on all axes)", single_axis(axis), *single_axis_timing(),
                 {**ALL_FEEDBACK, "decoupling": decoupling}, axis))
-    runs += seed001_experiments()
+    runs += feedforward_xy_experiments()
     return runs
 
 
@@ -238,14 +261,18 @@ def experiments() -> list[Experiment]:
 CONDITIONS = [
     "Demands as seed 000 prints them, absolute from the de-energized rest (every stack at "
     "0 V on its working loop, every reading 0): a single-axis sine drives its axis from 0 to "
-    "10 um (y = 5 - 5 cos 2 pi t) with the other axes demanded at 0; a rotation runs "
-    "+-9.2e-3 deg about x at half its stroke (6.37 um), the home §3.2 defines for rotation, "
+    f"{TRANSLATION_SPAN_UM:g} um (y = {TRANSLATION_SPAN_UM / 2:g} - {TRANSLATION_SPAN_UM / 2:g} "
+    "cos 2 pi t) with the other axes demanded at 0; a rotation runs "
+    f"+-{ROTATION_AMPLITUDE_DEG:g} deg about x at half its stroke ({ROTATION_X_UM:g} um), the "
+    "home §3.2 defines for rotation, "
     "y at 0. The stacks go below 0 V where the demand needs it: the PI E-505 takes -2..12 V "
     "(-20..120 V at the stacks), the controller's command range.",
-    "Single-axis sines at 1 Hz (seed 000 does not print the frequency of Fig. 6-7; 1 Hz is "
+    f"Single-axis sines at {SINE_HZ:g} Hz (seed 000 does not print the frequency of Fig. 6-7; "
+    f"{SINE_HZ:g} Hz is "
     "the fastest component of its identification signal eq. (6) and Fig. 8's 'higher "
     "frequency' is 10 Hz). Each run starts at rest; the reference reaches the trajectory's "
-    "start by a raised cosine over 0.5 s and holds 0.5 s; t = 0 in the figures is the start "
+    f"start by a raised cosine over {APPROACH_TIME:g} s and holds {SETTLE_TIME:g} s; t = 0 in "
+    "the figures is the start "
     "of the trajectory.",
     f"Single-axis figures are taken over {MEASURED_CYCLES} cycles after {SETTLING_CYCLES} "
     "settling cycles: the plant's Bouc-Wen minor loops need about four cycles to settle when "
@@ -273,9 +300,9 @@ CONDITIONS = [
 
 #: A pose in the middle of both strokes, x at its rotation home: where the
 #: packaged closed loop (demo.systems) parks the stage.
-MID_STROKE = (ROTATION_X_UM, 12.22 / 2.0, 0.0)
+MID_STROKE = (_HOMES["mid_stroke"]["x"], _HOMES["mid_stroke"]["y"], 0.0)
 #: Seed 001's single-axis homes on FlexureStage (its runs about a home).
-S001_HOME = (8.0, 7.0, 0.0)
+S001_HOME = (_HOMES["single_axis_flexure"]["x"], _HOMES["single_axis_flexure"]["y"], 0.0)
 
 # The stages seed 001's experiments run on: FlexureStage as it starts, and
 # its XY200S parameter set with the controller identified on it (both sets
@@ -284,7 +311,7 @@ S001_HOME = (8.0, 7.0, 0.0)
 S001_STAGES = {
     "flexure": {"home": S001_HOME, "plant": None, "controller": None},
     "xy200s": {
-        "home": (90.0, 85.0, 0.0),
+        "home": (_HOMES["single_axis_xy200s"]["x"], _HOMES["single_axis_xy200s"]["y"], 0.0),
         "plant": "FlexureStage.xy200s.json",
         "controller": "PiezoController.xy200s.json",
     },
@@ -306,7 +333,7 @@ def s001_key(stage: str, method: str, rest: str) -> str:
     return f"{prefix}_{method}_{rest}"
 
 
-def seed001_experiments() -> list[Experiment]:
+def feedforward_xy_experiments() -> list[Experiment]:
     """Seed 001 §5.2-5.3 on both stages, by both methods: feedforward only
     (no feedback, as seed 001), 2 Hz sines about the stage's single-axis
     home; for the linearity runs the other axis is demanded at 0 (seed 001:
@@ -334,25 +361,28 @@ def seed001_experiments() -> list[Experiment]:
             return columns
 
         for method, selectors in METHODS.items():
+            def run(rest, title, figure, path, axis, decoupling, method=method,
+                    selectors=selectors):
+                return Experiment(
+                    s001_key(stage, method, rest), f"{title} ({method}, {stage})", figure,
+                    path, *single_axis_timing(S001_HZ),
+                    {**base, **NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis,
+                    plant=plant)
+
             for axis in ("x", "y"):
                 amplitude = S001_LINEARITY_UM[axis]
-                runs.append(Experiment(
-                    s001_key(stage, method, f"linearity_{axis}"),
-                    f"{axis} 2 Hz sine of {amplitude} um, feedforward only ({method}'s method, "
-                    f"{stage})",
-                    "seed 001 §5.2", path(axis, amplitude, True), *single_axis_timing(S001_HZ),
-                    {**base, **NO_FEEDBACK, **selectors, "decoupling": False}, axis,
-                    plant=plant))
+                runs.append(run(
+                    f"linearity_{axis}",
+                    f"{axis} {S001_HZ:g} Hz sine of {amplitude} um, feedforward only",
+                    "seed 001 §5.2", path(axis, amplitude, True), axis, False))
             for axis in ("y", "x"):
                 for decoupling in (False, True):
                     tag = "decoupled" if decoupling else "coupled"
-                    runs.append(Experiment(
-                        s001_key(stage, method, f"coupling_{axis}_{tag}"),
-                        f"{axis} 2 Hz sine of 2 um, other axis held, feedforward only"
-                        f"{' + decoupling' if decoupling else ''} ({method}'s method, {stage})",
-                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), *single_axis_timing(S001_HZ),
-                        {**base, **NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis,
-                        plant=plant))
+                    runs.append(run(
+                        f"coupling_{axis}_{tag}",
+                        f"{axis} {S001_HZ:g} Hz sine of {S001_COUPLING_UM:g} um, other axis held, "
+                        f"feedforward only{' + decoupling' if decoupling else ''}",
+                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), axis, decoupling))
     return runs
 
 

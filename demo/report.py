@@ -123,7 +123,7 @@ def _coupling(results: dict, stage: str, method: str, driven: str) -> tuple[floa
     return a, b, 100.0 * (1.0 - b / a)
 
 
-def seed001_section(results: dict) -> list[str]:
+def feedforward_xy_section(results: dict) -> list[str]:
     """Seed 001's experiments beside its figures, and both methods side by
     side on both stages."""
     lines = [
@@ -148,14 +148,14 @@ def seed001_section(results: dict) -> list[str]:
     ]
     for stage in S001_STAGES:
         for axis, paper in (("x", (0.10, 0.08)), ("y", (0.11, 0.055))):
-            error, eta = _linearity(results, stage, "seed001", axis)
+            error, eta = _linearity(results, stage, "inverse_bouc_wen_model_based", axis)
             lines.append(
                 f"| {axis} feedforward linearity at {S001_LINEARITY_UM[axis]} um, eq. (17)-(18): "
                 f"max error / eta | {STAGE_NAMES[stage]} | {paper[0]} um / {100 * paper[1]:.1f} % "
                 f"| {error:.4f} um / {100 * eta:.2f} % | eta < paper | {_verdict(eta < paper[1])} |")
         for name, driven, paper in (("x from a y sine", "y", (0.56, 0.15, 73.2)),
                                     ("y from an x sine", "x", (0.48, 0.13, 72.9))):
-            a, b, reduction = _coupling(results, stage, "seed001", driven)
+            a, b, reduction = _coupling(results, stage, "inverse_bouc_wen_model_based", driven)
             lines.append(
                 f"| coupling {name}, without -> with decoupling | {STAGE_NAMES[stage]} "
                 f"| {paper[0]} -> {paper[1]} um (-{paper[2]} %) "
@@ -171,14 +171,14 @@ def seed001_section(results: dict) -> list[str]:
     for stage in S001_STAGES:
         for axis in ("x", "y"):
             cells = []
-            for method in ("seed000", "seed001"):
+            for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
                 m = results[s001_key(stage, method, f"linearity_{axis}")]
                 cells.append(f"{m['tracking_max']:.4f} / {m['tracking_rms']:.4f} um")
             lines.append(f"| {axis} 2 Hz sine of {S001_LINEARITY_UM[axis]} um: max / RMS error "
                          f"| {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
         for name, driven in (("x from a y sine", "y"), ("y from an x sine", "x")):
             cells = []
-            for method in ("seed000", "seed001"):
+            for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
                 a, b, reduction = _coupling(results, stage, method, driven)
                 cells.append(f"{a:.4f} -> {b:.4f} um ({-reduction:+.1f} %)")
             lines.append(f"| coupling span {name}, without -> with decoupling "
@@ -237,7 +237,7 @@ def write_report(path: Path, results: dict, context: dict) -> None:
         a = results[f"allfb_{axis}_coupled"][key]
         b = results[f"allfb_{axis}_decoupled"][key]
         lines.append(f"| {name} | {a:.4f} um | {b:.4f} um |")
-    lines += seed001_section(results)
+    lines += feedforward_xy_section(results)
     f8a, f8b = results["fig8_y_10hz_ff"], results["fig8_y_10hz_ffpi"]
     lines += [
         "",

@@ -265,7 +265,7 @@ def envelope_figure(groups, stage, method, kind, limit, path: Path) -> None:
         ax.set_title(f"{title}\nheld axes at {fmt(held)} of stroke", fontsize=8)
     what = (f"tracking RMS / amplitude [%] (red: above {fmt(100 * limit)} %)" if kind == "tracking"
             else f"coupling span without / with decoupling (red: below {fmt(limit)}x)")
-    fig.suptitle(f"{stage}, {method}'s method: {what}", fontsize=10)
+    fig.suptitle(f"{stage}, {method}: {what}", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.92, 1))
     if image is not None:
         fig.colorbar(image, ax=grid.ravel().tolist(), shrink=0.6, pad=0.02)

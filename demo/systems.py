@@ -20,7 +20,7 @@ parameter values from dist/presets/*.json (written by `make fmus` from the
 Rust parameter structs) with the demo's run conditions on top.
 
 The system configuration (SYSTEM_PRESETS + SYSTEM_OVERRIDES): FlexureStage's
-seed000 set with the demo's seeded sensor noise on (demo.experiments.
+3dof set with the demo's seeded sensor noise on (demo.experiments.
 PLANT_PARAMETERS), PiezoController's stage set, and the references held at the
 demo's home pose (demo.experiments.MID_STROKE). Loaded as is, both the SSP and the
 container FMU run the stage from rest to home and hold it there with feedback
@@ -73,7 +73,7 @@ STOP_TIME = 1.0
 
 #: instance -> (FMU identifier, preset file under dist/presets)
 SYSTEM_PRESETS = {
-    PLANT_INSTANCE: ("FlexureStage", "FlexureStage.seed000.json"),
+    PLANT_INSTANCE: ("FlexureStage", "FlexureStage.3dof.json"),
     CONTROLLER_INSTANCE: ("PiezoController", "PiezoController.stage.json"),
 }
 #: What the system sets on top of the presets: the demo's conditions.

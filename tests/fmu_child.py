@@ -20,111 +20,79 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
+import pathlib
 import sys
-import tempfile
 from ctypes import byref
 
-import fmpy
 from fmpy import fmi2
 from fmpy.fmi1 import FMICallException
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent))
+from demo.fmu import Fmu, Instance, LogCapture  # noqa: E402
 
 OUTPUTS = ("s1", "s2", "s3", "x", "y", "theta_z")
 
 
-class Logged:
-    def __init__(self):
-        self.records = []
-        self.logger = fmi2.fmi2CallbackLoggerTYPE(self._log)
-        self.callbacks = fmi2.fmi2CallbackFunctions()
-        self.callbacks.logger = self.logger
-        self.callbacks.allocateMemory = fmi2.fmi2CallbackAllocateMemoryTYPE(fmpy.calloc)
-        self.callbacks.freeMemory = fmi2.fmi2CallbackFreeMemoryTYPE(fmpy.free)
-
-    def _log(self, env, name, status, category, message):
-        self.records.append(
-            {
-                "instance": name.decode("utf-8", "replace") if name else None,
-                "status": status,
-                "category": category.decode("utf-8", "replace") if category else None,
-                "message": message.decode("utf-8", "replace") if message else None,
-            }
-        )
-
-
-def load(fmu_path: str, instance_name: str):
-    md = fmpy.read_model_description(fmu_path)
-    unzip = fmpy.extract(fmu_path, unzipdir=tempfile.mkdtemp(prefix="flexure_child_"))
-    fmu = fmi2.FMU2Slave(
-        guid=md.guid,
-        unzipDirectory=unzip,
-        modelIdentifier=md.coSimulation.modelIdentifier,
-        instanceName=instance_name,
-    )
-    vrs = {v.name: v.valueReference for v in md.modelVariables}
-    return md, unzip, fmu, vrs
+def records(log) -> list[dict]:
+    """The messages as the importer received them."""
+    return [{"instance": r.instance_name, "status": r.status, "category": r.category,
+             "message": r.raw} for r in log.records]
 
 
 def restore_state(args) -> dict:
-    md, unzip, fmu, vrs = load(args.fmu, "child")
-    log = Logged()
-    out: dict = {"log": log.records}
-    try:
-        fmu.instantiate(callbacks=log.callbacks, loggingOn=False)
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        with open(args.state_file, "rb") as f:
-            data = f.read()
-        state = fmu.deSerializeFMUstate(data)
-        fmu.setFMUstate(state)
-        fmu.freeFMUstate(state)
-        out["restored_time"] = fmu.getRealStatus(fmi2.fmi2LastSuccessfulTime).hex()
-        t = float.fromhex(args.time_hex)
-        h = float.fromhex(args.step_hex)
-        new_inputs = [float.fromhex(v) for v in args.inputs_hex.split(",")]
-        out_vrs = [vrs[n] for n in OUTPUTS]
-        rows = []
-        for k in range(args.steps):
-            if k == args.steps // 2:
-                fmu.setReal([vrs["u1"], vrs["u2"], vrs["u3"]], new_inputs)
-            fmu.doStep(t, h)
-            t = t + h
-            rows.append([v.hex() for v in fmu.getReal(out_vrs)])
-        out["rows"] = rows
-        fmu.terminate()
-        fmu.freeInstance()
-    except FMICallException as e:
-        out["error"] = str(e)
-    finally:
-        shutil.rmtree(unzip, ignore_errors=True)
+    out: dict = {}
+    with Fmu(args.fmu) as fmu:
+        s = fmu.instantiate("child")
+        try:
+            s.initialize()
+            s.restore_bytes(pathlib.Path(args.state_file).read_bytes())
+            out["restored_time"] = s.last_successful_time().hex()
+            s.time = float.fromhex(args.time_hex)
+            h = float.fromhex(args.step_hex)
+            new_inputs = [float.fromhex(v) for v in args.inputs_hex.split(",")]
+            rows = []
+            for k in range(args.steps):
+                if k == args.steps // 2:
+                    s.set_real(dict(zip(("u1", "u2", "u3"), new_inputs)))
+                s.fmu.doStep(s.time, h)
+                s.time = s.time + h
+                rows.append([v.hex() for v in s.get(*OUTPUTS)])
+            out["rows"] = rows
+            s.fmu.terminate()
+        except FMICallException as e:
+            out["error"] = str(e)
+        finally:
+            s.free()
+            out["log"] = records(s.log)
     return out
 
 
 def percent_log(args) -> dict:
     from fmpy.logging import addLoggerProxy
 
-    md, unzip, fmu, vrs = load(args.fmu, "probe%s")
-    log = Logged()
-    # Route this callbacks struct through fmpy's native proxy, which formats
-    # the message with vsnprintf before handing it to the Python logger.
-    addLoggerProxy(byref(log.callbacks))
-    out: dict = {"log": log.records}
-    try:
-        fmu.instantiate(callbacks=log.callbacks, loggingOn=True)
-        fmu.setDebugLogging(True, ["logFmiCalls"])
-        categories = (fmi2.fmi2String * 1)(b"log%s%d")
-        out["set_debug_logging_status"] = fmu.fmi2SetDebugLogging(fmu.component, 1, 1, categories)
-        fmu.setupExperiment(startTime=0.0)
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        fmu.doStep(0.0, 1e-4)
-        fmu.terminate()
-        fmu.freeInstance()
-    except FMICallException as e:
-        out["error"] = str(e)
-    finally:
-        shutil.rmtree(unzip, ignore_errors=True)
+    out: dict = {}
+    with Fmu(args.fmu) as fmu:
+        slave = fmu.load("probe%s")
+        log = LogCapture()
+        # Route this callbacks struct through fmpy's native proxy, which
+        # formats the message with vsnprintf before handing it to the
+        # Python logger.
+        addLoggerProxy(byref(log.callbacks))
+        s = Instance(fmu, slave, log)
+        try:
+            slave.instantiate(callbacks=log.callbacks, loggingOn=True)
+            slave.setDebugLogging(True, ["logFmiCalls"])
+            categories = (fmi2.fmi2String * 1)(b"log%s%d")
+            out["set_debug_logging_status"] = slave.fmi2SetDebugLogging(
+                slave.component, 1, 1, categories)
+            s.initialize()
+            s.fmu.doStep(0.0, 1e-4)
+            s.fmu.terminate()
+        except FMICallException as e:
+            out["error"] = str(e)
+        finally:
+            s.free()
+            out["log"] = records(log)
     return out
 
 

@@ -58,7 +58,7 @@ def test_a_c_importer_runs_the_fmu_and_agrees_with_fmpy(importer, tmp_path, mode
         try:
             slave.real_port((input_name,)).set([value])
             for k in range(100):
-                slave.do_step(k * 1e-4, 1e-4)
+                slave.do_step(1e-4)
             from_fmpy = float(slave.real_port((output_name,)).get()[0])
         finally:
             slave.free()

@@ -524,7 +524,7 @@ def test_container_tracks_a_trajectory_as_the_direct_loop(fmus, members):
 @pytest.mark.parametrize(
     "preset, change, message",
     [
-        ("FlexureStage.seed000.json", {"no_such_parameter": 1.0}, "no such variable in FlexureStage.fmu"),
+        ("FlexureStage.3dof.json", {"no_such_parameter": 1.0}, "no such variable in FlexureStage.fmu"),
         ("PiezoController.stage.json", {"u1": 1.0}, "causality output, not settable"),
         ("PiezoController.stage.json", {"feedforward": 1}, "Boolean expected, got 1"),
     ],

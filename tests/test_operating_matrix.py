@@ -39,7 +39,7 @@ def held_pose(plant: Fmu, commands) -> dict:
             t = k * STEP
             blend = 0.5 * (1 - math.cos(math.pi * min(t / RAMP_TIME, 1.0)))
             inputs.set(blend * target)
-            slave.do_step(t, STEP)
+            slave.do_step_at(t, STEP)
         x, y, theta = outputs.get()
         return {"x": x, "y": y, "theta": theta}
     finally:

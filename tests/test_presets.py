@@ -27,7 +27,7 @@ def load(name: str) -> dict:
 @pytest.mark.parametrize(
     "fmu, preset",
     [
-        ("FlexureStage", "FlexureStage.seed000.json"),
+        ("FlexureStage", "FlexureStage.3dof.json"),
         ("PiezoController", "PiezoController.stage.json"),
     ],
 )
@@ -67,7 +67,7 @@ def ramp_to_full_command(plant: Fmu, parameters: dict, channels: list[int]) -> n
         for k in range(10_000):
             command[channels] = 10.0 * (k + 1) / 10_000
             u.set(command)
-            slave.do_step(k * 1e-4, 1e-4)
+            slave.do_step(1e-4)
         return s.get()
     finally:
         slave.free()

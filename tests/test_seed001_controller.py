@@ -15,23 +15,20 @@ import numpy as np
 import pytest
 
 from demo.cosim import Fmu, simulate
+from demo.experiments import S001_HOME, S001_HZ, pose, trajectory
 from tests.conftest import REPO_ROOT
 from tests.docs_figures import doc_rows, stale_rows, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
-HOME_X, HOME_Y = 8.0, 7.0
+HOME_X, HOME_Y, _ = S001_HOME
+
+#: Raised-cosine approach to the home, hold, then the 2 Hz, 2 um sine on y
+#: (the demo's approach and timing, demo/experiment_conditions.json).
+reference = trajectory(pose(x=HOME_X, y=lambda tau: HOME_Y + 2.0 * np.sin(2 * np.pi * S001_HZ * tau)))
 
 
-def reference(t):
-    """Raised-cosine approach to the home over 0.5 s, hold, then from t = 1 s
-    the 2 Hz, 2 um sine on y."""
-    approach = np.where(t < 0.5, 0.5 * (1 - np.cos(np.pi * np.minimum(t, 0.5) / 0.5)), 1.0)
-    sine = np.where(t > 1.0, 2.0 * np.sin(2 * np.pi * 2.0 * (t - 1.0)), 0.0)
-    return np.column_stack((HOME_X * approach, HOME_Y * approach + sine, np.zeros_like(t)))
-
-
-def seed001_parameters(decoupling: bool) -> dict:
+def inverse_bouc_wen_model_based_parameters(decoupling: bool) -> dict:
     return {
         "feedforward": True,
         "feedback_x": False,
@@ -69,8 +66,8 @@ def test_an_unknown_selector_code_is_refused_at_initialization(fmus):
 
 def test_model_based_decoupling_shrinks_the_coupling_seed_001_measured(fmus):
     plant, controller = fmus
-    without = simulate(plant, controller, reference, 2.5, controller_parameters=seed001_parameters(False))
-    with_ = simulate(plant, controller, reference, 2.5, controller_parameters=seed001_parameters(True))
+    without = simulate(plant, controller, reference, 2.5, controller_parameters=inverse_bouc_wen_model_based_parameters(False))
+    with_ = simulate(plant, controller, reference, 2.5, controller_parameters=inverse_bouc_wen_model_based_parameters(True))
     span_without, _ = coupling_and_tracking(without)
     span_with, y_rms = coupling_and_tracking(with_)
     reduction = 100 * (1 - span_with / span_without)
@@ -86,14 +83,14 @@ def test_model_based_decoupling_shrinks_the_coupling_seed_001_measured(fmus):
 
 
 @pytest.fixture(scope="module")
-def seed001_results(fmus):
+def feedforward_xy_results(fmus):
     """The demo's seed 001 runs (both methods, same trajectories)."""
-    from demo.experiments import metrics, seed001_experiments
+    from demo.experiments import metrics, feedforward_xy_experiments
 
     plant, controller = fmus
     spacing_um = float(controller.variables["L"].start) * 1e3
     results = {}
-    for experiment in seed001_experiments():
+    for experiment in feedforward_xy_experiments():
         run = simulate(plant, controller, experiment.reference(), experiment.duration,
                        plant_parameters=experiment.plant,
                        controller_parameters=experiment.controller)
@@ -101,14 +98,14 @@ def seed001_results(fmus):
     return results
 
 
-def test_seed_001_feedforward_linearity_beats_the_papers(seed001_results):
+def test_seed_001_feedforward_linearity_beats_the_papers(feedforward_xy_results):
     """Seed 001 eq. (17)-(18): eta = max |d_e - d| / amplitude; the paper:
     8 % for x at 1.25 um, 5.5 % for y at 2 um (measured: docs/seed001.md)."""
     from demo.experiments import S001_LINEARITY_UM, S001_STAGES, s001_key
 
     for stage in S001_STAGES:
         for axis, paper in (("x", 0.08), ("y", 0.055)):
-            m = seed001_results[s001_key(stage, "seed001", f"linearity_{axis}")]
+            m = feedforward_xy_results[s001_key(stage, "inverse_bouc_wen_model_based", f"linearity_{axis}")]
             eta = m["tracking_max"] / S001_LINEARITY_UM[axis]
             print(f"{stage} {axis}: eta {100 * eta:.2f} % (seed 001: {100 * paper} %)")
             assert eta < paper
@@ -119,26 +116,26 @@ def test_seed_001_feedforward_linearity_beats_the_papers(seed001_results):
     ("x", "coupling_y_span", 72.9),
 ])
 def test_seed_001_decoupling_beats_the_papers_reduction_and_seed_000s(
-        seed001_results, driven, key, paper):
+        feedforward_xy_results, driven, key, paper):
     from demo.experiments import S001_STAGES, s001_key
 
     for stage in S001_STAGES:
         reductions = {}
-        for method in ("seed000", "seed001"):
-            a = seed001_results[s001_key(stage, method, f"coupling_{driven}_coupled")][key]
-            b = seed001_results[s001_key(stage, method, f"coupling_{driven}_decoupled")][key]
+        for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
+            a = feedforward_xy_results[s001_key(stage, method, f"coupling_{driven}_coupled")][key]
+            b = feedforward_xy_results[s001_key(stage, method, f"coupling_{driven}_decoupled")][key]
             reductions[method] = 100 * (1 - b / a)
-        print(f"{stage} {key}: reduction by seed 000's method {reductions['seed000']:.1f} %, "
-              f"by seed 001's {reductions['seed001']:.1f} % (paper {paper} %)")
-        assert reductions["seed001"] > paper
+        print(f"{stage} {key}: reduction by seed 000's method {reductions['inverse_pi_piecewise']:.1f} %, "
+              f"by seed 001's {reductions['inverse_bouc_wen_model_based']:.1f} % (paper {paper} %)")
+        assert reductions["inverse_bouc_wen_model_based"] > paper
 
 
-def test_docs_seed001_prints_these_figures(seed001_results):
+def test_docs_seed001_prints_these_figures(feedforward_xy_results):
     """docs/seed001.md's two tables are this measurement (the tables `make
     demo`'s report prints): a figure left stale fails here."""
-    from demo.report import seed001_section
+    from demo.report import feedforward_xy_section
 
-    measured = table_rows(seed001_section(seed001_results))
+    measured = table_rows(feedforward_xy_section(feedforward_xy_results))
     assert len(measured) == 16
     problems = stale_rows(doc_rows("seed001.md"), measured, 2, "docs/seed001.md")
     assert not problems, "\n".join(problems)

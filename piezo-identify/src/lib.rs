@@ -26,6 +26,8 @@
 //!   eq. (6) records, closed loop with the controller law).
 //! - [`decoupling`]: fits seed 000's compensations D_i (eq. 11, Table 2) to
 //!   single-axis coupling errors.
+//! - [`fingerprints`]: the plant's calibration fingerprints
+//!   ([`piezo_models::fingerprint`]) measured through its FMU.
 //! - [`stage`]: the whole procedure on a plant FMU, giving the `stage`
 //!   controller preset.
 //! - [`gapso`]: seed 001's GA-PSO, a bounded global minimiser (rayon,
@@ -43,6 +45,7 @@ pub mod bouc_wen_fit;
 pub mod compare;
 pub mod data;
 pub mod decoupling;
+pub mod fingerprints;
 pub mod fit;
 pub mod gapso;
 pub mod lab_records;

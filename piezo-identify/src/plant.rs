@@ -149,6 +149,11 @@ impl PlantFmu {
         Ok(self)
     }
 
+    /// The `.fmu` file or folder it was opened from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     /// The value a Real parameter has in every session, e.g. `L`: the one
     /// set by [`with_parameters`](Self::with_parameters), else its start
     /// attribute.
@@ -252,6 +257,38 @@ impl PlantSession<'_> {
         let (status, s) = self.instance.get_real(&self.plant.s);
         self.check("fmi2GetReal", status)?;
         Ok([s[0], s[1], s[2]])
+    }
+}
+
+impl PlantSession<'_> {
+    /// The instance's whole state, serialized (fmi2GetFMUstate, then
+    /// fmi2SerializeFMUstate): a probe runs from here and
+    /// [`restore`](Self::restore) comes back.
+    pub fn snapshot(&self) -> Result<Vec<u8>, PlantError> {
+        let (status, mut state) = self.instance.get_state();
+        self.check("fmi2GetFMUstate", status)?;
+        let (status, bytes) = self.instance.serialize(state);
+        let freed = self.instance.free_state(&mut state);
+        self.check("fmi2SerializeFMUstate", status)?;
+        self.check("fmi2FreeFMUstate", freed)?;
+        Ok(bytes)
+    }
+
+    /// Back to a [`snapshot`](Self::snapshot) of this plant, time included.
+    pub fn restore(&mut self, snapshot: &[u8], time: f64) -> Result<(), PlantError> {
+        let (status, mut state) = self.instance.deserialize(snapshot);
+        self.check("fmi2DeSerializeFMUstate", status)?;
+        let set = self.instance.set_state(state);
+        let freed = self.instance.free_state(&mut state);
+        self.check("fmi2SetFMUstate", set)?;
+        self.check("fmi2FreeFMUstate", freed)?;
+        self.instance.time = time;
+        Ok(())
+    }
+
+    /// The communication point the next step starts from [s].
+    pub fn time(&self) -> f64 {
+        self.instance.time
     }
 }
 

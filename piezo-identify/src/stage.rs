@@ -35,15 +35,17 @@
 //! the rotational motion", y at 0. The reference reaches the start pose by a
 //! raised cosine over 0.5 s (only the θ run's x moves), holds 0.5 s, then the
 //! sine runs for 5 s; the fit uses the last 2 s. These are the conditions of
-//! the demo's Fig. 7/10 runs (demo/experiments.py).
+//! the demo's Fig. 7/10 runs, read from the one file both use,
+//! `demo/experiment_conditions.json` ([`conditions`]).
 
 use std::f64::consts::PI;
+use std::sync::LazyLock;
 
 use piezo_models::{
     BoucWenModels, BoucWenParams, ControllerParams, DecouplingModel, DecouplingParams,
     HysteresisModel, InversePiParams, PiGains,
 };
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::bouc_wen_fit::{
     BoucWenFitError, BoucWenFitOptions, identify_bouc_wen, wide_shape_bounds,
@@ -57,21 +59,121 @@ use crate::plant::{
     PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record, exercise_samples, sine_records,
 };
 
-pub const APPROACH_TIME: f64 = 0.5;
-pub const SETTLE_TIME: f64 = 0.5;
-pub const SINE_HZ: f64 = 1.0;
-/// Peak-to-peak of the translation sines, from 0 [µm] (seed 000 §5: 10 µm).
-pub const TRANSLATION_SPAN_UM: f64 = 10.0;
-/// x demand of the θ runs [µm]: half the x stroke (seed 000 §2: 12.74 µm),
-/// the home §3.2 defines for rotation.
-pub const ROTATION_X_UM: f64 = 12.74 / 2.0;
-pub const ROTATION_AMPLITUDE_DEG: f64 = 9.2e-3;
-/// Length of a single-axis run after the approach [s], and the part fitted:
-/// three settling cycles, then two (the plant's Bouc-Wen minor loops settle
-/// within about four cycles of a new excursion; the demo measures the same
-/// two cycles).
-pub const RUN_TIME: f64 = 5.0;
-pub const FITTED_TIME: f64 = 2.0;
+/// The experiment conditions this procedure shares with the demo's
+/// single-axis runs (`demo/experiments.py`), which measure what the fitted
+/// decoupling achieves: one data file, read by both.
+pub const CONDITIONS_JSON: &str = include_str!("../../demo/experiment_conditions.json");
+
+/// How the reference leaves rest: a raised cosine from the origin to the
+/// start pose over `time_s`, then held for `settle_time_s`.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Approach {
+    pub shape: ApproachShape,
+    pub time_s: f64,
+    pub settle_time_s: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ApproachShape {
+    /// 0.5·(1 − cos πt/T): no step at either end.
+    RaisedCosine,
+}
+
+/// Where a translation sine starts: `Bottom` is base + span/2·(1 − cos 2πft).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SineStart {
+    Bottom,
+}
+
+/// A translation pose [µm].
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanePoint {
+    pub x: f64,
+    pub y: f64,
+}
+
+/// Seed 000 §5's single-axis runs as printed.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SingleAxisConditions {
+    pub sine_frequency_hz: f64,
+    pub sine_start: SineStart,
+    /// Peak-to-peak of the translation sines, from 0 (seed 000 §5: 10 µm).
+    pub translation_span_um: f64,
+    /// Held translations: x during the y run, y during the x run.
+    pub held_um: PlanePoint,
+    /// θ sine amplitude (eq. 16's 9.2·10⁻³°).
+    pub rotation_amplitude_deg: f64,
+    /// Cycles run before the measured (fitted) ones: the plant's Bouc-Wen
+    /// minor loops settle within about four cycles of a new excursion.
+    pub settling_cycles: u32,
+    pub measured_cycles: u32,
+}
+
+/// The homes the experiments run about [µm].
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Homes {
+    /// x at half its stroke (seed 000 §2: 12.74 µm), where §3.2 puts x's home
+    /// "in order to implement the rotational motion".
+    pub rotation: PlanePoint,
+    pub mid_stroke: PlanePoint,
+    pub single_axis_flexure: PlanePoint,
+    pub single_axis_xy200s: PlanePoint,
+}
+
+/// `demo/experiment_conditions.json`.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentConditions {
+    pub about: String,
+    pub approach: Approach,
+    pub single_axis: SingleAxisConditions,
+    pub homes_um: Homes,
+}
+
+impl ExperimentConditions {
+    /// Time from rest to the start of the trajectory [s].
+    pub fn start_time(&self) -> f64 {
+        self.approach.time_s + self.approach.settle_time_s
+    }
+
+    /// Length of a single-axis run after the start [s].
+    pub fn run_time(&self) -> f64 {
+        let cycles = self.single_axis.settling_cycles + self.single_axis.measured_cycles;
+        f64::from(cycles) / self.single_axis.sine_frequency_hz
+    }
+
+    /// The measured (fitted) part at the end of a run [s].
+    pub fn fitted_time(&self) -> f64 {
+        f64::from(self.single_axis.measured_cycles) / self.single_axis.sine_frequency_hz
+    }
+
+    /// The raised-cosine blend 0 → 1 at time `t` of the approach.
+    pub fn approach_blend(&self, t: f64) -> f64 {
+        match self.approach.shape {
+            ApproachShape::RaisedCosine => {
+                let s = (t / self.approach.time_s).clamp(0.0, 1.0);
+                0.5 * (1.0 - (PI * s).cos())
+            }
+        }
+    }
+}
+
+/// The shared conditions, parsed once (a malformed file fails the
+/// `conditions_file_parses` test and names the problem).
+pub fn conditions() -> &'static ExperimentConditions {
+    static CONDITIONS: LazyLock<ExperimentConditions> = LazyLock::new(|| {
+        serde_json::from_str(CONDITIONS_JSON)
+            .unwrap_or_else(|error| panic!("demo/experiment_conditions.json: {error}"))
+    });
+    &CONDITIONS
+}
+
 pub const SAMPLE_PERIOD: f64 = 1e-4;
 pub const PREVIEW: usize = 2;
 /// eq. (6) is applied for 10 s (one period of its 0.2 Hz component).
@@ -80,9 +182,6 @@ pub const IDENTIFICATION_TIME: f64 = 10.0;
 /// over the loop it rests on, so the model's memories (set by running the
 /// operators through the cycle, not fitted) start in the stack's state.
 pub const EXERCISE_TIME: f64 = 2.0;
-/// PI's recommended control input of its LVPZT amplifiers (E-505: −2..12 V,
-/// −20..120 V at the stack; MODEL.md §4).
-pub const COMMAND_RANGE: (f64, f64) = (-2.0, 12.0);
 
 /// The axis a single-axis run drives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -125,13 +224,18 @@ pub struct StageConditions {
 
 impl Default for StageConditions {
     fn default() -> Self {
+        let shared = conditions();
+        // PI's recommended control input of its LVPZT amplifiers (E-505:
+        // −2..12 V, −20..120 V at the stack; MODEL.md §4): the controller's
+        // own start values.
+        let controller = ControllerParams::default();
         StageConditions {
-            translation_span_um: TRANSLATION_SPAN_UM,
-            held_um: [0.0, 0.0],
-            rotation_x_um: ROTATION_X_UM,
-            rotation_amplitude_deg: Some(ROTATION_AMPLITUDE_DEG),
+            translation_span_um: shared.single_axis.translation_span_um,
+            held_um: [shared.single_axis.held_um.x, shared.single_axis.held_um.y],
+            rotation_x_um: shared.homes_um.rotation.x,
+            rotation_amplitude_deg: Some(shared.single_axis.rotation_amplitude_deg),
             gain_scale: 1.0,
-            command_range: COMMAND_RANGE,
+            command_range: (controller.command_min, controller.command_max),
             no_cutoff_um: NO_CUTOFF,
         }
     }
@@ -155,9 +259,11 @@ impl StageConditions {
 
 /// The reference of a single-axis run at time `t` (x [µm], y [µm], θ [rad]).
 pub fn single_axis_reference(axis: DrivenAxis, conditions: &StageConditions, t: f64) -> [f64; 3] {
-    let start = APPROACH_TIME + SETTLE_TIME;
+    let shared = self::conditions();
+    let start = shared.start_time();
     let path = |tau: f64| {
-        let phase = 2.0 * PI * SINE_HZ * tau;
+        let phase = 2.0 * PI * shared.single_axis.sine_frequency_hz * tau;
+        // SineStart::Bottom, the only start: from 0 up.
         let half = 0.5 * conditions.translation_span_um;
         match axis {
             DrivenAxis::Y => [conditions.held_um[0], half - half * phase.cos(), 0.0],
@@ -176,8 +282,7 @@ pub fn single_axis_reference(axis: DrivenAxis, conditions: &StageConditions, t: 
     if t >= start {
         return path(t - start);
     }
-    let s = (t / APPROACH_TIME).clamp(0.0, 1.0);
-    let blend = 0.5 * (1.0 - (PI * s).cos());
+    let blend = shared.approach_blend(t);
     path(0.0).map(|v| blend * v)
 }
 
@@ -188,7 +293,8 @@ fn coupling_pairs(
     run: &crate::plant::ClosedLoopRun,
     spacing_um: f64,
 ) -> Vec<(usize, Vec<f64>, Vec<f64>)> {
-    let from = APPROACH_TIME + SETTLE_TIME + RUN_TIME - FITTED_TIME - 1e-9;
+    let shared = conditions();
+    let from = shared.start_time() + shared.run_time() - shared.fitted_time() - 1e-9;
     let window: Vec<usize> = (0..run.t.len()).filter(|&k| run.t[k] >= from).collect();
     let half = spacing_um / 2.0;
     let collect = |demand: &dyn Fn(usize) -> f64, error: &dyn Fn(usize) -> f64| {
@@ -455,7 +561,7 @@ pub fn identify_stage(
                 plant,
                 &run_params,
                 |t| single_axis_reference(axis, conditions, t),
-                APPROACH_TIME + SETTLE_TIME + RUN_TIME,
+                self::conditions().start_time() + self::conditions().run_time(),
                 SAMPLE_PERIOD,
                 PREVIEW,
             )?;
@@ -509,4 +615,40 @@ pub fn identify_stage(
         rounds: all_rounds,
         bouc_wen_fits,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conditions_file_parses_into_seed_000s_protocol() {
+        let shared = conditions();
+        // Seed 000 §5's single-axis runs: 10 µm from 0, ±9.2·10⁻³°, x at
+        // half its 12.74 µm stroke while the platform rotates.
+        assert_eq!(shared.single_axis.translation_span_um, 10.0);
+        assert_eq!(shared.single_axis.rotation_amplitude_deg, 9.2e-3);
+        assert!((shared.homes_um.rotation.x - 12.74 / 2.0).abs() < 1e-12);
+        assert!(shared.run_time() > shared.fitted_time() && shared.fitted_time() > 0.0);
+    }
+
+    #[test]
+    fn single_axis_runs_start_at_rest_and_sine_from_the_bottom() {
+        let shared = conditions();
+        let stage = StageConditions::default();
+        let start = shared.start_time();
+        for axis in [DrivenAxis::Y, DrivenAxis::X, DrivenAxis::Theta] {
+            assert_eq!(single_axis_reference(axis, &stage, 0.0), [0.0, 0.0, 0.0]);
+        }
+        // The θ run's x reaches its home by the end of the approach, smoothly.
+        let half_way =
+            single_axis_reference(DrivenAxis::Theta, &stage, 0.5 * shared.approach.time_s);
+        assert!((half_way[0] - 0.5 * stage.rotation_x_um).abs() < 1e-12);
+        let home = single_axis_reference(DrivenAxis::Theta, &stage, start);
+        assert_eq!(home[0], stage.rotation_x_um);
+        // Half a period after the start the translation sine is at its top.
+        let top = start + 0.5 / shared.single_axis.sine_frequency_hz;
+        let y = single_axis_reference(DrivenAxis::Y, &stage, top)[1];
+        assert!((y - stage.translation_span_um).abs() < 1e-9);
+    }
 }

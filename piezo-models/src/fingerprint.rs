@@ -1,16 +1,75 @@
 //! The measurement procedures behind the calibration of [`FlexureStage`] to the
-//! stage of seed 000 (§2 figures, Table 3 coupling spans).
+//! stage of seed 000 (§2 figures, Table 3 coupling spans), and the figures
+//! they must reproduce ([`TARGETS`], the one place they are written).
 //!
 //! Each procedure drives a fresh stage from rest the way an FMI master would:
 //! commands held over fixed steps of [`SAMPLE_PERIOD`] (seed 000's 10 kHz
 //! controller), the command of step k being the demand evaluated at the end of
 //! that step, t_k = k·SAMPLE_PERIOD, and readings taken from the sensors after
-//! each step (x = (s2 + s3)/2, y = s1, θ = (s2 − s3)/L). The same procedures are
-//! meant to be repeated through the FMU, so every one is spelled out in its doc
-//! comment. They are shared by the fingerprint tests and the calibration
-//! example (`examples/calibrate.rs`).
+//! each step (x = (s2 + s3)/2, y = s1, θ = (s2 − s3)/L). Every procedure is
+//! spelled out in its doc comment and is generic over the [`StageSource`]
+//! that makes the stages: the model itself ([`FlexureStageParams`], for the
+//! calibration example `examples/calibrate.rs` and this crate's tests), or a
+//! FlexureStage FMU loaded by an importer (`piezo-cosim fingerprint`, which
+//! the Python tests run), so the same code measures both and this crate
+//! stays free of FMI.
+
+use serde::Serialize;
 
 use crate::flexure_stage::{FlexureStage, FlexureStageParams};
+
+/// One stage instance as the procedures drive it: three commands in, three
+/// sensor readings out, one fixed step at a time.
+pub trait Stage {
+    /// What [`Stage::snapshot`] saves: a probe runs from it and comes back.
+    type Snapshot;
+    /// Holds `commands` [V] over one step of `period` [s].
+    fn step(&mut self, commands: [f64; 3], period: f64);
+    /// s1, s2, s3 [µm] after the last step.
+    fn sensors(&self) -> [f64; 3];
+    fn snapshot(&self) -> Self::Snapshot;
+    fn restore(&mut self, snapshot: &Self::Snapshot);
+}
+
+/// What makes fresh stages at rest (zero commands) to measure.
+pub trait StageSource {
+    type Stage: Stage;
+    fn fresh(&self) -> Self::Stage;
+    /// L, the distance between the x sensors s2 and s3 [µm].
+    fn sensor_spacing_um(&self) -> f64;
+}
+
+impl Stage for FlexureStage {
+    type Snapshot = FlexureStage;
+
+    fn step(&mut self, commands: [f64; 3], period: f64) {
+        FlexureStage::step(self, commands, period);
+    }
+
+    fn sensors(&self) -> [f64; 3] {
+        FlexureStage::sensors(self)
+    }
+
+    fn snapshot(&self) -> FlexureStage {
+        self.clone()
+    }
+
+    fn restore(&mut self, snapshot: &FlexureStage) {
+        self.clone_from(snapshot);
+    }
+}
+
+impl StageSource for FlexureStageParams {
+    type Stage = FlexureStage;
+
+    fn fresh(&self) -> FlexureStage {
+        FlexureStage::new(self.clone()).expect("valid stage parameters")
+    }
+
+    fn sensor_spacing_um(&self) -> f64 {
+        self.sensor_spacing_mm * 1e3
+    }
+}
 
 /// Communication step of every procedure except the resonance record [s].
 pub const SAMPLE_PERIOD: f64 = 1e-4;
@@ -45,24 +104,23 @@ pub struct Sample {
 
 /// A stage with its current commands, stepped at a fixed period.
 #[derive(Clone)]
-pub struct Rig {
-    stage: FlexureStage,
+pub struct Rig<S: Stage = FlexureStage> {
+    stage: S,
     commands: [f64; 3],
     spacing_um: f64,
 }
 
-impl Rig {
-    /// A stage at rest with zero commands.
-    pub fn new(params: &FlexureStageParams) -> Self {
-        let stage = FlexureStage::new(params.clone()).expect("valid stage parameters");
+impl<S: Stage> Rig<S> {
+    /// A fresh stage of `source` at rest with zero commands.
+    pub fn new<P: StageSource<Stage = S>>(source: &P) -> Self {
         Self {
-            spacing_um: params.sensor_spacing_mm * 1e3,
-            stage,
+            spacing_um: source.sensor_spacing_um(),
+            stage: source.fresh(),
             commands: [0.0; 3],
         }
     }
 
-    pub fn stage(&self) -> &FlexureStage {
+    pub fn stage(&self) -> &S {
         &self.stage
     }
 
@@ -133,8 +191,8 @@ impl Rig {
 /// y 12.22 µm): from rest, the driven command(s) ramp linearly 0 → 10 V over
 /// 1 s (10 000 steps of 100 µs) with the other commands at 0; the stroke is the
 /// axis reading after the last step.
-pub fn stroke(params: &FlexureStageParams, axis: Axis) -> f64 {
-    let mut rig = Rig::new(params);
+pub fn stroke<P: StageSource>(plant: &P, axis: Axis) -> f64 {
+    let mut rig = Rig::new(plant);
     match axis {
         Axis::X => {
             rig.ramp_to([0.0, FULL_COMMAND, FULL_COMMAND]);
@@ -148,8 +206,8 @@ pub fn stroke(params: &FlexureStageParams, axis: Axis) -> f64 {
 }
 
 /// x after ramping u2 = u3 from rest to `u` over 1 s (u1 = 0).
-fn x_after_ramp(params: &FlexureStageParams, u: f64) -> f64 {
-    let mut rig = Rig::new(params);
+fn x_after_ramp<P: StageSource>(plant: &P, u: f64) -> f64 {
+    let mut rig = Rig::new(plant);
     rig.ramp_to([0.0, u, u]);
     rig.x()
 }
@@ -157,14 +215,14 @@ fn x_after_ramp(params: &FlexureStageParams, u: f64) -> f64 {
 /// The x home command u_home (seed 000 §3.2: home at half of the x stroke):
 /// the u2 = u3 command whose 1 s ramp from rest ends at x = stroke(X)/2,
 /// solved to |x − stroke/2| ≤ 1e-9 µm.
-pub fn x_home_command(params: &FlexureStageParams) -> f64 {
-    let half = 0.5 * stroke(params, Axis::X);
-    solve_increasing(|u| x_after_ramp(params, u) - half, 0.0, FULL_COMMAND, 1e-9)
+pub fn x_home_command<P: StageSource>(plant: &P) -> f64 {
+    let half = 0.5 * stroke(plant, Axis::X);
+    solve_increasing(|u| x_after_ramp(plant, u) - half, 0.0, FULL_COMMAND, 1e-9)
 }
 
 /// A rig at the x home: from rest, u2 = u3 ramped 0 → `u_home` over 1 s, u1 = 0.
-pub fn rig_at_x_home(params: &FlexureStageParams, u_home: f64) -> Rig {
-    let mut rig = Rig::new(params);
+pub fn rig_at_x_home<P: StageSource>(plant: &P, u_home: f64) -> Rig<P::Stage> {
+    let mut rig = Rig::new(plant);
     rig.ramp_to([0.0, u_home, u_home]);
     rig
 }
@@ -176,8 +234,8 @@ pub fn rig_at_x_home(params: &FlexureStageParams, u_home: f64) -> Rig {
 /// read θ⁺; ramp back to (0, u_home, u_home); ramp to (0, 0, 10) and read θ⁻.
 /// Every ramp is linear over 1 s; θ = (s2 − s3)/L is measured from the
 /// orientation at rest (θ = 0). Anticlockwise = θ⁺, clockwise = −θ⁻.
-pub fn rotation_range_deg(params: &FlexureStageParams, u_home: f64) -> (f64, f64) {
-    let mut rig = rig_at_x_home(params, u_home);
+pub fn rotation_range_deg<P: StageSource>(plant: &P, u_home: f64) -> (f64, f64) {
+    let mut rig = rig_at_x_home(plant, u_home);
     rig.ramp_to([0.0, FULL_COMMAND, 0.0]);
     let anticlockwise = rig.theta_deg();
     rig.ramp_to([0.0, u_home, u_home]);
@@ -196,8 +254,8 @@ pub const RESONANCE_RECORD_TIME: f64 = 0.25;
 /// 0.5 s (the modes settle), then commands (0, u_home + 0.1, u_home − 0.1)
 /// held while θ = (s2 − s3)/L is sampled every 10 µs for 0.25 s (25 000
 /// samples, steps of 10 µs).
-pub fn rotation_step_record(params: &FlexureStageParams, u_home: f64) -> Vec<f64> {
-    let mut rig = rig_at_x_home(params, u_home);
+pub fn rotation_step_record<P: StageSource>(plant: &P, u_home: f64) -> Vec<f64> {
+    let mut rig = rig_at_x_home(plant, u_home);
     rig.hold(0.5);
     let held = [
         0.0,
@@ -239,15 +297,15 @@ pub fn spectral_peak_hz(record: &[f64], period: f64) -> f64 {
 
 /// θ resonance (seed 000 §2: 790 Hz): [`spectral_peak_hz`] of
 /// [`rotation_step_record`].
-pub fn theta_resonance_hz(params: &FlexureStageParams, u_home: f64) -> f64 {
+pub fn theta_resonance_hz<P: StageSource>(plant: &P, u_home: f64) -> f64 {
     spectral_peak_hz(
-        &rotation_step_record(params, u_home),
+        &rotation_step_record(plant, u_home),
         RESONANCE_SAMPLE_PERIOD,
     )
 }
 
 /// Shape of a hysteresis loop over one cycle.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct LoopShape {
     /// max − min of the output over the cycle [µm].
     pub span_um: f64,
@@ -313,8 +371,8 @@ pub fn loop_shape(input: &[f64], output: &[f64]) -> LoopShape {
 /// 1 Hz after one preconditioning cycle: from rest, the driven command(s)
 /// follow u(t) = 5·(1 − cos 2πt) V for t ∈ (0, 2] s (others 0); the loop is
 /// the axis reading versus the command over the second cycle, t ∈ [1, 2] s.
-pub fn major_loop(params: &FlexureStageParams, axis: Axis) -> LoopShape {
-    let mut rig = Rig::new(params);
+pub fn major_loop<P: StageSource>(plant: &P, axis: Axis) -> LoopShape {
+    let mut rig = Rig::new(plant);
     let wave = |t: f64| 0.5 * FULL_COMMAND * (1.0 - (std::f64::consts::TAU * t).cos());
     let samples = rig.run(2.0, SAMPLE_PERIOD, |t| match axis {
         Axis::X => [0.0, wave(t), wave(t)],
@@ -334,7 +392,7 @@ pub fn major_loop(params: &FlexureStageParams, axis: Axis) -> LoopShape {
 }
 
 /// A coupled displacement recorded in one of the coupling sweeps.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Coupling {
     /// Span (max − min) of the coupled displacement over the measured cycle [µm].
     pub span_um: f64,
@@ -344,7 +402,7 @@ pub struct Coupling {
 }
 
 /// The four couplings of seed 000 Table 3 (without decoupling).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct CouplingSweeps {
     /// Command amplitude a of the y sweep u1 = a(1 − cos 2πt)/2 [V].
     pub y_sweep_amplitude: f64,
@@ -364,8 +422,8 @@ pub struct CouplingSweeps {
 
 /// y sweep: from rest, ramp to the x home; then u1 = a·(1 − cos 2πt)/2 for
 /// t ∈ (0, 2] s with u2 = u3 = u_home; measured cycle t ∈ [1, 2] s.
-fn y_sweep(params: &FlexureStageParams, u_home: f64, a: f64) -> Vec<Sample> {
-    let mut rig = rig_at_x_home(params, u_home);
+fn y_sweep<P: StageSource>(plant: &P, u_home: f64, a: f64) -> Vec<Sample> {
+    let mut rig = rig_at_x_home(plant, u_home);
     let samples = rig.run(2.0, SAMPLE_PERIOD, |t| {
         [
             0.5 * a * (1.0 - (std::f64::consts::TAU * t).cos()),
@@ -378,8 +436,8 @@ fn y_sweep(params: &FlexureStageParams, u_home: f64, a: f64) -> Vec<Sample> {
 
 /// x sweep: from rest, u2 = u3 = a·(1 − cos 2πt)/2 for t ∈ (0, 2] s with
 /// u1 = 0 (the y home); measured cycle t ∈ [1, 2] s.
-fn x_sweep(params: &FlexureStageParams, a: f64) -> Vec<Sample> {
-    let mut rig = Rig::new(params);
+fn x_sweep<P: StageSource>(plant: &P, a: f64) -> Vec<Sample> {
+    let mut rig = Rig::new(plant);
     let samples = rig.run(2.0, SAMPLE_PERIOD, |t| {
         let u = 0.5 * a * (1.0 - (std::f64::consts::TAU * t).cos());
         [0.0, u, u]
@@ -390,8 +448,8 @@ fn x_sweep(params: &FlexureStageParams, a: f64) -> Vec<Sample> {
 /// Rotation sweep: from rest, ramp to the x home; then u2 = u_home + D sin 2πt,
 /// u3 = u_home − D sin 2πt for t ∈ (0, 2.75] s with u1 = 0; measured cycle
 /// t ∈ [1.75, 2.75] s (minimum to minimum of the differential command).
-fn rotation_sweep(params: &FlexureStageParams, u_home: f64, d: f64) -> Vec<Sample> {
-    let mut rig = rig_at_x_home(params, u_home);
+fn rotation_sweep<P: StageSource>(plant: &P, u_home: f64, d: f64) -> Vec<Sample> {
+    let mut rig = rig_at_x_home(plant, u_home);
     let samples = rig.run(2.75, SAMPLE_PERIOD, |t| {
         let s = d * (std::f64::consts::TAU * t).sin();
         [0.0, u_home + s, u_home - s]
@@ -416,44 +474,44 @@ fn coupling(input: &[f64], output: &[f64]) -> Coupling {
 /// `rotation_sweep` in this module for the exact demands. Coupled readings:
 /// s2 and s3 versus u1 (y sweep), y versus u2 (x sweep), y versus
 /// D sin 2πt (rotation sweep).
-pub fn coupling_sweeps(params: &FlexureStageParams, u_home: f64) -> CouplingSweeps {
-    let spacing = params.sensor_spacing_mm * 1e3;
+pub fn coupling_sweeps<P: StageSource>(plant: &P, u_home: f64) -> CouplingSweeps {
+    let spacing = plant.sensor_spacing_um();
     let y_of = |s: &Sample| s.sensors[0];
     let x_of = |s: &Sample| 0.5 * (s.sensors[1] + s.sensors[2]);
     let theta_deg_of = |s: &Sample| ((s.sensors[1] - s.sensors[2]) / spacing).to_degrees();
 
     let a_y = solve_increasing(
-        |a| span_of(&y_sweep(params, u_home, a), y_of) - SWEEP_SPAN_UM,
+        |a| span_of(&y_sweep(plant, u_home, a), y_of) - SWEEP_SPAN_UM,
         0.0,
         FULL_COMMAND,
         1e-7,
     );
-    let ys = y_sweep(params, u_home, a_y);
+    let ys = y_sweep(plant, u_home, a_y);
     let u1: Vec<f64> = ys.iter().map(|s| s.commands[0]).collect();
     let s2: Vec<f64> = ys.iter().map(|s| s.sensors[1]).collect();
     let s3: Vec<f64> = ys.iter().map(|s| s.sensors[2]).collect();
 
     let a_x = solve_increasing(
-        |a| span_of(&x_sweep(params, a), x_of) - SWEEP_SPAN_UM,
+        |a| span_of(&x_sweep(plant, a), x_of) - SWEEP_SPAN_UM,
         0.0,
         FULL_COMMAND,
         1e-7,
     );
-    let xs = x_sweep(params, a_x);
+    let xs = x_sweep(plant, a_x);
     let u2: Vec<f64> = xs.iter().map(|s| s.commands[1]).collect();
     let y_x: Vec<f64> = xs.iter().map(y_of).collect();
 
     let d_max = u_home.min(FULL_COMMAND - u_home);
     let d = solve_increasing(
         |d| {
-            span_of(&rotation_sweep(params, u_home, d), theta_deg_of)
+            span_of(&rotation_sweep(plant, u_home, d), theta_deg_of)
                 - 2.0 * ROTATION_SWEEP_AMPLITUDE_DEG
         },
         0.0,
         d_max,
         1e-9,
     );
-    let rs = rotation_sweep(params, u_home, d);
+    let rs = rotation_sweep(plant, u_home, d);
     let differential: Vec<f64> = rs
         .iter()
         .map(|s| 0.5 * (s.commands[1] - s.commands[2]))
@@ -494,7 +552,7 @@ impl LoopAxis {
         }
     }
 
-    fn reading(self, rig: &Rig) -> f64 {
+    fn reading<S: Stage>(self, rig: &Rig<S>) -> f64 {
         let s = rig.stage.sensors();
         match self {
             LoopAxis::X => 0.5 * (s[1] + s[2]),
@@ -516,7 +574,7 @@ const LOOP_WINDOWS: [(f64, f64); 2] = [(0.02, 0.06), (0.08, 0.12)];
 /// The Ziegler-Nichols ultimate gain of one axis: the proportional gain at
 /// which the sampled loop oscillates without growing or decaying, and the
 /// period of that oscillation.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct UltimateGain {
     /// K_u [V/µm].
     pub gain: f64,
@@ -541,12 +599,20 @@ impl UltimateGain {
 /// [`LOOP_WINDOWS`], over their distance) and its period [s] from the zero
 /// crossings in the last window. A probe whose command leaves 0..10 V is
 /// unstable: growth +∞.
-pub fn proportional_loop_growth(start: &Rig, axis: LoopAxis, kp: f64) -> (f64, f64) {
-    let mut rig = start.clone();
+pub fn proportional_loop_growth<S: Stage>(rig: &mut Rig<S>, axis: LoopAxis, kp: f64) -> (f64, f64) {
+    let saved = rig.stage.snapshot();
+    let saved_commands = rig.commands;
+    let (growth, period) = loop_probe(rig, axis, kp);
+    rig.stage.restore(&saved);
+    rig.commands = saved_commands;
+    (growth, period)
+}
+
+fn loop_probe<S: Stage>(rig: &mut Rig<S>, axis: LoopAxis, kp: f64) -> (f64, f64) {
     let operating = rig.commands;
     let directions = axis.directions();
-    let reference = axis.reading(&rig) + LOOP_STEP_UM;
-    let mut previous = axis.reading(&rig);
+    let reference = axis.reading(rig) + LOOP_STEP_UM;
+    let mut previous = axis.reading(rig);
     let mut current = previous;
     let steps = (LOOP_PROBE_TIME / SAMPLE_PERIOD).round() as usize;
     let mut errors = Vec::with_capacity(steps);
@@ -561,7 +627,7 @@ pub fn proportional_loop_growth(start: &Rig, axis: LoopAxis, kp: f64) -> (f64, f
         }
         rig.stage.step(raw, SAMPLE_PERIOD);
         previous = current;
-        current = axis.reading(&rig);
+        current = axis.reading(rig);
         errors.push(reference - current);
     }
     let window = |(from, to): (f64, f64)| {
@@ -594,8 +660,8 @@ pub fn proportional_loop_growth(start: &Rig, axis: LoopAxis, kp: f64) -> (f64, f
 /// A rig at the operating point of the loop tests: from rest, ramp to
 /// ([`LOOP_Y_COMMAND`], u_home, u_home) over 1 s and hold 0.5 s so that the
 /// modes settle.
-pub fn rig_at_loop_operating_point(params: &FlexureStageParams, u_home: f64) -> Rig {
-    let mut rig = Rig::new(params);
+pub fn rig_at_loop_operating_point<P: StageSource>(plant: &P, u_home: f64) -> Rig<P::Stage> {
+    let mut rig = Rig::new(plant);
     rig.ramp_to([LOOP_Y_COMMAND, u_home, u_home]);
     rig.hold(0.5);
     rig
@@ -607,12 +673,12 @@ pub fn rig_at_loop_operating_point(params: &FlexureStageParams, u_home: f64) -> 
 /// between 0.001 and 10 V/µm to a relative width of 1e-4, at the operating
 /// point of [`rig_at_loop_operating_point`]. (Bisection, because an unstable
 /// probe reports an infinite growth that regula falsi cannot interpolate.)
-pub fn ultimate_gain(params: &FlexureStageParams, u_home: f64, axis: LoopAxis) -> UltimateGain {
-    let rig = rig_at_loop_operating_point(params, u_home);
+pub fn ultimate_gain<P: StageSource>(plant: &P, u_home: f64, axis: LoopAxis) -> UltimateGain {
+    let mut rig = rig_at_loop_operating_point(plant, u_home);
     let (mut stable, mut unstable): (f64, f64) = (1e-3, 10.0);
     while unstable / stable > 1.0 + 1e-4 {
         let kp = (stable * unstable).sqrt();
-        if proportional_loop_growth(&rig, axis, kp).0 > 0.0 {
+        if proportional_loop_growth(&mut rig, axis, kp).0 > 0.0 {
             unstable = kp;
         } else {
             stable = kp;
@@ -621,12 +687,12 @@ pub fn ultimate_gain(params: &FlexureStageParams, u_home: f64, axis: LoopAxis) -
     let gain = (stable * unstable).sqrt();
     // The period of the oscillation just inside the stable side, where the
     // probe does not leave the command range.
-    let (_, period) = proportional_loop_growth(&rig, axis, stable);
+    let (_, period) = proportional_loop_growth(&mut rig, axis, stable);
     UltimateGain { gain, period }
 }
 
 /// Every fingerprint of the calibrated stage.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Fingerprints {
     pub stroke_x_um: f64,
     pub stroke_y_um: f64,
@@ -642,18 +708,286 @@ pub struct Fingerprints {
 }
 
 /// Runs every procedure of this module.
-pub fn measure(params: &FlexureStageParams) -> Fingerprints {
-    let u_home = x_home_command(params);
+pub fn measure<P: StageSource>(plant: &P) -> Fingerprints {
+    let u_home = x_home_command(plant);
     Fingerprints {
-        stroke_x_um: stroke(params, Axis::X),
-        stroke_y_um: stroke(params, Axis::Y),
+        stroke_x_um: stroke(plant, Axis::X),
+        stroke_y_um: stroke(plant, Axis::Y),
         x_home_command: u_home,
-        rotation_range_deg: rotation_range_deg(params, u_home),
-        theta_resonance_hz: theta_resonance_hz(params, u_home),
-        loop_x: major_loop(params, Axis::X),
-        loop_y: major_loop(params, Axis::Y),
-        couplings: coupling_sweeps(params, u_home),
-        ultimate_gains: LoopAxis::ALL.map(|axis| ultimate_gain(params, u_home, axis)),
+        rotation_range_deg: rotation_range_deg(plant, u_home),
+        theta_resonance_hz: theta_resonance_hz(plant, u_home),
+        loop_x: major_loop(plant, Axis::X),
+        loop_y: major_loop(plant, Axis::Y),
+        couplings: coupling_sweeps(plant, u_home),
+        ultimate_gains: LoopAxis::ALL.map(|axis| ultimate_gain(plant, u_home, axis)),
+    }
+}
+
+/// A figure of seed 000 and the relative tolerance the plant must meet.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Target {
+    /// The [`Fingerprints::value`] key.
+    pub key: &'static str,
+    pub name: &'static str,
+    pub paper: f64,
+    pub relative_tolerance: f64,
+    pub unit: &'static str,
+    pub source: &'static str,
+}
+
+/// Seed 000 §3.2's PI gains (translation kp 0.05, ki 50; rotation kp 0.06),
+/// tuned by Ziegler-Nichols: kp = 0.45·K_u, ki = 1.2·kp/T_u.
+const TRANSLATION_KP: f64 = 0.05;
+const TRANSLATION_KI: f64 = 50.0;
+const ROTATION_KP: f64 = 0.06;
+const ZIEGLER_NICHOLS_KP: f64 = 0.45;
+
+/// Every figure the calibrated stage reproduces (the calibration example
+/// solves for them; the tests and `piezo-cosim fingerprint` check them).
+pub const TARGETS: [Target; 14] = [
+    Target {
+        key: "stroke_x",
+        name: "stroke x at 10 V",
+        paper: 12.74,
+        relative_tolerance: 0.05,
+        unit: "um",
+        source: "seed 000 §2",
+    },
+    Target {
+        key: "stroke_y",
+        name: "stroke y at 10 V",
+        paper: 12.22,
+        relative_tolerance: 0.05,
+        unit: "um",
+        source: "seed 000 §2",
+    },
+    Target {
+        key: "rotation_anticlockwise",
+        name: "rotation range anticlockwise",
+        paper: 0.0103,
+        relative_tolerance: 0.10,
+        unit: "deg",
+        source: "seed 000 §2",
+    },
+    Target {
+        key: "rotation_clockwise",
+        name: "rotation range clockwise",
+        paper: 0.0088,
+        relative_tolerance: 0.10,
+        unit: "deg",
+        source: "seed 000 §2",
+    },
+    Target {
+        key: "theta_resonance",
+        name: "theta_z resonance",
+        paper: 790.0,
+        relative_tolerance: 0.02,
+        unit: "Hz",
+        source: "seed 000 §2",
+    },
+    Target {
+        key: "s2_from_y",
+        name: "coupling span s2 (x2) from y",
+        paper: 2.2065,
+        relative_tolerance: 0.15,
+        unit: "um",
+        source: "seed 000 Table 3",
+    },
+    Target {
+        key: "s3_from_y",
+        name: "coupling span s3 (x3) from y",
+        paper: 2.7435,
+        relative_tolerance: 0.15,
+        unit: "um",
+        source: "seed 000 Table 3",
+    },
+    Target {
+        key: "y_from_x",
+        name: "coupling span y from x",
+        paper: 1.2482,
+        relative_tolerance: 0.15,
+        unit: "um",
+        source: "seed 000 Table 3",
+    },
+    Target {
+        key: "y_from_rotation",
+        name: "coupling span y from rotation",
+        paper: 1.6784,
+        relative_tolerance: 0.15,
+        unit: "um",
+        source: "seed 000 Table 3",
+    },
+    Target {
+        key: "ultimate_gain_x",
+        name: "Ziegler-Nichols ultimate gain x",
+        paper: TRANSLATION_KP / ZIEGLER_NICHOLS_KP,
+        relative_tolerance: 0.10,
+        unit: "V/um",
+        source: "seed 000 §3.2 kp / 0.45",
+    },
+    Target {
+        key: "ultimate_gain_y",
+        name: "Ziegler-Nichols ultimate gain y",
+        paper: TRANSLATION_KP / ZIEGLER_NICHOLS_KP,
+        relative_tolerance: 0.10,
+        unit: "V/um",
+        source: "seed 000 §3.2 kp / 0.45",
+    },
+    Target {
+        key: "ultimate_gain_theta",
+        name: "Ziegler-Nichols ultimate gain theta_z",
+        paper: ROTATION_KP / ZIEGLER_NICHOLS_KP,
+        relative_tolerance: 0.10,
+        unit: "V/um",
+        source: "seed 000 §3.2 kp / 0.45",
+    },
+    Target {
+        key: "ultimate_period_x",
+        name: "Ziegler-Nichols ultimate period x",
+        paper: 1.2 * TRANSLATION_KP / TRANSLATION_KI,
+        relative_tolerance: 0.10,
+        unit: "s",
+        source: "seed 000 §3.2 1.2 kp / ki",
+    },
+    Target {
+        key: "ultimate_period_y",
+        name: "Ziegler-Nichols ultimate period y",
+        paper: 1.2 * TRANSLATION_KP / TRANSLATION_KI,
+        relative_tolerance: 0.10,
+        unit: "s",
+        source: "seed 000 §3.2 1.2 kp / ki",
+    },
+];
+
+/// The target of `key` (one of [`TARGETS`]).
+pub fn target(key: &str) -> &'static Target {
+    TARGETS
+        .iter()
+        .find(|t| t.key == key)
+        .unwrap_or_else(|| panic!("no fingerprint target {key}"))
+}
+
+/// Major-loop width as a share of the loop's span (8-15 %).
+pub const LOOP_WIDTH_RANGE: (f64, f64) = (0.08, 0.15);
+/// A loop is asymmetric when max_d |w(c+d) − w(c−d)| / max|w| exceeds this.
+pub const LOOP_ASYMMETRY_MIN: f64 = 0.10;
+/// A coupling is a hysteresis loop when its width is at least this share of
+/// its span.
+pub const COUPLING_LOOP_WIDTH_MIN: f64 = 0.05;
+
+/// One checked row of the fingerprint table.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Check {
+    pub key: String,
+    pub name: String,
+    /// The paper's figure (target rows).
+    pub paper: Option<f64>,
+    /// What the measured value must meet: the tolerance about the paper's
+    /// figure, or the rule of a shape check.
+    pub rule: String,
+    pub measured: f64,
+    pub unit: &'static str,
+    /// measured / paper − 1 (target rows only).
+    pub relative_error: Option<f64>,
+    pub relative_tolerance: Option<f64>,
+    pub within: bool,
+    pub source: &'static str,
+}
+
+impl Fingerprints {
+    /// The measured figure of a [`TARGETS`] key.
+    pub fn value(&self, key: &str) -> Option<f64> {
+        let c = &self.couplings;
+        let [x, y, theta] = self.ultimate_gains;
+        Some(match key {
+            "stroke_x" => self.stroke_x_um,
+            "stroke_y" => self.stroke_y_um,
+            "rotation_anticlockwise" => self.rotation_range_deg.0,
+            "rotation_clockwise" => self.rotation_range_deg.1,
+            "theta_resonance" => self.theta_resonance_hz,
+            "s2_from_y" => c.s2_from_y.span_um,
+            "s3_from_y" => c.s3_from_y.span_um,
+            "y_from_x" => c.y_from_x.span_um,
+            "y_from_rotation" => c.y_from_rotation.span_um,
+            "ultimate_gain_x" => x.gain,
+            "ultimate_gain_y" => y.gain,
+            "ultimate_gain_theta" => theta.gain,
+            "ultimate_period_x" => x.period,
+            "ultimate_period_y" => y.period,
+            "ultimate_period_theta" => theta.period,
+            _ => return None,
+        })
+    }
+
+    /// Every target and shape rule, measured and judged.
+    pub fn checks(&self) -> Vec<Check> {
+        let mut checks: Vec<Check> = TARGETS
+            .iter()
+            .map(|t| {
+                let measured = self.value(t.key).expect("every target has a value");
+                let error = measured / t.paper - 1.0;
+                Check {
+                    key: t.key.to_owned(),
+                    name: t.name.to_owned(),
+                    paper: Some(t.paper),
+                    rule: format!("±{:.0} %", 100.0 * t.relative_tolerance),
+                    measured,
+                    unit: t.unit,
+                    relative_error: Some(error),
+                    relative_tolerance: Some(t.relative_tolerance),
+                    within: error.abs() <= t.relative_tolerance,
+                    source: t.source,
+                }
+            })
+            .collect();
+        for (axis, shape) in [("x", self.loop_x), ("y", self.loop_y)] {
+            let (low, high) = LOOP_WIDTH_RANGE;
+            checks.push(Check {
+                key: format!("loop_{axis}_width_ratio"),
+                name: format!("major loop {axis}: width / span"),
+                paper: None,
+                rule: format!("{:.0}-{:.0} %", 100.0 * low, 100.0 * high),
+                measured: shape.width_ratio,
+                unit: "",
+                relative_error: None,
+                relative_tolerance: None,
+                within: (low..=high).contains(&shape.width_ratio),
+                source: "hysteresis of PZT stacks",
+            });
+            checks.push(Check {
+                key: format!("loop_{axis}_asymmetry"),
+                name: format!("major loop {axis}: asymmetry"),
+                paper: None,
+                rule: format!("> {LOOP_ASYMMETRY_MIN}"),
+                measured: shape.asymmetry,
+                unit: "",
+                relative_error: None,
+                relative_tolerance: None,
+                within: shape.asymmetry > LOOP_ASYMMETRY_MIN,
+                source: "seed 001 (asymmetric loops)",
+            });
+        }
+        let c = &self.couplings;
+        for (key, coupling) in [
+            ("s2_from_y", c.s2_from_y),
+            ("s3_from_y", c.s3_from_y),
+            ("y_from_x", c.y_from_x),
+            ("y_from_rotation", c.y_from_rotation),
+        ] {
+            checks.push(Check {
+                key: format!("{key}_width_ratio"),
+                name: format!("{key}: loop width / span"),
+                paper: None,
+                rule: format!(">= {:.0} %", 100.0 * COUPLING_LOOP_WIDTH_MIN),
+                measured: coupling.width_ratio,
+                unit: "",
+                relative_error: None,
+                relative_tolerance: None,
+                within: coupling.width_ratio >= COUPLING_LOOP_WIDTH_MIN,
+                source: "seed 001 eq. 8",
+            });
+        }
+        checks
     }
 }
 
