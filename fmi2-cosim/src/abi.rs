@@ -914,42 +914,15 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
                     std::slice::from_raw_parts(serialized.cast::<u8>(), size)
                 };
                 match fmu_state::decode::<M>(bytes, &inst.guid) {
-                    Ok(data) => match non_finite_value(&data) {
-                        None => store_snapshot(inst, function, state, data),
-                        Some(reason) => inst.error(function, format_args!("refused: {reason}")),
+                    Ok(mut data) => match inst.validate_foreign_state(function, &mut data) {
+                        Ok(()) => store_snapshot(inst, function, state, data),
+                        Err(status) => status,
                     },
                     Err(reason) => inst.error(function, format_args!("refused: {reason}")),
                 }
             },
         )
     }
-}
-
-/// Why sound bytes (a valid CRC, so written on purpose) still cannot be
-/// restored: a time, or the value of a settable Real, that is not finite.
-/// `fmi2SetupExperiment`, `fmi2DoStep` and `fmi2SetReal` never let one in, so
-/// models may take their inputs and parameters as finite at every step
-/// without checking them there; this keeps that true of deserialized states
-/// (states taken in memory come from an instance where it holds).
-fn non_finite_value<M: CoSimModel>(data: &fmu_state::SnapshotData<M>) -> Option<String> {
-    if !(data.time.is_finite() && data.start_time.is_finite()) {
-        return Some(format!(
-            "the state's time {} (start time {}) is not finite",
-            data.time, data.start_time
-        ));
-    }
-    M::variables()
-        .iter()
-        .filter(|v| v.is_settable())
-        .find_map(|v| {
-            let value = f64::getter(&v.value)?(&data.model);
-            (!value.is_finite()).then(|| {
-                format!(
-                    "the state holds {} = {value}, and only finite values can be set",
-                    v.name
-                )
-            })
-        })
 }
 
 /// An optional capability this layer does not offer: `fmi2Error` with the
@@ -1140,10 +1113,18 @@ pub unsafe fn get_boolean_status<M: CoSimModel>(
     value: *mut sys::fmi2Boolean,
 ) -> sys::fmi2Status {
     unsafe {
-        status_query::<M, _>(c, FmiFunction::GetBooleanStatus, kind, value, |_, kind| {
-            // The slave never asks the master to stop the simulation.
-            (kind == sys::fmi2StatusKind_fmi2Terminated).then_some(0)
-        })
+        status_query::<M, _>(
+            c,
+            FmiFunction::GetBooleanStatus,
+            kind,
+            value,
+            |inst, kind| {
+                // Whether the model asked, in a discarded step, to end the
+                // simulation.
+                (kind == sys::fmi2StatusKind_fmi2Terminated)
+                    .then_some(inst.terminate_requested as sys::fmi2Boolean)
+            },
+        )
     }
 }
 

@@ -345,43 +345,46 @@ macro_rules! __export_fmi2_common {
                 unsafe { abi::get_string_status::<Model>(c, s, value) }
             }
 
-            // Every export has exactly the type of the official typedef.
-            const _: () = {
-                let _: fmi2GetTypesPlatformTYPE = Some(fmi2GetTypesPlatform);
-                let _: fmi2GetVersionTYPE = Some(fmi2GetVersion);
-                let _: fmi2SetDebugLoggingTYPE = Some(fmi2SetDebugLogging);
-                let _: fmi2InstantiateTYPE = Some(fmi2Instantiate);
-                let _: fmi2FreeInstanceTYPE = Some(fmi2FreeInstance);
-                let _: fmi2SetupExperimentTYPE = Some(fmi2SetupExperiment);
-                let _: fmi2EnterInitializationModeTYPE = Some(fmi2EnterInitializationMode);
-                let _: fmi2ExitInitializationModeTYPE = Some(fmi2ExitInitializationMode);
-                let _: fmi2TerminateTYPE = Some(fmi2Terminate);
-                let _: fmi2ResetTYPE = Some(fmi2Reset);
-                let _: fmi2GetRealTYPE = Some(fmi2GetReal);
-                let _: fmi2GetIntegerTYPE = Some(fmi2GetInteger);
-                let _: fmi2GetBooleanTYPE = Some(fmi2GetBoolean);
-                let _: fmi2GetStringTYPE = Some(fmi2GetString);
-                let _: fmi2SetRealTYPE = Some(fmi2SetReal);
-                let _: fmi2SetIntegerTYPE = Some(fmi2SetInteger);
-                let _: fmi2SetBooleanTYPE = Some(fmi2SetBoolean);
-                let _: fmi2SetStringTYPE = Some(fmi2SetString);
-                let _: fmi2GetFMUstateTYPE = Some(fmi2GetFMUstate);
-                let _: fmi2SetFMUstateTYPE = Some(fmi2SetFMUstate);
-                let _: fmi2FreeFMUstateTYPE = Some(fmi2FreeFMUstate);
-                let _: fmi2SerializedFMUstateSizeTYPE = Some(fmi2SerializedFMUstateSize);
-                let _: fmi2SerializeFMUstateTYPE = Some(fmi2SerializeFMUstate);
-                let _: fmi2DeSerializeFMUstateTYPE = Some(fmi2DeSerializeFMUstate);
-                let _: fmi2GetDirectionalDerivativeTYPE = Some(fmi2GetDirectionalDerivative);
-                let _: fmi2SetRealInputDerivativesTYPE = Some(fmi2SetRealInputDerivatives);
-                let _: fmi2GetRealOutputDerivativesTYPE = Some(fmi2GetRealOutputDerivatives);
-                let _: fmi2DoStepTYPE = Some(fmi2DoStep);
-                let _: fmi2CancelStepTYPE = Some(fmi2CancelStep);
-                let _: fmi2GetStatusTYPE = Some(fmi2GetStatus);
-                let _: fmi2GetRealStatusTYPE = Some(fmi2GetRealStatus);
-                let _: fmi2GetIntegerStatusTYPE = Some(fmi2GetIntegerStatus);
-                let _: fmi2GetBooleanStatusTYPE = Some(fmi2GetBooleanStatus);
-                let _: fmi2GetStringStatusTYPE = Some(fmi2GetStringStatus);
-            };
+            // Every export has exactly the type of the official typedef, and
+            // the exports are the list of `functions::ALL` (checked at compile
+            // time).
+            $crate::__fmi2_signatures! {
+                $crate::functions::EXPORTED_FUNCTIONS;
+                fmi2GetTypesPlatform: fmi2GetTypesPlatformTYPE,
+                fmi2GetVersion: fmi2GetVersionTYPE,
+                fmi2SetDebugLogging: fmi2SetDebugLoggingTYPE,
+                fmi2Instantiate: fmi2InstantiateTYPE,
+                fmi2FreeInstance: fmi2FreeInstanceTYPE,
+                fmi2SetupExperiment: fmi2SetupExperimentTYPE,
+                fmi2EnterInitializationMode: fmi2EnterInitializationModeTYPE,
+                fmi2ExitInitializationMode: fmi2ExitInitializationModeTYPE,
+                fmi2Terminate: fmi2TerminateTYPE,
+                fmi2Reset: fmi2ResetTYPE,
+                fmi2GetReal: fmi2GetRealTYPE,
+                fmi2GetInteger: fmi2GetIntegerTYPE,
+                fmi2GetBoolean: fmi2GetBooleanTYPE,
+                fmi2GetString: fmi2GetStringTYPE,
+                fmi2SetReal: fmi2SetRealTYPE,
+                fmi2SetInteger: fmi2SetIntegerTYPE,
+                fmi2SetBoolean: fmi2SetBooleanTYPE,
+                fmi2SetString: fmi2SetStringTYPE,
+                fmi2GetFMUstate: fmi2GetFMUstateTYPE,
+                fmi2SetFMUstate: fmi2SetFMUstateTYPE,
+                fmi2FreeFMUstate: fmi2FreeFMUstateTYPE,
+                fmi2SerializedFMUstateSize: fmi2SerializedFMUstateSizeTYPE,
+                fmi2SerializeFMUstate: fmi2SerializeFMUstateTYPE,
+                fmi2DeSerializeFMUstate: fmi2DeSerializeFMUstateTYPE,
+                fmi2GetDirectionalDerivative: fmi2GetDirectionalDerivativeTYPE,
+                fmi2SetRealInputDerivatives: fmi2SetRealInputDerivativesTYPE,
+                fmi2GetRealOutputDerivatives: fmi2GetRealOutputDerivativesTYPE,
+                fmi2DoStep: fmi2DoStepTYPE,
+                fmi2CancelStep: fmi2CancelStepTYPE,
+                fmi2GetStatus: fmi2GetStatusTYPE,
+                fmi2GetRealStatus: fmi2GetRealStatusTYPE,
+                fmi2GetIntegerStatus: fmi2GetIntegerStatusTYPE,
+                fmi2GetBooleanStatus: fmi2GetBooleanStatusTYPE,
+                fmi2GetStringStatus: fmi2GetStringStatusTYPE,
+            }
         }
     };
 }
@@ -475,74 +478,44 @@ macro_rules! __export_fmi2_model_exchange {
                 unsafe { me::get_nominals_of_continuous_states::<Model>(c, x_nominal, nx) }
             }
 
-            // Every export has exactly the type of the official typedef.
-            const _: () = {
-                let _: fmi2EnterEventModeTYPE = Some(fmi2EnterEventMode);
-                let _: fmi2NewDiscreteStatesTYPE = Some(fmi2NewDiscreteStates);
-                let _: fmi2EnterContinuousTimeModeTYPE = Some(fmi2EnterContinuousTimeMode);
-                let _: fmi2CompletedIntegratorStepTYPE = Some(fmi2CompletedIntegratorStep);
-                let _: fmi2SetTimeTYPE = Some(fmi2SetTime);
-                let _: fmi2SetContinuousStatesTYPE = Some(fmi2SetContinuousStates);
-                let _: fmi2GetDerivativesTYPE = Some(fmi2GetDerivatives);
-                let _: fmi2GetEventIndicatorsTYPE = Some(fmi2GetEventIndicators);
-                let _: fmi2GetContinuousStatesTYPE = Some(fmi2GetContinuousStates);
-                let _: fmi2GetNominalsOfContinuousStatesTYPE =
-                    Some(fmi2GetNominalsOfContinuousStates);
-            };
+            // Every export has exactly the type of the official typedef, and
+            // the exports are the list of `functions::ALL` (checked at compile
+            // time).
+            $crate::__fmi2_signatures! {
+                $crate::functions::MODEL_EXCHANGE_FUNCTIONS;
+                fmi2EnterEventMode: fmi2EnterEventModeTYPE,
+                fmi2NewDiscreteStates: fmi2NewDiscreteStatesTYPE,
+                fmi2EnterContinuousTimeMode: fmi2EnterContinuousTimeModeTYPE,
+                fmi2CompletedIntegratorStep: fmi2CompletedIntegratorStepTYPE,
+                fmi2SetTime: fmi2SetTimeTYPE,
+                fmi2SetContinuousStates: fmi2SetContinuousStatesTYPE,
+                fmi2GetDerivatives: fmi2GetDerivativesTYPE,
+                fmi2GetEventIndicators: fmi2GetEventIndicatorsTYPE,
+                fmi2GetContinuousStates: fmi2GetContinuousStatesTYPE,
+                fmi2GetNominalsOfContinuousStates: fmi2GetNominalsOfContinuousStatesTYPE,
+            }
         }
     };
 }
 
-/// Names of the Model Exchange functions that `export_fmi2!(Model,
-/// model_exchange)` exports besides [`EXPORTED_FUNCTIONS`].
-pub const MODEL_EXCHANGE_FUNCTIONS: [&str; 10] = [
-    "fmi2EnterEventMode",
-    "fmi2NewDiscreteStates",
-    "fmi2EnterContinuousTimeMode",
-    "fmi2CompletedIntegratorStep",
-    "fmi2SetTime",
-    "fmi2SetContinuousStates",
-    "fmi2GetDerivatives",
-    "fmi2GetEventIndicators",
-    "fmi2GetContinuousStates",
-    "fmi2GetNominalsOfContinuousStates",
-];
-
-/// Names of every common and co-simulation function [`export_fmi2!`] exports
-/// (for export-table checks).
-pub const EXPORTED_FUNCTIONS: [&str; 34] = [
-    "fmi2GetTypesPlatform",
-    "fmi2GetVersion",
-    "fmi2SetDebugLogging",
-    "fmi2Instantiate",
-    "fmi2FreeInstance",
-    "fmi2SetupExperiment",
-    "fmi2EnterInitializationMode",
-    "fmi2ExitInitializationMode",
-    "fmi2Terminate",
-    "fmi2Reset",
-    "fmi2GetReal",
-    "fmi2GetInteger",
-    "fmi2GetBoolean",
-    "fmi2GetString",
-    "fmi2SetReal",
-    "fmi2SetInteger",
-    "fmi2SetBoolean",
-    "fmi2SetString",
-    "fmi2GetFMUstate",
-    "fmi2SetFMUstate",
-    "fmi2FreeFMUstate",
-    "fmi2SerializedFMUstateSize",
-    "fmi2SerializeFMUstate",
-    "fmi2DeSerializeFMUstate",
-    "fmi2GetDirectionalDerivative",
-    "fmi2SetRealInputDerivatives",
-    "fmi2GetRealOutputDerivatives",
-    "fmi2DoStep",
-    "fmi2CancelStep",
-    "fmi2GetStatus",
-    "fmi2GetRealStatus",
-    "fmi2GetIntegerStatus",
-    "fmi2GetBooleanStatus",
-    "fmi2GetStringStatus",
-];
+/// Checks each `function: typedef` pair of an export module at compile time
+/// (the function has exactly the type of the official typedef), and that the
+/// functions are, in order, the `expected` names drawn from
+/// [`functions::ALL`](crate::functions::ALL): a function exported here and
+/// not listed there, or listed there and not exported, does not compile.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi2_signatures {
+    ($expected:expr; $($function:ident: $typedef:ident),* $(,)?) => {
+        const _: () = {
+            $(let _: $typedef = Some($function);)*
+        };
+        /// The functions this module exports, in order.
+        #[allow(dead_code)]
+        pub const EXPORTED: &[&str] = &[$(stringify!($function)),*];
+        const _: () = assert!(
+            $crate::functions::same_names(EXPORTED, &$expected),
+            "the exported functions differ from fmi2_cosim::functions::ALL"
+        );
+    };
+}

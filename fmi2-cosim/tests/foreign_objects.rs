@@ -14,7 +14,7 @@ use std::ptr;
 use fmi2_cosim::abi;
 use fmi2_cosim::fmi_sys::fmi2 as sys;
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, StepOutcome,
     UnitDefinition, Variable,
 };
 use serde::{Deserialize, Serialize};
@@ -104,9 +104,9 @@ macro_rules! integrator_model {
                 _: &mut Context<'_>,
                 _: f64,
                 h: f64,
-            ) -> Result<Status, ModelError> {
+            ) -> Result<StepOutcome, ModelError> {
                 self.y += self.u * h;
-                Ok(Status::Ok)
+                Ok(StepOutcome::Completed)
             }
         }
     };

@@ -8,7 +8,7 @@ use std::ptr;
 use fmi2_cosim::abi;
 use fmi2_cosim::fmi_sys::fmi2 as sys;
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, StepOutcome,
     UnitDefinition, Variability, Variable,
 };
 use serde::{Deserialize, Serialize};
@@ -72,13 +72,13 @@ impl CoSimModel for Faulty {
         Ok(())
     }
 
-    fn do_step(&mut self, _: &mut Context<'_>, _: f64, h: f64) -> Result<Status, ModelError> {
+    fn do_step(&mut self, _: &mut Context<'_>, _: f64, h: f64) -> Result<StepOutcome, ModelError> {
         match self.mode {
             1 => panic!("model bug"),
             2 => Err(ModelError("diverged".into())),
             _ => {
                 self.output += self.input * h;
-                Ok(Status::Ok)
+                Ok(StepOutcome::Completed)
             }
         }
     }

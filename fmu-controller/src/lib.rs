@@ -14,8 +14,8 @@
 
 use fmi2_cosim::variables::Value;
 use fmi2_cosim::{
-    BaseUnit, Causality, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
-    UnitDefinition, Variability, Variable, units,
+    BaseUnit, Causality, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo,
+    StepOutcome, UnitDefinition, Variability, Variable, units,
 };
 use piezo_models::{
     ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel, PiezoController,
@@ -748,7 +748,7 @@ impl CoSimModel for PiezoControllerFmu {
         ctx: &mut Context<'_>,
         current_time: f64,
         step_size: f64,
-    ) -> Result<Status, ModelError> {
+    ) -> Result<StepOutcome, ModelError> {
         // The inputs are finite: fmi2SetReal refuses a non-finite value, and
         // fmi2DeSerializeFMUstate a state that holds one (the FMI layer).
         let [x_ref, y_ref, theta_ref] = self.references;
@@ -768,7 +768,7 @@ impl CoSimModel for PiezoControllerFmu {
         if self.controller.limited() != [0; 3] {
             self.report_limiting(ctx, current_time);
         }
-        Ok(Status::Ok)
+        Ok(StepOutcome::Completed)
     }
 }
 

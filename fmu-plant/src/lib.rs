@@ -10,8 +10,8 @@
 
 use fmi2_cosim::{
     BaseUnit, CoSimModel, Context, DefaultExperiment, EventUpdate, Interface, ModelError,
-    ModelExchange, ModelExchangeInfo, ModelInfo, Status, UnitDefinition, Variability, Variable,
-    units,
+    ModelExchange, ModelExchangeInfo, ModelInfo, Status, StepOutcome, UnitDefinition, Variability,
+    Variable, units,
 };
 use piezo_models::flexure_stage::ode::{self, NUMBER_OF_STATES};
 use piezo_models::{FlexureStage, FlexureStageParams};
@@ -871,7 +871,7 @@ impl CoSimModel for FlexureStageFmu {
         ctx: &mut Context<'_>,
         current_time: f64,
         step_size: f64,
-    ) -> Result<Status, ModelError> {
+    ) -> Result<StepOutcome, ModelError> {
         let report = self.stage.step(self.commands, step_size);
         if let Some(fault) = report.fault {
             // Never hand a diverged state on as outputs: the importer gets
@@ -883,9 +883,14 @@ impl CoSimModel for FlexureStageFmu {
         let unreported: [bool; 3] =
             std::array::from_fn(|c| report.clipped[c] & !self.clip_reported[c]);
         if unreported == [false; 3] {
-            return Ok(Status::Ok);
+            return Ok(StepOutcome::Completed);
         }
-        Ok(self.report_clipping(ctx, current_time, report.clipped))
+        Ok(
+            match self.report_clipping(ctx, current_time, report.clipped) {
+                Status::Ok => StepOutcome::Completed,
+                _ => StepOutcome::CompletedWithWarning,
+            },
+        )
     }
 }
 
