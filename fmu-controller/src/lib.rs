@@ -14,7 +14,7 @@
 
 use fmi2_cosim::variables::Value;
 use fmi2_cosim::{
-    BaseUnit, Causality, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo,
+    BaseUnit, Causality, CoSimModel, Context, DefaultExperiment, FmiState, ModelError, ModelInfo,
     StepOutcome, UnitDefinition, Variability, Variable, units,
 };
 use piezo_models::{
@@ -720,13 +720,7 @@ impl CoSimModel for PiezoControllerFmu {
             })?;
         // The controller starts with empty integrators and de-energized
         // backlash memories (seed 000 eq. 1: zero initial state).
-        self.controller = PiezoController::new(self.params.clone()).map_err(|e| {
-            let name = fmi_name(&e.parameter).unwrap_or("a parameter");
-            ModelError(format!(
-                "parameter {name} ({}) = {} is not allowed: {}",
-                e.parameter, e.value, e.allowed
-            ))
-        })?;
+        self.controller = PiezoController::new(self.params.clone()).map_err(refused_parameter)?;
         self.saturation_reported = [false; 3];
         ctx.event(format_args!(
             "controller built from the parameters: feedforward {} ({:?}), decoupling {} ({:?}), feedback x/y/theta {}/{}/{}",
@@ -770,9 +764,65 @@ impl CoSimModel for PiezoControllerFmu {
         }
         Ok(StepOutcome::Completed)
     }
+
+    fn validate_restored(
+        &mut self,
+        _ctx: &mut Context<'_>,
+        state: FmiState,
+    ) -> Result<(), ModelError> {
+        self.check_restored(state)
+    }
+}
+
+/// A parameter piezo-models refuses, named as the importer knows it.
+fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
+    let name = fmi_name(&e.parameter).unwrap_or("a parameter");
+    ModelError(format!(
+        "parameter {name} ({}) = {} is not allowed: {}",
+        e.parameter, e.value, e.allowed
+    ))
 }
 
 impl PiezoControllerFmu {
+    /// The restored-state check of [`CoSimModel::validate_restored`]: past
+    /// initialization the controller was built from the parameters (so they
+    /// pass piezo-models' validation, the selector codes are the selectors,
+    /// and the controller holds the same parameters) and its last sample is
+    /// finite. Before it, `exit_initialization_mode` checks and rebuilds
+    /// everything.
+    fn check_restored(&self, state: FmiState) -> Result<(), ModelError> {
+        if matches!(
+            state,
+            FmiState::Instantiated | FmiState::InitializationMode | FmiState::Error
+        ) {
+            return Ok(());
+        }
+        self.params.validate().map_err(refused_parameter)?;
+        let selectors = (
+            selected(&HysteresisModel::CODES, self.selector_codes[0]),
+            selected(&DecouplingModel::CODES, self.selector_codes[1]),
+        );
+        if selectors
+            != (
+                Some(self.params.hysteresis_model),
+                Some(self.params.decoupling_model),
+            )
+            || self.controller.params() != &self.params
+        {
+            return Err(ModelError(
+                "the controller's parameters or selectors differ from the FMU's: the state \
+                 was not taken from an instance of this FMU"
+                    .to_owned(),
+            ));
+        }
+        if !sample_is_finite(self.controller.output()) {
+            return Err(ModelError(
+                "the controller's last sample is not finite".to_owned(),
+            ));
+        }
+        Ok(())
+    }
+
     #[cold]
     #[inline(never)]
     fn non_finite_step(&self, current_time: f64, step_size: f64) -> ModelError {
