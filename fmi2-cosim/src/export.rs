@@ -59,6 +59,8 @@ macro_rules! __export_fmi2_common {
                 nCategories: usize,
                 categories: *const fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_debug_logging::<Model>(c, loggingOn, nCategories, categories) }
             }
             #[unsafe(no_mangle)]
@@ -71,6 +73,8 @@ macro_rules! __export_fmi2_common {
                 visible: fmi2Boolean,
                 loggingOn: fmi2Boolean,
             ) -> fmi2Component {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     abi::instantiate::<Model>(
                         instanceName,
@@ -85,6 +89,8 @@ macro_rules! __export_fmi2_common {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2FreeInstance(c: fmi2Component) {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::free_instance::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -96,6 +102,8 @@ macro_rules! __export_fmi2_common {
                 stopTimeDefined: fmi2Boolean,
                 stopTime: fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     abi::setup_experiment::<Model>(
                         c,
@@ -109,18 +117,26 @@ macro_rules! __export_fmi2_common {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2EnterInitializationMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::enter_initialization_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2ExitInitializationMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::exit_initialization_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2Terminate(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::terminate::<Model>(c) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2Reset(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::reset::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -130,6 +146,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_real::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -139,6 +157,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2Integer,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_integer::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -148,6 +168,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_boolean::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -157,6 +179,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_string::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -166,6 +190,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_real::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -175,6 +201,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2Integer,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_integer::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -184,6 +212,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_boolean::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -193,6 +223,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_string::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -200,6 +232,8 @@ macro_rules! __export_fmi2_common {
                 c: fmi2Component,
                 FMUstate: *mut fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_fmu_state::<Model>(c, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -207,6 +241,8 @@ macro_rules! __export_fmi2_common {
                 c: fmi2Component,
                 FMUstate: fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_fmu_state::<Model>(c, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -214,6 +250,8 @@ macro_rules! __export_fmi2_common {
                 c: fmi2Component,
                 FMUstate: *mut fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::free_fmu_state::<Model>(c, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -222,6 +260,8 @@ macro_rules! __export_fmi2_common {
                 FMUstate: fmi2FMUstate,
                 size: *mut usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::serialized_fmu_state_size::<Model>(c, FMUstate, size) }
             }
             #[unsafe(no_mangle)]
@@ -231,6 +271,8 @@ macro_rules! __export_fmi2_common {
                 serializedState: *mut fmi2Byte,
                 size: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::serialize_fmu_state::<Model>(c, FMUstate, serializedState, size) }
             }
             #[unsafe(no_mangle)]
@@ -240,6 +282,8 @@ macro_rules! __export_fmi2_common {
                 size: usize,
                 FMUstate: *mut fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::deserialize_fmu_state::<Model>(c, serializedState, size, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -260,6 +304,8 @@ macro_rules! __export_fmi2_common {
                     dvKnown,
                     dvUnknown,
                 );
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_directional_derivative::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -271,6 +317,8 @@ macro_rules! __export_fmi2_common {
                 value: *const fmi2Real,
             ) -> fmi2Status {
                 let _ = (vr, nvr, order, value);
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_real_input_derivatives::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -282,6 +330,8 @@ macro_rules! __export_fmi2_common {
                 value: *mut fmi2Real,
             ) -> fmi2Status {
                 let _ = (vr, nvr, order, value);
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_real_output_derivatives::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -291,6 +341,8 @@ macro_rules! __export_fmi2_common {
                 communicationStepSize: fmi2Real,
                 noSetFMUStatePriorToCurrentPoint: fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     abi::do_step::<Model>(
                         c,
@@ -302,6 +354,8 @@ macro_rules! __export_fmi2_common {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2CancelStep(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::cancel_step::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -310,6 +364,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Status,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -318,6 +374,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_real_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -326,6 +384,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Integer,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_integer_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -334,6 +394,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_boolean_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -342,6 +404,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_string_status::<Model>(c, s, value) }
             }
 
@@ -404,6 +468,8 @@ macro_rules! __export_fmi2_model_exchange {
 
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2EnterEventMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::enter_event_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -411,10 +477,14 @@ macro_rules! __export_fmi2_model_exchange {
                 c: fmi2Component,
                 fmi2eventInfo: *mut fmi2EventInfo,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::new_discrete_states::<Model>(c, fmi2eventInfo) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2EnterContinuousTimeMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::enter_continuous_time_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -424,6 +494,8 @@ macro_rules! __export_fmi2_model_exchange {
                 enterEventMode: *mut fmi2Boolean,
                 terminateSimulation: *mut fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     me::completed_integrator_step::<Model>(
                         c,
@@ -435,6 +507,8 @@ macro_rules! __export_fmi2_model_exchange {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2SetTime(c: fmi2Component, time: fmi2Real) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::set_time::<Model>(c, time) }
             }
             #[unsafe(no_mangle)]
@@ -443,6 +517,8 @@ macro_rules! __export_fmi2_model_exchange {
                 x: *const fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::set_continuous_states::<Model>(c, x, nx) }
             }
             #[unsafe(no_mangle)]
@@ -451,6 +527,8 @@ macro_rules! __export_fmi2_model_exchange {
                 derivatives: *mut fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_derivatives::<Model>(c, derivatives, nx) }
             }
             #[unsafe(no_mangle)]
@@ -459,6 +537,8 @@ macro_rules! __export_fmi2_model_exchange {
                 eventIndicators: *mut fmi2Real,
                 ni: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_event_indicators::<Model>(c, eventIndicators, ni) }
             }
             #[unsafe(no_mangle)]
@@ -467,6 +547,8 @@ macro_rules! __export_fmi2_model_exchange {
                 x: *mut fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_continuous_states::<Model>(c, x, nx) }
             }
             #[unsafe(no_mangle)]
@@ -475,6 +557,8 @@ macro_rules! __export_fmi2_model_exchange {
                 x_nominal: *mut fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_nominals_of_continuous_states::<Model>(c, x_nominal, nx) }
             }
 

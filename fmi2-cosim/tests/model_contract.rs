@@ -240,13 +240,16 @@ impl Slave {
         (status, flag)
     }
 
+    fn terminate(&self) -> sys::fmi2Status {
+        // SAFETY: `self.0` is a live instance of Stepper.
+        unsafe { abi::terminate::<Stepper>(self.0) }
+    }
+
     fn get_state(&self) -> sys::fmi2FMUstate {
         let mut state: sys::fmi2FMUstate = ptr::null_mut();
         // SAFETY: `state` is a NULL slot the layer fills.
-        assert_eq!(
-            unsafe { abi::get_fmu_state::<Stepper>(self.0, &mut state) },
-            OK
-        );
+        let status = unsafe { abi::get_fmu_state::<Stepper>(self.0, &mut state) };
+        assert_eq!(status, OK);
         state
     }
 
@@ -367,8 +370,7 @@ fn a_step_is_refused_after_a_discard_and_terminate_is_allowed() {
     let slave = Slave::initialized();
     assert_eq!(slave.set_mode(DISCARD_HALFWAY), OK);
     assert_eq!(slave.step(0.0, 0.1), DISCARD);
-    // SAFETY: `slave.0` is live.
-    assert_eq!(unsafe { abi::terminate::<Stepper>(slave.0) }, OK);
+    assert_eq!(slave.terminate(), OK);
     let slave = Slave::initialized();
     assert_eq!(slave.set_mode(DISCARD_HALFWAY), OK);
     assert_eq!(slave.step(0.0, 0.1), DISCARD);
@@ -395,11 +397,11 @@ fn a_terminate_request_is_a_discard_with_fmi2_terminated_true() {
     assert_eq!(other.terminated(), (OK, 1));
     assert_eq!(other.last_successful_time(), (OK, 0.1));
     assert_eq!(other.step(0.1, 0.1), ERROR, "stepFailed allows no step");
-    // SAFETY: `slave.0` is live.
-    assert_eq!(unsafe { abi::terminate::<Stepper>(slave.0) }, OK);
+    assert_eq!(slave.terminate(), OK);
     // fmi2Reset clears the request.
-    // SAFETY: as above.
-    assert_eq!(unsafe { abi::reset::<Stepper>(other.0) }, OK);
+    // SAFETY: `other.0` is live.
+    let status = unsafe { abi::reset::<Stepper>(other.0) };
+    assert_eq!(status, OK);
     let other = Slave::initialized();
     assert_eq!(other.terminated(), (OK, 0));
 }
