@@ -724,8 +724,8 @@ impl<M: CoSimModel> Instance<M> {
                 let value = get(&data.model);
                 if var.derivative_of.is_none() && !value.is_finite() {
                     return Err(refuse(format_args!(
-                        "the state holds {} = {value}; an instance in {} never holds a \
-                         non-finite value",
+                        "the state holds {} = {value}, and only finite values are held by an \
+                         instance in {}",
                         var.name,
                         data.state.name()
                     )));
