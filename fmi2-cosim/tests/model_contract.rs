@@ -481,3 +481,25 @@ fn ranges_are_not_enforced_on_a_state_taken_before_initialization() {
         assert_eq!(abi::exit_initialization_mode::<Stepper>(other.0), ERROR);
     }
 }
+
+/// The gate turns (pointer, length) into a slice only when it can be one: a
+/// misaligned array is refused with fmi2Error instead of being read.
+#[test]
+fn a_misaligned_array_is_refused_at_the_gate() {
+    let slave = Slave::initialized();
+    let storage = [0u64; 3];
+    // One byte into an 8-aligned buffer: misaligned for u32 and f64.
+    let misaligned = storage.as_ptr().cast::<u8>().wrapping_add(1);
+    let mut value = 0.0;
+    // SAFETY: the layer checks the alignment before it reads `vr`, and
+    // refuses; `value` is a local.
+    let status =
+        unsafe { abi::get_real::<Stepper>(slave.0, misaligned.cast::<u32>(), 1, &mut value) };
+    assert_eq!(status, ERROR);
+    // Refused without a read: the instance is in its error state, values
+    // intact, and recovers through a reset.
+    assert!((slave.real(Y) - 0.0).abs() < 1e-15);
+    // SAFETY: `slave.0` is live.
+    let status = unsafe { abi::reset::<Stepper>(slave.0) };
+    assert_eq!(status, OK);
+}
