@@ -686,7 +686,7 @@ impl<M: CoSimModel> Instance<M> {
     /// in, every Real of the variable table finite (state derivatives aside:
     /// `fmi2GetReal` refuses a non-finite one itself; and in the error state,
     /// which a diverged step may have left), and, past initialization, every
-    /// parameter in its declared range. Then the model's own hook
+    /// fixed parameter in its declared range. Then the model's own hook
     /// ([`CoSimModel::validate_restored`]). The reason of a refusal is logged
     /// and returned.
     pub(crate) fn validate_foreign_state(
@@ -732,9 +732,12 @@ impl<M: CoSimModel> Instance<M> {
                 }
             }
         }
+        // Tunable parameters are not among them: fmi2SetReal accepts any
+        // finite value for one while simulating, as it does for an input.
         if ranges_hold_in(data.state)
             && let Some(reason) = M::variables()
                 .iter()
+                .filter(|var| var.variability == Variability::Fixed)
                 .find_map(|var| parameter_out_of_range(var, &data.model))
         {
             return Err(refuse(format_args!(

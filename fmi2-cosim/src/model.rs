@@ -172,7 +172,8 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
     /// (`fmi2SetFMUstate`, and `fmi2DeSerializeFMUstate` for bytes from
     /// outside), on the candidate model value, after the layer checked that
     /// every Real of the variable table is finite and, in `state`s past
-    /// initialization, that every parameter is in its declared range. The
+    /// initialization, that every fixed parameter is in its declared range
+    /// (tunable ones, like inputs, take any finite value while running). The
     /// model checks the rest of its invariants (what its own constructor
     /// would refuse) and rebuilds whatever it derives from its parameters,
     /// so that a state with valid checksum but made-up values never runs.

@@ -503,3 +503,19 @@ fn a_misaligned_array_is_refused_at_the_gate() {
     let status = unsafe { abi::reset::<Stepper>(slave.0) };
     assert_eq!(status, OK);
 }
+
+/// fmi2SetReal/Integer take any finite value for a tunable parameter while
+/// running (its range is checked at initialization), so a state holding
+/// one outside its range is a state an instance can be in, and restores.
+#[test]
+fn a_tunable_parameter_outside_its_range_after_initialization_restores() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.set_mode(7), OK);
+    assert_eq!(slave.step(0.0, 0.1), OK);
+    let bytes = slave.serialize(slave.get_state());
+    let other = Slave::initialized();
+    let (status, state) = other.deserialize(&bytes);
+    assert_eq!(status, OK);
+    assert_eq!(other.set_state(state), OK);
+    assert_eq!(other.last_successful_time(), (OK, 0.1));
+}

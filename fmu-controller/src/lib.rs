@@ -797,7 +797,17 @@ impl PiezoControllerFmu {
         ) {
             return Ok(());
         }
-        self.params.validate().map_err(refused_parameter)?;
+        // The PI gains are tunable: fmi2SetReal takes any finite value for
+        // them while running (as the layer does for every tunable), so a
+        // state may hold gains that validate() would refuse; the rest is
+        // checked as at initialization.
+        let defaults = ControllerParams::default();
+        let fixed_part = ControllerParams {
+            translation_gains: defaults.translation_gains,
+            rotation_gains: defaults.rotation_gains,
+            ..self.params.clone()
+        };
+        fixed_part.validate().map_err(refused_parameter)?;
         let selectors = (
             selected(&HysteresisModel::CODES, self.selector_codes[0]),
             selected(&DecouplingModel::CODES, self.selector_codes[1]),
