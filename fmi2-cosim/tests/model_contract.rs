@@ -358,7 +358,7 @@ fn a_discarded_step_stops_at_the_last_successful_time_in_step_failed() {
 }
 
 #[test]
-fn step_failed_allows_no_input_and_no_step() {
+fn step_failed_refuses_inputs() {
     let slave = Slave::initialized();
     assert_eq!(slave.set_mode(DISCARD_HALFWAY), OK);
     assert_eq!(slave.step(0.0, 0.1), DISCARD);
