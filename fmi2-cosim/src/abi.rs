@@ -6,9 +6,18 @@
 //! refusal with the function's name and the reason, catches any panic so that
 //! none crosses the C boundary, and moves the instance to its error state after
 //! `fmi2Error`. With `n == 0`, array pointers may be NULL.
+//!
+//! This is the gate: the pointers of a call become references and slices
+//! here ([`slice_in`], [`slice_out`], [`value_out`], checked for NULL,
+//! alignment and size with `fmi2Error` and a log line when they fail), and
+//! everything past it (`Instance`, the model) is safe Rust. Every `unsafe`
+//! block says, in its `SAFETY` comment, which part of the caller's contract
+//! (the FMI 2.0 standard's rules for the arguments, repeated in each
+//! function's `# Safety`) or which check makes it sound.
 
 use std::ffi::{CStr, CString, c_char};
 use std::fmt;
+use std::mem::MaybeUninit;
 use std::panic::{self, AssertUnwindSafe};
 use std::ptr;
 
@@ -50,11 +59,18 @@ unsafe fn instance<'a, M: CoSimModel>(c: sys::fmi2Component) -> Option<&'a mut I
     }
     // SAFETY: every object this layer hands out (instances and FMU states) is
     // repr(C) with a u64 magic number first, so reading the first eight bytes
-    // stays inside the allocation whichever of them `c` is.
-    let magic = unsafe { ptr::read(c as *const u64) };
+    // stays inside the allocation whichever of them `c` is (the caller
+    // guarantees eight readable bytes); read_unaligned makes no claim on the
+    // alignment of a pointer that may not be ours.
+    let magic = unsafe { ptr::read_unaligned(c as *const u64) };
     if magic != Magic::<M>::INSTANCE {
         return None;
     }
+    // SAFETY: the magic number is that of a live `Instance<M>` made by
+    // `instantiate` (Box, so aligned and initialized); `fmi2FreeInstance`
+    // poisons it before the memory is released. The FMI standard forbids
+    // calling into one instance from two threads at once, so the reference
+    // is the only one while the call runs.
     Some(unsafe { &mut *(c as *mut Instance<M>) })
 }
 
@@ -76,6 +92,8 @@ where
     A: Fn(&mut fmt::Formatter<'_>) -> fmt::Result,
     F: FnOnce(&mut Instance<M>) -> Status,
 {
+    // SAFETY: `c` is NULL or points to eight readable bytes (this function's
+    // contract, the caller's from the FMI standard).
     let Some(inst) = (unsafe { instance::<M>(c) }) else {
         return ERROR;
     };
@@ -130,35 +148,138 @@ fn refuse_sequence<M: CoSimModel>(inst: &mut Instance<M>, function: FmiFunction)
 /// # Safety
 /// `s` must be NULL or a NUL-terminated string.
 unsafe fn string_arg<'a>(s: *const c_char) -> Option<std::borrow::Cow<'a, str>> {
-    (!s.is_null()).then(|| unsafe { CStr::from_ptr(s) }.to_string_lossy())
+    if s.is_null() {
+        return None;
+    }
+    // SAFETY: non-NULL, and NUL-terminated by this function's contract.
+    Some(unsafe { CStr::from_ptr(s) }.to_string_lossy())
 }
 
-/// The array arguments of a getter or setter as slices; refuses NULL arrays
-/// when `n > 0`.
+/// An input array argument (`values`, `n`) as a slice: empty when `n == 0`
+/// (the pointer may then be NULL); refuses, with `fmi2Error` and a log line
+/// naming `name`, a NULL or misaligned pointer or an impossible length.
 ///
 /// # Safety
-/// When non-NULL, `vr` and `values` must point to `n` elements.
-unsafe fn arrays<'a, T>(
+/// When non-NULL, `values` must point to `n` initialized elements, valid for
+/// `'a` and not written meanwhile.
+pub(crate) unsafe fn slice_in<'a, T>(
     inst: &Instance<impl CoSimModel>,
     function: FmiFunction,
-    vr: *const sys::fmi2ValueReference,
-    n: usize,
     values: *const T,
-    values_name: &str,
-) -> Result<(&'a [u32], *const T), Status> {
+    n: usize,
+    name: &str,
+) -> Result<&'a [T], Status> {
     if n == 0 {
-        return Ok((&[], values));
+        return Ok(&[]);
     }
-    if vr.is_null() {
-        return Err(inst.error(function, format_args!("vr[] is NULL but nvr = {n}")));
+    check_array(inst, function, values, n, name)?;
+    // SAFETY: `values` is non-NULL and aligned, and `n` elements of `T` fit
+    // in `isize` (all checked above); the caller guarantees that it points to
+    // `n` initialized elements that nothing writes while the call runs (the
+    // FMI standard: the array has `n` elements).
+    Ok(unsafe { std::slice::from_raw_parts(values, n) })
+}
+
+/// An output array argument (`values`, `n`) as a slice of possibly
+/// uninitialized elements (the importer's buffer may be fresh memory),
+/// checked as by [`slice_in`].
+///
+/// # Safety
+/// When non-NULL, `values` must point to `n` elements writable for `'a`, that
+/// nothing else reads or writes meanwhile.
+pub(crate) unsafe fn slice_out<'a, T>(
+    inst: &Instance<impl CoSimModel>,
+    function: FmiFunction,
+    values: *mut T,
+    n: usize,
+    name: &str,
+) -> Result<&'a mut [MaybeUninit<T>], Status> {
+    if n == 0 {
+        return Ok(&mut []);
     }
+    check_array(inst, function, values.cast_const(), n, name)?;
+    // SAFETY: as in `slice_in` (non-NULL, aligned, size checked); the caller
+    // guarantees the elements writable and not aliased (the FMI standard: the
+    // importer's output buffer of `n` elements). `MaybeUninit` makes no claim
+    // on what the buffer holds before it is written.
+    Ok(unsafe { std::slice::from_raw_parts_mut(values.cast::<MaybeUninit<T>>(), n) })
+}
+
+/// Refuses, with a log line, an array pointer that cannot be made a slice of
+/// `n > 0` elements: NULL, misaligned, or too long for the address space.
+fn check_array<T>(
+    inst: &Instance<impl CoSimModel>,
+    function: FmiFunction,
+    values: *const T,
+    n: usize,
+    name: &str,
+) -> Result<(), Status> {
     if values.is_null() {
         return Err(inst.error(
             function,
-            format_args!("{values_name}[] is NULL but nvr = {n}"),
+            format_args!("{name}[] is NULL but its length is {n}"),
         ));
     }
-    Ok((unsafe { std::slice::from_raw_parts(vr, n) }, values))
+    if !values.is_aligned() {
+        return Err(inst.error(
+            function,
+            format_args!(
+                "{name}[] at {values:?} is not aligned for its element type ({} bytes)",
+                std::mem::align_of::<T>()
+            ),
+        ));
+    }
+    if n > isize::MAX as usize / std::mem::size_of::<T>().max(1) {
+        return Err(inst.error(
+            function,
+            format_args!("{name}[] cannot have {n} elements (larger than the address space)"),
+        ));
+    }
+    Ok(())
+}
+
+/// A pointer to one output value, possibly uninitialized, as a reference;
+/// refuses NULL and misaligned pointers with a log line naming `name`.
+///
+/// # Safety
+/// When non-NULL, `value` must be valid for writes of a `T` for `'a`, and not
+/// aliased meanwhile.
+pub(crate) unsafe fn value_out<'a, T>(
+    inst: &Instance<impl CoSimModel>,
+    function: FmiFunction,
+    value: *mut T,
+    name: &str,
+) -> Result<&'a mut MaybeUninit<T>, Status> {
+    if value.is_null() {
+        return Err(inst.error(function, format_args!("{name} is NULL")));
+    }
+    check_array(inst, function, value.cast_const(), 1, name)?;
+    // SAFETY: non-NULL and aligned (checked); valid for writes and unaliased
+    // by this function's contract (the FMI standard: the importer's output
+    // variable); `MaybeUninit` claims nothing of its current contents.
+    Ok(unsafe { &mut *value.cast::<MaybeUninit<T>>() })
+}
+
+/// A pointer to one in-out value (read, then maybe written) as a reference;
+/// refuses NULL and misaligned pointers with a log line naming `name`.
+///
+/// # Safety
+/// When non-NULL, `value` must point to an initialized `T` valid for reads
+/// and writes for `'a`, and not aliased meanwhile.
+unsafe fn value_in_out<'a, T>(
+    inst: &Instance<impl CoSimModel>,
+    function: FmiFunction,
+    value: *mut T,
+    name: &str,
+) -> Result<&'a mut T, Status> {
+    if value.is_null() {
+        return Err(inst.error(function, format_args!("{name} is NULL")));
+    }
+    check_array(inst, function, value.cast_const(), 1, name)?;
+    // SAFETY: non-NULL and aligned (checked); initialized, valid and
+    // unaliased by this function's contract (the FMI standard: the
+    // importer's `fmi2FMUstate` variable).
+    Ok(unsafe { &mut *value })
 }
 
 /// The arguments of a traced call, written only when the trace is.
@@ -206,19 +327,24 @@ pub unsafe fn instantiate<M: CoSimModel>(
     _visible: sys::fmi2Boolean,
     logging_on: sys::fmi2Boolean,
 ) -> sys::fmi2Component {
-    let outcome = panic::catch_unwind(|| unsafe {
-        instantiate_checked::<M>(
-            instance_name,
-            fmu_type,
-            fmu_guid,
-            fmu_resource_location,
-            functions,
-            logging_on,
-        )
+    let outcome = panic::catch_unwind(|| {
+        // SAFETY: the arguments are this function's, under the same contract.
+        unsafe {
+            instantiate_checked::<M>(
+                instance_name,
+                fmu_type,
+                fmu_guid,
+                fmu_resource_location,
+                functions,
+                logging_on,
+            )
+        }
     });
     outcome.unwrap_or(ptr::null_mut())
 }
 
+/// # Safety
+/// As [`instantiate`].
 unsafe fn instantiate_checked<M: CoSimModel>(
     instance_name: sys::fmi2String,
     fmu_type: sys::fmi2Type,
@@ -232,7 +358,14 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         // Without callbacks there is no logger to say why.
         return ptr::null_mut();
     }
+    if !functions.is_aligned() {
+        return ptr::null_mut();
+    }
+    // SAFETY: non-NULL and aligned (checked); the importer passes its
+    // callback struct, initialized (FMI 2.0.4 §2.1.5). Copied: the importer
+    // may free it after the call.
     let callbacks = unsafe { *functions };
+    // SAFETY: NULL or a NUL-terminated string (the standard's `fmi2String`).
     let name = unsafe { string_arg(instance_name) };
     let logger_name = CString::new(name.as_deref().unwrap_or("(NULL)").replace('\0', "?"))
         .expect("NUL bytes replaced");
@@ -280,6 +413,7 @@ unsafe fn instantiate_checked<M: CoSimModel>(
             return ptr::null_mut();
         }
     };
+    // SAFETY: as for `instance_name`.
     match unsafe { string_arg(fmu_guid) } {
         None => {
             logger.error(NAME, format_args!("fmuGUID is NULL (expected {guid})"));
@@ -297,6 +431,7 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         }
         Some(_) => {}
     }
+    // SAFETY: as for `instance_name`.
     let location = unsafe { string_arg(fmu_resource_location) };
     let resource_dir = match resources::resource_dir(location.as_deref()) {
         Ok(dir) => dir,
@@ -335,17 +470,23 @@ unsafe fn instantiate_checked<M: CoSimModel>(
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn free_instance<M: CoSimModel>(c: sys::fmi2Component) {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     let Some(inst) = (unsafe { instance::<M>(c) }) else {
         return;
     };
     trace(inst, FmiFunction::FreeInstance, |_| Ok(()));
     // The FMU states it made that the importer did not free.
     for state in std::mem::take(&mut inst.fmu_states) {
+        // SAFETY: `fmu_states` holds only live snapshots of `M` this
+        // instance made; `fmi2FreeFMUstate` removes a state from it before
+        // freeing it, so none is freed twice.
         unsafe { free_snapshot::<M>(state) };
     }
     // Poison the magic so that a second free of the same pointer is refused
     // as long as the memory has not been reused.
     inst.magic = 0;
+    // SAFETY: `c` is a live `Instance<M>` (its magic number said so) that
+    // `instantiate` made with `Box::into_raw`; `inst` is not used after this.
     let boxed = unsafe { Box::from_raw(c as *mut Instance<M>) };
     let _ = panic::catch_unwind(AssertUnwindSafe(move || drop(boxed)));
 }
@@ -359,33 +500,33 @@ pub unsafe fn set_debug_logging<M: CoSimModel>(
     categories: *const sys::fmi2String,
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetDebugLogging;
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `categories` points to `n_categories` strings when
+        // non-NULL (the standard's contract, this function's).
+        let raw = match unsafe { slice_in(inst, function, categories, n_categories, "categories") }
+        {
+            Ok(raw) => raw,
+            Err(status) => return status,
+        };
+        if raw.iter().any(|p| p.is_null()) {
+            return inst.error(function, format_args!("a category name is NULL"));
+        }
+        let names: Vec<std::borrow::Cow<'_, str>> = raw
+            .iter()
+            // SAFETY: each is non-NULL (checked) and NUL-terminated (the
+            // standard's `fmi2String`).
+            .map(|p| unsafe { string_arg(*p) }.expect("checked"))
+            .collect();
+        let names: Vec<&str> = names.iter().map(|n| n.as_ref()).collect();
+        inst.set_debug_logging(logging_on != 0, &names)
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
             function,
             |f| write!(f, "loggingOn = {logging_on}, nCategories = {n_categories}"),
-            |inst| {
-                if n_categories > 0 && categories.is_null() {
-                    return inst.error(
-                        function,
-                        format_args!("categories[] is NULL but nCategories = {n_categories}"),
-                    );
-                }
-                let raw: &[sys::fmi2String] = if n_categories == 0 {
-                    &[]
-                } else {
-                    std::slice::from_raw_parts(categories, n_categories)
-                };
-                if raw.iter().any(|p| p.is_null()) {
-                    return inst.error(function, format_args!("a category name is NULL"));
-                }
-                let names: Vec<std::borrow::Cow<'_, str>> = raw
-                    .iter()
-                    .map(|p| string_arg(*p).expect("checked"))
-                    .collect();
-                let names: Vec<&str> = names.iter().map(|n| n.as_ref()).collect();
-                inst.set_debug_logging(logging_on != 0, &names)
-            },
+            body,
         )
     }
 }
@@ -402,6 +543,8 @@ pub unsafe fn setup_experiment<M: CoSimModel>(
 ) -> sys::fmi2Status {
     // The tolerance is not used: the models integrate their linear parts exactly
     // and bound the rest by their own solver parameters.
+    // SAFETY: `c` as for every FMI function (this function's contract); the
+    // other arguments are values.
     unsafe {
         call::<M, _, _>(
             c,
@@ -420,6 +563,7 @@ pub unsafe fn setup_experiment<M: CoSimModel>(
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn enter_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
@@ -433,6 +577,7 @@ pub unsafe fn enter_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) ->
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn exit_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
@@ -446,12 +591,14 @@ pub unsafe fn exit_initialization_mode<M: CoSimModel>(c: sys::fmi2Component) -> 
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn terminate<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe { call::<M, _, _>(c, FmiFunction::Terminate, |_| Ok(()), |i| i.terminate()) }
 }
 
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn reset<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe { call::<M, _, _>(c, FmiFunction::Reset, |_| Ok(()), |i| i.reset()) }
 }
 
@@ -466,26 +613,25 @@ unsafe fn get<M: CoSimModel, T: FmiValue, C>(
     values: *mut C,
     to_c: fn(T) -> C,
 ) -> sys::fmi2Status {
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "nvr = {nvr}"),
-            |inst| {
-                let (vrs, values) =
-                    match arrays(inst, function, vr, nvr, values.cast_const(), "value") {
-                        Ok(v) => v,
-                        Err(status) => return status,
-                    };
-                let out: &mut [C] = if nvr == 0 {
-                    &mut []
-                } else {
-                    std::slice::from_raw_parts_mut(values.cast_mut(), nvr)
-                };
-                inst.get_values(function, vrs, |i, value: T| out[i] = to_c(value))
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `vr` points to `nvr` value references when non-NULL (this
+        // function's contract, the standard's for fmi2GetXXX).
+        let vrs = match unsafe { slice_in(inst, function, vr, nvr, "vr") } {
+            Ok(vrs) => vrs,
+            Err(status) => return status,
+        };
+        // SAFETY: `values` points to `nvr` writable elements when non-NULL
+        // (as above).
+        let out = match unsafe { slice_out(inst, function, values, nvr, "value") } {
+            Ok(out) => out,
+            Err(status) => return status,
+        };
+        inst.get_values(function, vrs, |i, value: T| {
+            out[i].write(to_c(value));
+        })
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "nvr = {nvr}"), body) }
 }
 
 /// # Safety
@@ -499,25 +645,22 @@ unsafe fn set<M: CoSimModel, T: FmiValue, C: Copy>(
     values: *const C,
     from_c: fn(C) -> T,
 ) -> sys::fmi2Status {
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "nvr = {nvr}"),
-            |inst| {
-                let (vrs, values) = match arrays(inst, function, vr, nvr, values, "value") {
-                    Ok(v) => v,
-                    Err(status) => return status,
-                };
-                let raw: &[C] = if nvr == 0 {
-                    &[]
-                } else {
-                    std::slice::from_raw_parts(values, nvr)
-                };
-                inst.set_values(function, vrs, |i| from_c(raw[i]))
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `vr` points to `nvr` value references when non-NULL (this
+        // function's contract, the standard's for fmi2SetXXX).
+        let vrs = match unsafe { slice_in(inst, function, vr, nvr, "vr") } {
+            Ok(vrs) => vrs,
+            Err(status) => return status,
+        };
+        // SAFETY: `values` points to `nvr` values when non-NULL (as above).
+        let raw = match unsafe { slice_in(inst, function, values, nvr, "value") } {
+            Ok(raw) => raw,
+            Err(status) => return status,
+        };
+        inst.set_values(function, vrs, |i| from_c(raw[i]))
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "nvr = {nvr}"), body) }
 }
 
 fn bool_to_c(b: bool) -> sys::fmi2Boolean {
@@ -536,6 +679,7 @@ pub unsafe fn get_real<M: CoSimModel>(
     nvr: usize,
     value: *mut sys::fmi2Real,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { get::<M, f64, _>(c, FmiFunction::GetReal, vr, nvr, value, |v| v) }
 }
 
@@ -547,6 +691,7 @@ pub unsafe fn get_integer<M: CoSimModel>(
     nvr: usize,
     value: *mut sys::fmi2Integer,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { get::<M, i32, _>(c, FmiFunction::GetInteger, vr, nvr, value, |v| v) }
 }
 
@@ -558,6 +703,7 @@ pub unsafe fn get_boolean<M: CoSimModel>(
     nvr: usize,
     value: *mut sys::fmi2Boolean,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { get::<M, bool, _>(c, FmiFunction::GetBoolean, vr, nvr, value, bool_to_c) }
 }
 
@@ -590,6 +736,7 @@ pub unsafe fn get_string<M: CoSimModel>(
     nvr: usize,
     value: *mut sys::fmi2String,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { get::<M, NoString, _>(c, FmiFunction::GetString, vr, nvr, value, |_| ptr::null()) }
 }
 
@@ -601,6 +748,7 @@ pub unsafe fn set_real<M: CoSimModel>(
     nvr: usize,
     value: *const sys::fmi2Real,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { set::<M, f64, _>(c, FmiFunction::SetReal, vr, nvr, value, |v| v) }
 }
 
@@ -612,6 +760,7 @@ pub unsafe fn set_integer<M: CoSimModel>(
     nvr: usize,
     value: *const sys::fmi2Integer,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { set::<M, i32, _>(c, FmiFunction::SetInteger, vr, nvr, value, |v| v) }
 }
 
@@ -623,6 +772,7 @@ pub unsafe fn set_boolean<M: CoSimModel>(
     nvr: usize,
     value: *const sys::fmi2Boolean,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { set::<M, bool, _>(c, FmiFunction::SetBoolean, vr, nvr, value, bool_from_c) }
 }
 
@@ -634,6 +784,7 @@ pub unsafe fn set_string<M: CoSimModel>(
     nvr: usize,
     value: *const sys::fmi2String,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { set::<M, NoString, _>(c, FmiFunction::SetString, vr, nvr, value, |_| NoString) }
 }
 
@@ -647,11 +798,17 @@ unsafe fn snapshot<'a, M: CoSimModel>(state: sys::fmi2FMUstate) -> Option<&'a mu
     if state.is_null() {
         return None;
     }
-    // SAFETY: as in `instance`: the magic number is the first field.
-    let magic = unsafe { ptr::read(state as *const u64) };
+    // SAFETY: as in `instance`: the magic number is the first field of
+    // every object this layer hands out, and the caller guarantees eight
+    // readable bytes.
+    let magic = unsafe { ptr::read_unaligned(state as *const u64) };
     if magic != Magic::<M>::SNAPSHOT {
         return None;
     }
+    // SAFETY: the magic number is that of a live `Snapshot<M>` made by
+    // `store_snapshot` (Box: aligned, initialized); `free_snapshot` poisons
+    // it before the memory is released. Calls on one instance are never
+    // concurrent (FMI standard), so the reference is the only one.
     Some(unsafe { &mut *(state as *mut Snapshot<M>) })
 }
 
@@ -661,31 +818,35 @@ unsafe fn snapshot<'a, M: CoSimModel>(state: sys::fmi2FMUstate) -> Option<&'a mu
 /// `state` must be a live snapshot of model `M` made by this layer.
 unsafe fn free_snapshot<M: CoSimModel>(state: sys::fmi2FMUstate) {
     let snapshot = state as *mut Snapshot<M>;
-    unsafe {
-        (*snapshot).magic = 0;
-        drop(Box::from_raw(snapshot));
-    }
+    // SAFETY: a live snapshot made by `Box::into_raw` in `store_snapshot`
+    // (this function's contract); nothing uses it after this.
+    let mut boxed = unsafe { Box::from_raw(snapshot) };
+    boxed.magic = 0;
+    drop(boxed);
 }
 
-/// Stores `data` in `*slot`, reusing the snapshot already there if there is one.
-///
-/// # Safety
-/// `slot` must be valid for reads and writes; `*slot` as for [`snapshot`].
-unsafe fn store_snapshot<M: CoSimModel>(
+/// Stores `data` in `*slot`, reusing the snapshot already there if there is
+/// one (`*slot` is NULL, or a state the importer got from this FMU and has
+/// not freed, as the standard requires).
+fn store_snapshot<M: CoSimModel>(
     inst: &mut Instance<M>,
     function: FmiFunction,
-    slot: *mut sys::fmi2FMUstate,
+    slot: &mut sys::fmi2FMUstate,
     data: fmu_state::SnapshotData<M>,
 ) -> Status {
-    let current = unsafe { *slot };
+    let current = *slot;
     if current.is_null() {
         let owner: *mut Instance<M> = inst;
         let boxed = Box::new(Snapshot::new(data, owner.cast()));
         let state: sys::fmi2FMUstate = Box::into_raw(boxed).cast();
         inst.fmu_states.push(state);
-        unsafe { *slot = state };
+        *slot = state;
         return Status::Ok;
     }
+    // SAFETY: `*slot` is non-NULL: a state the importer got from this FMU
+    // and has not freed, or the importer broke the standard (FMI 2.0.4
+    // §2.1.8: *FMUstate is NULL or a state of this FMU); any of our objects
+    // has the eight readable bytes the magic check needs.
     match unsafe { snapshot::<M>(current) } {
         Some(existing) => {
             existing.data = data;
@@ -706,20 +867,18 @@ pub unsafe fn get_fmu_state<M: CoSimModel>(
     state: *mut sys::fmi2FMUstate,
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetFmuState;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "FMUstate = {state:?}"),
-            |inst| {
-                if state.is_null() {
-                    return inst.error(function, format_args!("FMUstate is NULL"));
-                }
-                let data = inst.snapshot();
-                store_snapshot(inst, function, state, data)
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `state` is the importer's initialized `fmi2FMUstate`
+        // variable when non-NULL (this function's contract).
+        let slot = match unsafe { value_in_out(inst, function, state, "FMUstate") } {
+            Ok(slot) => slot,
+            Err(status) => return status,
+        };
+        let data = inst.snapshot();
+        store_snapshot(inst, function, slot, data)
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "FMUstate = {state:?}"), body) }
 }
 
 /// # Safety
@@ -729,20 +888,19 @@ pub unsafe fn set_fmu_state<M: CoSimModel>(
     state: sys::fmi2FMUstate,
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetFmuState;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "FMUstate = {state:?}"),
-            |inst| match snapshot::<M>(state) {
-                Some(snapshot) => inst.restore(function, &snapshot.data),
-                None => inst.error(
-                    function,
-                    format_args!("FMUstate is NULL or not a state of this FMU"),
-                ),
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `state` is NULL or a state of this FMU not yet freed (this
+        // function's contract); any of our objects has eight readable bytes.
+        match unsafe { snapshot::<M>(state) } {
+            Some(snapshot) => inst.restore(function, &snapshot.data),
+            None => inst.error(
+                function,
+                format_args!("FMUstate is NULL or not a state of this FMU"),
+            ),
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "FMUstate = {state:?}"), body) }
 }
 
 /// # Safety
@@ -752,42 +910,45 @@ pub unsafe fn free_fmu_state<M: CoSimModel>(
     state: *mut sys::fmi2FMUstate,
 ) -> sys::fmi2Status {
     let function = FmiFunction::FreeFmuState;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "FMUstate = {state:?}"),
-            |inst| {
-                if state.is_null() {
-                    return inst.error(function, format_args!("FMUstate is NULL"));
-                }
-                let current = *state;
-                if current.is_null() {
-                    return Status::Ok;
-                }
-                match snapshot::<M>(current) {
-                    Some(snapshot) => {
-                        // The instance that made it (maybe another one than this:
-                        // states of one instance may be used with another) no
-                        // longer has to free it.
-                        let owner = snapshot.owner as *mut Instance<M>;
-                        if ptr::eq(owner, &*inst) {
-                            inst.fmu_states.retain(|s| *s != current);
-                        } else if let Some(owner) = instance::<M>(owner.cast()) {
-                            owner.fmu_states.retain(|s| *s != current);
-                        }
-                        free_snapshot::<M>(current);
-                        *state = ptr::null_mut();
-                        Status::Ok
-                    }
-                    None => inst.error(
-                        function,
-                        format_args!("*FMUstate is not a state of this FMU"),
-                    ),
-                }
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `state` is the importer's initialized `fmi2FMUstate`
+        // variable when non-NULL (this function's contract).
+        let slot = match unsafe { value_in_out(inst, function, state, "FMUstate") } {
+            Ok(slot) => slot,
+            Err(status) => return status,
+        };
+        let current = *slot;
+        if current.is_null() {
+            return Status::Ok;
+        }
+        // SAFETY: `current` is non-NULL and a state of this FMU not yet
+        // freed, or refused by its magic number (this function's contract).
+        let Some(snapshot) = (unsafe { snapshot::<M>(current) }) else {
+            return inst.error(
+                function,
+                format_args!("*FMUstate is not a state of this FMU"),
+            );
+        };
+        // The instance that made it (maybe another one than this: states of
+        // one instance may be used with another) no longer has to free it.
+        let owner = snapshot.owner as *mut Instance<M>;
+        if ptr::eq(owner, &*inst) {
+            inst.fmu_states.retain(|s| *s != current);
+        // SAFETY: a snapshot's owner is the instance that made it; an owner
+        // freed since is refused by its poisoned magic number, as long as
+        // the memory was not reused (the standard forbids using a state of a
+        // freed instance).
+        } else if let Some(owner) = unsafe { instance::<M>(owner.cast()) } {
+            owner.fmu_states.retain(|s| *s != current);
+        }
+        // SAFETY: `current` is a live snapshot of `M` (its magic number) and
+        // no instance lists it any more, so it is freed once.
+        unsafe { free_snapshot::<M>(current) };
+        *slot = ptr::null_mut();
+        Status::Ok
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "FMUstate = {state:?}"), body) }
 }
 
 /// The encoded bytes of a snapshot, computed once.
@@ -813,31 +974,31 @@ pub unsafe fn serialized_fmu_state_size<M: CoSimModel>(
     size: *mut usize,
 ) -> sys::fmi2Status {
     let function = FmiFunction::SerializedFmuStateSize;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "FMUstate = {state:?}"),
-            |inst| {
-                if size.is_null() {
-                    return inst.error(function, format_args!("size is NULL"));
-                }
-                let Some(snapshot) = snapshot::<M>(state) else {
-                    return inst.error(
-                        function,
-                        format_args!("FMUstate is NULL or not a state of this FMU"),
-                    );
-                };
-                match encoded(inst, function, snapshot) {
-                    Ok(bytes) => {
-                        *size = bytes.len();
-                        Status::Ok
-                    }
-                    Err(status) => status,
-                }
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `size` is the importer's output variable when non-NULL
+        // (this function's contract).
+        let size = match unsafe { value_out(inst, function, size, "size") } {
+            Ok(size) => size,
+            Err(status) => return status,
+        };
+        // SAFETY: `state` is NULL or a state of this FMU not yet freed, or
+        // refused by its magic number (this function's contract).
+        let Some(snapshot) = (unsafe { snapshot::<M>(state) }) else {
+            return inst.error(
+                function,
+                format_args!("FMUstate is NULL or not a state of this FMU"),
+            );
+        };
+        match encoded(inst, function, snapshot) {
+            Ok(bytes) => {
+                size.write(bytes.len());
+                Status::Ok
+            }
+            Err(status) => status,
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "FMUstate = {state:?}"), body) }
 }
 
 /// # Safety
@@ -849,37 +1010,57 @@ pub unsafe fn serialize_fmu_state<M: CoSimModel>(
     size: usize,
 ) -> sys::fmi2Status {
     let function = FmiFunction::SerializeFmuState;
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `state` is NULL or a state of this FMU not yet freed, or
+        // refused by its magic number (this function's contract).
+        let Some(snapshot) = (unsafe { snapshot::<M>(state) }) else {
+            return inst.error(
+                function,
+                format_args!("FMUstate is NULL or not a state of this FMU"),
+            );
+        };
+        let bytes = match encoded(inst, function, snapshot) {
+            Ok(bytes) => bytes,
+            Err(status) => return status,
+        };
+        if size != bytes.len() {
+            return inst.error(
+                function,
+                format_args!(
+                    "size is {size} but the state needs {} bytes (ask fmi2SerializedFMUstateSize)",
+                    bytes.len()
+                ),
+            );
+        }
+        if serialized.is_null() {
+            return inst.error(function, format_args!("serializedState is NULL"));
+        }
+        // SAFETY: `serialized` points to `size` writable bytes (this
+        // function's contract); bytes have no alignment.
+        let out = match unsafe {
+            slice_out(
+                inst,
+                function,
+                serialized.cast::<u8>(),
+                size,
+                "serializedState",
+            )
+        } {
+            Ok(out) => out,
+            Err(status) => return status,
+        };
+        for (out, byte) in out.iter_mut().zip(bytes) {
+            out.write(*byte);
+        }
+        Status::Ok
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
             function,
             |f| write!(f, "FMUstate = {state:?}, size = {size}"),
-            |inst| {
-                let Some(snapshot) = snapshot::<M>(state) else {
-                    return inst.error(
-                        function,
-                        format_args!("FMUstate is NULL or not a state of this FMU"),
-                    );
-                };
-                let bytes = match encoded(inst, function, snapshot) {
-                    Ok(bytes) => bytes,
-                    Err(status) => return status,
-                };
-                if size != bytes.len() {
-                    return inst.error(
-                    function,
-                    format_args!(
-                        "size is {size} but the state needs {} bytes (ask fmi2SerializedFMUstateSize)",
-                        bytes.len()
-                    ),
-                );
-                }
-                if serialized.is_null() {
-                    return inst.error(function, format_args!("serializedState is NULL"));
-                }
-                ptr::copy_nonoverlapping(bytes.as_ptr(), serialized.cast::<u8>(), size);
-                Status::Ok
-            },
+            body,
         )
     }
 }
@@ -893,63 +1074,37 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
     state: *mut sys::fmi2FMUstate,
 ) -> sys::fmi2Status {
     let function = FmiFunction::DeSerializeFmuState;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "size = {size}"),
-            |inst| {
-                if state.is_null() {
-                    return inst.error(function, format_args!("FMUstate is NULL"));
-                }
-                if serialized.is_null() && size > 0 {
-                    return inst.error(
-                        function,
-                        format_args!("serializedState is NULL but size = {size}"),
-                    );
-                }
-                let bytes: &[u8] = if size == 0 {
-                    &[]
-                } else {
-                    std::slice::from_raw_parts(serialized.cast::<u8>(), size)
-                };
-                match fmu_state::decode::<M>(bytes, &inst.guid) {
-                    Ok(data) => match non_finite_value(&data) {
-                        None => store_snapshot(inst, function, state, data),
-                        Some(reason) => inst.error(function, format_args!("refused: {reason}")),
-                    },
-                    Err(reason) => inst.error(function, format_args!("refused: {reason}")),
-                }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `state` is the importer's initialized `fmi2FMUstate`
+        // variable when non-NULL (this function's contract).
+        let slot = match unsafe { value_in_out(inst, function, state, "FMUstate") } {
+            Ok(slot) => slot,
+            Err(status) => return status,
+        };
+        // SAFETY: `serialized` points to `size` bytes when non-NULL (this
+        // function's contract).
+        let bytes = match unsafe {
+            slice_in(
+                inst,
+                function,
+                serialized.cast::<u8>(),
+                size,
+                "serializedState",
+            )
+        } {
+            Ok(bytes) => bytes,
+            Err(status) => return status,
+        };
+        match fmu_state::decode::<M>(bytes, &inst.guid) {
+            Ok(mut data) => match inst.validate_foreign_state(function, &mut data) {
+                Ok(()) => store_snapshot(inst, function, slot, data),
+                Err(status) => status,
             },
-        )
-    }
-}
-
-/// Why sound bytes (a valid CRC, so written on purpose) still cannot be
-/// restored: a time, or the value of a settable Real, that is not finite.
-/// `fmi2SetupExperiment`, `fmi2DoStep` and `fmi2SetReal` never let one in, so
-/// models may take their inputs and parameters as finite at every step
-/// without checking them there; this keeps that true of deserialized states
-/// (states taken in memory come from an instance where it holds).
-fn non_finite_value<M: CoSimModel>(data: &fmu_state::SnapshotData<M>) -> Option<String> {
-    if !(data.time.is_finite() && data.start_time.is_finite()) {
-        return Some(format!(
-            "the state's time {} (start time {}) is not finite",
-            data.time, data.start_time
-        ));
-    }
-    M::variables()
-        .iter()
-        .filter(|v| v.is_settable())
-        .find_map(|v| {
-            let value = f64::getter(&v.value)?(&data.model);
-            (!value.is_finite()).then(|| {
-                format!(
-                    "the state holds {} = {value}, and only finite values can be set",
-                    v.name
-                )
-            })
-        })
+            Err(reason) => inst.error(function, format_args!("refused: {reason}")),
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "size = {size}"), body) }
 }
 
 /// An optional capability this layer does not offer: `fmi2Error` with the
@@ -962,6 +1117,7 @@ unsafe fn not_offered<M: CoSimModel>(
     function: FmiFunction,
     capability: &'static str,
 ) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
@@ -982,6 +1138,7 @@ unsafe fn not_offered<M: CoSimModel>(
 /// # Safety
 /// `c` as for every FMI function; the other arguments are not read.
 pub unsafe fn get_directional_derivative<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         not_offered::<M>(
             c,
@@ -994,6 +1151,7 @@ pub unsafe fn get_directional_derivative<M: CoSimModel>(c: sys::fmi2Component) -
 /// # Safety
 /// `c` as for every FMI function; the other arguments are not read.
 pub unsafe fn set_real_input_derivatives<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         not_offered::<M>(
             c,
@@ -1006,6 +1164,7 @@ pub unsafe fn set_real_input_derivatives<M: CoSimModel>(c: sys::fmi2Component) -
 /// # Safety
 /// `c` as for every FMI function; the other arguments are not read.
 pub unsafe fn get_real_output_derivatives<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         not_offered::<M>(
             c,
@@ -1019,6 +1178,7 @@ pub unsafe fn get_real_output_derivatives<M: CoSimModel>(c: sys::fmi2Component) 
 /// `c` as for every FMI function. Only legal while an asynchronous step is in
 /// progress, which never happens here, so the state check refuses it.
 pub unsafe fn cancel_step<M: CoSimModel>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         not_offered::<M>(
             c,
@@ -1037,6 +1197,7 @@ pub unsafe fn do_step<M: CoSimModel>(
     _no_set_fmu_state_prior_to_current_point: sys::fmi2Boolean,
 ) -> sys::fmi2Status {
     let function = FmiFunction::DoStep;
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
@@ -1066,36 +1227,34 @@ unsafe fn status_query<M: CoSimModel, T>(
     value: *mut T,
     answer: impl FnOnce(&Instance<M>, sys::fmi2StatusKind) -> Option<T>,
 ) -> sys::fmi2Status {
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "status kind {kind}"),
-            |inst| {
-                if value.is_null() {
-                    return inst.error(function, format_args!("value is NULL"));
-                }
-                match answer(inst, kind) {
-                    Some(v) => {
-                        *value = v;
-                        Status::Ok
-                    }
-                    None => {
-                        inst.logger.log_in(
-                            function.name(),
-                            Status::Discard,
-                            LogCategory::StatusDiscard,
-                            format_args!(
-                                "status kind {kind} is not available here: this FMU never runs \
-                             asynchronous steps"
-                            ),
-                        );
-                        Status::Discard
-                    }
-                }
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `value` is the importer's output variable when non-NULL
+        // (this function's contract).
+        let value = match unsafe { value_out(inst, function, value, "value") } {
+            Ok(value) => value,
+            Err(status) => return status,
+        };
+        match answer(inst, kind) {
+            Some(v) => {
+                value.write(v);
+                Status::Ok
+            }
+            None => {
+                inst.logger.log_in(
+                    function.name(),
+                    Status::Discard,
+                    LogCategory::StatusDiscard,
+                    format_args!(
+                        "status kind {kind} is not available here: this FMU never runs \
+                         asynchronous steps"
+                    ),
+                );
+                Status::Discard
+            }
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "status kind {kind}"), body) }
 }
 
 /// # Safety
@@ -1105,6 +1264,7 @@ pub unsafe fn get_status<M: CoSimModel>(
     kind: sys::fmi2StatusKind,
     value: *mut sys::fmi2Status,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { status_query::<M, _>(c, FmiFunction::GetStatus, kind, value, |_, _| None) }
 }
 
@@ -1115,6 +1275,7 @@ pub unsafe fn get_real_status<M: CoSimModel>(
     kind: sys::fmi2StatusKind,
     value: *mut sys::fmi2Real,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe {
         status_query::<M, _>(c, FmiFunction::GetRealStatus, kind, value, |inst, kind| {
             (kind == sys::fmi2StatusKind_fmi2LastSuccessfulTime).then_some(inst.time)
@@ -1129,6 +1290,7 @@ pub unsafe fn get_integer_status<M: CoSimModel>(
     kind: sys::fmi2StatusKind,
     value: *mut sys::fmi2Integer,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { status_query::<M, _>(c, FmiFunction::GetIntegerStatus, kind, value, |_, _| None) }
 }
 
@@ -1139,11 +1301,20 @@ pub unsafe fn get_boolean_status<M: CoSimModel>(
     kind: sys::fmi2StatusKind,
     value: *mut sys::fmi2Boolean,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe {
-        status_query::<M, _>(c, FmiFunction::GetBooleanStatus, kind, value, |_, kind| {
-            // The slave never asks the master to stop the simulation.
-            (kind == sys::fmi2StatusKind_fmi2Terminated).then_some(0)
-        })
+        status_query::<M, _>(
+            c,
+            FmiFunction::GetBooleanStatus,
+            kind,
+            value,
+            |inst, kind| {
+                // Whether the model asked, in a discarded step, to end the
+                // simulation.
+                (kind == sys::fmi2StatusKind_fmi2Terminated)
+                    .then_some(inst.terminate_requested as sys::fmi2Boolean)
+            },
+        )
     }
 }
 
@@ -1154,5 +1325,6 @@ pub unsafe fn get_string_status<M: CoSimModel>(
     kind: sys::fmi2StatusKind,
     value: *mut sys::fmi2String,
 ) -> sys::fmi2Status {
+    // SAFETY: the arguments are this function's, under the same contract.
     unsafe { status_query::<M, _>(c, FmiFunction::GetStringStatus, kind, value, |_, _| None) }
 }

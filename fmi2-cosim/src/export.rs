@@ -59,6 +59,8 @@ macro_rules! __export_fmi2_common {
                 nCategories: usize,
                 categories: *const fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_debug_logging::<Model>(c, loggingOn, nCategories, categories) }
             }
             #[unsafe(no_mangle)]
@@ -71,6 +73,8 @@ macro_rules! __export_fmi2_common {
                 visible: fmi2Boolean,
                 loggingOn: fmi2Boolean,
             ) -> fmi2Component {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     abi::instantiate::<Model>(
                         instanceName,
@@ -85,6 +89,8 @@ macro_rules! __export_fmi2_common {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2FreeInstance(c: fmi2Component) {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::free_instance::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -96,6 +102,8 @@ macro_rules! __export_fmi2_common {
                 stopTimeDefined: fmi2Boolean,
                 stopTime: fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     abi::setup_experiment::<Model>(
                         c,
@@ -109,18 +117,26 @@ macro_rules! __export_fmi2_common {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2EnterInitializationMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::enter_initialization_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2ExitInitializationMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::exit_initialization_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2Terminate(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::terminate::<Model>(c) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2Reset(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::reset::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -130,6 +146,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_real::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -139,6 +157,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2Integer,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_integer::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -148,6 +168,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_boolean::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -157,6 +179,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *mut fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_string::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -166,6 +190,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_real::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -175,6 +201,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2Integer,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_integer::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -184,6 +212,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_boolean::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -193,6 +223,8 @@ macro_rules! __export_fmi2_common {
                 nvr: usize,
                 value: *const fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_string::<Model>(c, vr, nvr, value) }
             }
             #[unsafe(no_mangle)]
@@ -200,6 +232,8 @@ macro_rules! __export_fmi2_common {
                 c: fmi2Component,
                 FMUstate: *mut fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_fmu_state::<Model>(c, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -207,6 +241,8 @@ macro_rules! __export_fmi2_common {
                 c: fmi2Component,
                 FMUstate: fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_fmu_state::<Model>(c, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -214,6 +250,8 @@ macro_rules! __export_fmi2_common {
                 c: fmi2Component,
                 FMUstate: *mut fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::free_fmu_state::<Model>(c, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -222,6 +260,8 @@ macro_rules! __export_fmi2_common {
                 FMUstate: fmi2FMUstate,
                 size: *mut usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::serialized_fmu_state_size::<Model>(c, FMUstate, size) }
             }
             #[unsafe(no_mangle)]
@@ -231,6 +271,8 @@ macro_rules! __export_fmi2_common {
                 serializedState: *mut fmi2Byte,
                 size: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::serialize_fmu_state::<Model>(c, FMUstate, serializedState, size) }
             }
             #[unsafe(no_mangle)]
@@ -240,6 +282,8 @@ macro_rules! __export_fmi2_common {
                 size: usize,
                 FMUstate: *mut fmi2FMUstate,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::deserialize_fmu_state::<Model>(c, serializedState, size, FMUstate) }
             }
             #[unsafe(no_mangle)]
@@ -260,6 +304,8 @@ macro_rules! __export_fmi2_common {
                     dvKnown,
                     dvUnknown,
                 );
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_directional_derivative::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -271,6 +317,8 @@ macro_rules! __export_fmi2_common {
                 value: *const fmi2Real,
             ) -> fmi2Status {
                 let _ = (vr, nvr, order, value);
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::set_real_input_derivatives::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -282,6 +330,8 @@ macro_rules! __export_fmi2_common {
                 value: *mut fmi2Real,
             ) -> fmi2Status {
                 let _ = (vr, nvr, order, value);
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_real_output_derivatives::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -291,6 +341,8 @@ macro_rules! __export_fmi2_common {
                 communicationStepSize: fmi2Real,
                 noSetFMUStatePriorToCurrentPoint: fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     abi::do_step::<Model>(
                         c,
@@ -302,6 +354,8 @@ macro_rules! __export_fmi2_common {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2CancelStep(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::cancel_step::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -310,6 +364,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Status,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -318,6 +374,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Real,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_real_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -326,6 +384,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Integer,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_integer_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -334,6 +394,8 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_boolean_status::<Model>(c, s, value) }
             }
             #[unsafe(no_mangle)]
@@ -342,46 +404,51 @@ macro_rules! __export_fmi2_common {
                 s: fmi2StatusKind,
                 value: *mut fmi2String,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { abi::get_string_status::<Model>(c, s, value) }
             }
 
-            // Every export has exactly the type of the official typedef.
-            const _: () = {
-                let _: fmi2GetTypesPlatformTYPE = Some(fmi2GetTypesPlatform);
-                let _: fmi2GetVersionTYPE = Some(fmi2GetVersion);
-                let _: fmi2SetDebugLoggingTYPE = Some(fmi2SetDebugLogging);
-                let _: fmi2InstantiateTYPE = Some(fmi2Instantiate);
-                let _: fmi2FreeInstanceTYPE = Some(fmi2FreeInstance);
-                let _: fmi2SetupExperimentTYPE = Some(fmi2SetupExperiment);
-                let _: fmi2EnterInitializationModeTYPE = Some(fmi2EnterInitializationMode);
-                let _: fmi2ExitInitializationModeTYPE = Some(fmi2ExitInitializationMode);
-                let _: fmi2TerminateTYPE = Some(fmi2Terminate);
-                let _: fmi2ResetTYPE = Some(fmi2Reset);
-                let _: fmi2GetRealTYPE = Some(fmi2GetReal);
-                let _: fmi2GetIntegerTYPE = Some(fmi2GetInteger);
-                let _: fmi2GetBooleanTYPE = Some(fmi2GetBoolean);
-                let _: fmi2GetStringTYPE = Some(fmi2GetString);
-                let _: fmi2SetRealTYPE = Some(fmi2SetReal);
-                let _: fmi2SetIntegerTYPE = Some(fmi2SetInteger);
-                let _: fmi2SetBooleanTYPE = Some(fmi2SetBoolean);
-                let _: fmi2SetStringTYPE = Some(fmi2SetString);
-                let _: fmi2GetFMUstateTYPE = Some(fmi2GetFMUstate);
-                let _: fmi2SetFMUstateTYPE = Some(fmi2SetFMUstate);
-                let _: fmi2FreeFMUstateTYPE = Some(fmi2FreeFMUstate);
-                let _: fmi2SerializedFMUstateSizeTYPE = Some(fmi2SerializedFMUstateSize);
-                let _: fmi2SerializeFMUstateTYPE = Some(fmi2SerializeFMUstate);
-                let _: fmi2DeSerializeFMUstateTYPE = Some(fmi2DeSerializeFMUstate);
-                let _: fmi2GetDirectionalDerivativeTYPE = Some(fmi2GetDirectionalDerivative);
-                let _: fmi2SetRealInputDerivativesTYPE = Some(fmi2SetRealInputDerivatives);
-                let _: fmi2GetRealOutputDerivativesTYPE = Some(fmi2GetRealOutputDerivatives);
-                let _: fmi2DoStepTYPE = Some(fmi2DoStep);
-                let _: fmi2CancelStepTYPE = Some(fmi2CancelStep);
-                let _: fmi2GetStatusTYPE = Some(fmi2GetStatus);
-                let _: fmi2GetRealStatusTYPE = Some(fmi2GetRealStatus);
-                let _: fmi2GetIntegerStatusTYPE = Some(fmi2GetIntegerStatus);
-                let _: fmi2GetBooleanStatusTYPE = Some(fmi2GetBooleanStatus);
-                let _: fmi2GetStringStatusTYPE = Some(fmi2GetStringStatus);
-            };
+            // Every export has exactly the type of the official typedef, and
+            // the exports are the list of `functions::ALL` (checked at compile
+            // time).
+            $crate::__fmi2_signatures! {
+                $crate::functions::EXPORTED_FUNCTIONS;
+                fmi2GetTypesPlatform: fmi2GetTypesPlatformTYPE,
+                fmi2GetVersion: fmi2GetVersionTYPE,
+                fmi2SetDebugLogging: fmi2SetDebugLoggingTYPE,
+                fmi2Instantiate: fmi2InstantiateTYPE,
+                fmi2FreeInstance: fmi2FreeInstanceTYPE,
+                fmi2SetupExperiment: fmi2SetupExperimentTYPE,
+                fmi2EnterInitializationMode: fmi2EnterInitializationModeTYPE,
+                fmi2ExitInitializationMode: fmi2ExitInitializationModeTYPE,
+                fmi2Terminate: fmi2TerminateTYPE,
+                fmi2Reset: fmi2ResetTYPE,
+                fmi2GetReal: fmi2GetRealTYPE,
+                fmi2GetInteger: fmi2GetIntegerTYPE,
+                fmi2GetBoolean: fmi2GetBooleanTYPE,
+                fmi2GetString: fmi2GetStringTYPE,
+                fmi2SetReal: fmi2SetRealTYPE,
+                fmi2SetInteger: fmi2SetIntegerTYPE,
+                fmi2SetBoolean: fmi2SetBooleanTYPE,
+                fmi2SetString: fmi2SetStringTYPE,
+                fmi2GetFMUstate: fmi2GetFMUstateTYPE,
+                fmi2SetFMUstate: fmi2SetFMUstateTYPE,
+                fmi2FreeFMUstate: fmi2FreeFMUstateTYPE,
+                fmi2SerializedFMUstateSize: fmi2SerializedFMUstateSizeTYPE,
+                fmi2SerializeFMUstate: fmi2SerializeFMUstateTYPE,
+                fmi2DeSerializeFMUstate: fmi2DeSerializeFMUstateTYPE,
+                fmi2GetDirectionalDerivative: fmi2GetDirectionalDerivativeTYPE,
+                fmi2SetRealInputDerivatives: fmi2SetRealInputDerivativesTYPE,
+                fmi2GetRealOutputDerivatives: fmi2GetRealOutputDerivativesTYPE,
+                fmi2DoStep: fmi2DoStepTYPE,
+                fmi2CancelStep: fmi2CancelStepTYPE,
+                fmi2GetStatus: fmi2GetStatusTYPE,
+                fmi2GetRealStatus: fmi2GetRealStatusTYPE,
+                fmi2GetIntegerStatus: fmi2GetIntegerStatusTYPE,
+                fmi2GetBooleanStatus: fmi2GetBooleanStatusTYPE,
+                fmi2GetStringStatus: fmi2GetStringStatusTYPE,
+            }
         }
     };
 }
@@ -401,6 +468,8 @@ macro_rules! __export_fmi2_model_exchange {
 
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2EnterEventMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::enter_event_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -408,10 +477,14 @@ macro_rules! __export_fmi2_model_exchange {
                 c: fmi2Component,
                 fmi2eventInfo: *mut fmi2EventInfo,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::new_discrete_states::<Model>(c, fmi2eventInfo) }
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2EnterContinuousTimeMode(c: fmi2Component) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::enter_continuous_time_mode::<Model>(c) }
             }
             #[unsafe(no_mangle)]
@@ -421,6 +494,8 @@ macro_rules! __export_fmi2_model_exchange {
                 enterEventMode: *mut fmi2Boolean,
                 terminateSimulation: *mut fmi2Boolean,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe {
                     me::completed_integrator_step::<Model>(
                         c,
@@ -432,6 +507,8 @@ macro_rules! __export_fmi2_model_exchange {
             }
             #[unsafe(no_mangle)]
             pub unsafe extern "C" fn fmi2SetTime(c: fmi2Component, time: fmi2Real) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::set_time::<Model>(c, time) }
             }
             #[unsafe(no_mangle)]
@@ -440,6 +517,8 @@ macro_rules! __export_fmi2_model_exchange {
                 x: *const fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::set_continuous_states::<Model>(c, x, nx) }
             }
             #[unsafe(no_mangle)]
@@ -448,6 +527,8 @@ macro_rules! __export_fmi2_model_exchange {
                 derivatives: *mut fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_derivatives::<Model>(c, derivatives, nx) }
             }
             #[unsafe(no_mangle)]
@@ -456,6 +537,8 @@ macro_rules! __export_fmi2_model_exchange {
                 eventIndicators: *mut fmi2Real,
                 ni: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_event_indicators::<Model>(c, eventIndicators, ni) }
             }
             #[unsafe(no_mangle)]
@@ -464,6 +547,8 @@ macro_rules! __export_fmi2_model_exchange {
                 x: *mut fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_continuous_states::<Model>(c, x, nx) }
             }
             #[unsafe(no_mangle)]
@@ -472,77 +557,49 @@ macro_rules! __export_fmi2_model_exchange {
                 x_nominal: *mut fmi2Real,
                 nx: usize,
             ) -> fmi2Status {
+                // SAFETY: the importer's arguments, passed on under the standard's
+                // contract for this function (the callee's `# Safety`).
                 unsafe { me::get_nominals_of_continuous_states::<Model>(c, x_nominal, nx) }
             }
 
-            // Every export has exactly the type of the official typedef.
-            const _: () = {
-                let _: fmi2EnterEventModeTYPE = Some(fmi2EnterEventMode);
-                let _: fmi2NewDiscreteStatesTYPE = Some(fmi2NewDiscreteStates);
-                let _: fmi2EnterContinuousTimeModeTYPE = Some(fmi2EnterContinuousTimeMode);
-                let _: fmi2CompletedIntegratorStepTYPE = Some(fmi2CompletedIntegratorStep);
-                let _: fmi2SetTimeTYPE = Some(fmi2SetTime);
-                let _: fmi2SetContinuousStatesTYPE = Some(fmi2SetContinuousStates);
-                let _: fmi2GetDerivativesTYPE = Some(fmi2GetDerivatives);
-                let _: fmi2GetEventIndicatorsTYPE = Some(fmi2GetEventIndicators);
-                let _: fmi2GetContinuousStatesTYPE = Some(fmi2GetContinuousStates);
-                let _: fmi2GetNominalsOfContinuousStatesTYPE =
-                    Some(fmi2GetNominalsOfContinuousStates);
-            };
+            // Every export has exactly the type of the official typedef, and
+            // the exports are the list of `functions::ALL` (checked at compile
+            // time).
+            $crate::__fmi2_signatures! {
+                $crate::functions::MODEL_EXCHANGE_FUNCTIONS;
+                fmi2EnterEventMode: fmi2EnterEventModeTYPE,
+                fmi2NewDiscreteStates: fmi2NewDiscreteStatesTYPE,
+                fmi2EnterContinuousTimeMode: fmi2EnterContinuousTimeModeTYPE,
+                fmi2CompletedIntegratorStep: fmi2CompletedIntegratorStepTYPE,
+                fmi2SetTime: fmi2SetTimeTYPE,
+                fmi2SetContinuousStates: fmi2SetContinuousStatesTYPE,
+                fmi2GetDerivatives: fmi2GetDerivativesTYPE,
+                fmi2GetEventIndicators: fmi2GetEventIndicatorsTYPE,
+                fmi2GetContinuousStates: fmi2GetContinuousStatesTYPE,
+                fmi2GetNominalsOfContinuousStates: fmi2GetNominalsOfContinuousStatesTYPE,
+            }
         }
     };
 }
 
-/// Names of the Model Exchange functions that `export_fmi2!(Model,
-/// model_exchange)` exports besides [`EXPORTED_FUNCTIONS`].
-pub const MODEL_EXCHANGE_FUNCTIONS: [&str; 10] = [
-    "fmi2EnterEventMode",
-    "fmi2NewDiscreteStates",
-    "fmi2EnterContinuousTimeMode",
-    "fmi2CompletedIntegratorStep",
-    "fmi2SetTime",
-    "fmi2SetContinuousStates",
-    "fmi2GetDerivatives",
-    "fmi2GetEventIndicators",
-    "fmi2GetContinuousStates",
-    "fmi2GetNominalsOfContinuousStates",
-];
-
-/// Names of every common and co-simulation function [`export_fmi2!`] exports
-/// (for export-table checks).
-pub const EXPORTED_FUNCTIONS: [&str; 34] = [
-    "fmi2GetTypesPlatform",
-    "fmi2GetVersion",
-    "fmi2SetDebugLogging",
-    "fmi2Instantiate",
-    "fmi2FreeInstance",
-    "fmi2SetupExperiment",
-    "fmi2EnterInitializationMode",
-    "fmi2ExitInitializationMode",
-    "fmi2Terminate",
-    "fmi2Reset",
-    "fmi2GetReal",
-    "fmi2GetInteger",
-    "fmi2GetBoolean",
-    "fmi2GetString",
-    "fmi2SetReal",
-    "fmi2SetInteger",
-    "fmi2SetBoolean",
-    "fmi2SetString",
-    "fmi2GetFMUstate",
-    "fmi2SetFMUstate",
-    "fmi2FreeFMUstate",
-    "fmi2SerializedFMUstateSize",
-    "fmi2SerializeFMUstate",
-    "fmi2DeSerializeFMUstate",
-    "fmi2GetDirectionalDerivative",
-    "fmi2SetRealInputDerivatives",
-    "fmi2GetRealOutputDerivatives",
-    "fmi2DoStep",
-    "fmi2CancelStep",
-    "fmi2GetStatus",
-    "fmi2GetRealStatus",
-    "fmi2GetIntegerStatus",
-    "fmi2GetBooleanStatus",
-    "fmi2GetStringStatus",
-];
+/// Checks each `function: typedef` pair of an export module at compile time
+/// (the function has exactly the type of the official typedef), and that the
+/// functions are, in order, the `expected` names drawn from
+/// [`functions::ALL`](crate::functions::ALL): a function exported here and
+/// not listed there, or listed there and not exported, does not compile.
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __fmi2_signatures {
+    ($expected:expr; $($function:ident: $typedef:ident),* $(,)?) => {
+        const _: () = {
+            $(let _: $typedef = Some($function);)*
+        };
+        /// The functions this module exports, in order.
+        #[allow(dead_code)]
+        pub const EXPORTED: &[&str] = &[$(stringify!($function)),*];
+        const _: () = assert!(
+            $crate::functions::same_names(EXPORTED, &$expected),
+            "the exported functions differ from fmi2_cosim::functions::ALL"
+        );
+    };
+}

@@ -21,8 +21,10 @@ use crate::status::{FmiState, Interface};
 
 const FILE_MAGIC: &[u8; 8] = b"FMI2RSST";
 /// 2: the snapshot carries the start time, the interface and the machine
-/// state (version 1 carried an "initialized" flag instead).
-const FORMAT_VERSION: u32 = 2;
+/// state (version 1 carried an "initialized" flag instead). 3: the machine
+/// states of asynchronous steps are gone (the state's encoding changed) and
+/// the snapshot carries whether the model asked to terminate.
+const FORMAT_VERSION: u32 = 3;
 const GUID_LEN: usize = 38;
 const HEADER_LEN: usize = FILE_MAGIC.len() + 4 + GUID_LEN + 8;
 const CRC_LEN: usize = 4;
@@ -38,6 +40,9 @@ pub struct SnapshotData<M> {
     pub interface: Interface,
     /// The state of the FMI state machine it was taken in.
     pub state: FmiState,
+    /// Whether the model had asked to end the simulation (a discarded step,
+    /// `fmi2Terminated`).
+    pub terminate_requested: bool,
 }
 
 /// What `fmi2FMUstate` points to; `repr(C)` with the magic number first (see
@@ -146,6 +151,7 @@ mod tests {
             start_time: -2.5,
             interface: Interface::ModelExchange,
             state: FmiState::ContinuousTimeMode,
+            terminate_requested: false,
         }
     }
 

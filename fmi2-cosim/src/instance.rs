@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use crate::fmu_state::SnapshotData;
 use crate::logging::{LogCategory, Logger};
-use crate::model::{CoSimModel, Context};
+use crate::model::{CoSimModel, Context, StepOutcome};
 use crate::status::{FmiFunction, FmiState, Interface, Status};
 use crate::variables::{Causality, Value, Variability, Variable};
 
@@ -62,8 +62,13 @@ pub struct Instance<M: CoSimModel> {
     pub(crate) logger: Logger,
     pub(crate) state: FmiState,
     pub(crate) interface: Interface,
+    /// The time the instance stands at: after a discarded step, the last
+    /// successful time (`fmi2LastSuccessfulTime`).
     pub(crate) time: f64,
     pub(crate) start_time: f64,
+    /// The model asked to end the simulation in its last step
+    /// (`fmi2GetBooleanStatus(fmi2Terminated)`).
+    pub(crate) terminate_requested: bool,
     pub(crate) model: M,
     pub(crate) resource_dir: Option<PathBuf>,
     pub(crate) guid: String,
@@ -164,6 +169,7 @@ impl<M: CoSimModel> Instance<M> {
             interface,
             time: 0.0,
             start_time: 0.0,
+            terminate_requested: false,
             model: M::new(),
             resource_dir,
             guid,
@@ -190,6 +196,18 @@ impl<M: CoSimModel> Instance<M> {
 
     pub fn model(&self) -> &M {
         &self.model
+    }
+
+    /// The time the instance stands at; after a discarded step, the last
+    /// successful time.
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// Whether the model asked to end the simulation (answer of
+    /// `fmi2GetBooleanStatus(fmi2Terminated)`).
+    pub fn terminate_requested(&self) -> bool {
+        self.terminate_requested
     }
 
     pub(crate) fn error(&self, function: FmiFunction, args: fmt::Arguments<'_>) -> Status {
@@ -285,41 +303,8 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn exit_initialization_mode(&mut self) -> Status {
         let function = FmiFunction::ExitInitializationMode;
         let mut violations = 0;
-        for var in M::variables()
-            .iter()
-            .filter(|v| v.causality == Causality::Parameter)
-        {
-            let violation = match &var.value {
-                Value::Real(r) => {
-                    let value = (r.get)(&self.model);
-                    // A NaN parameter is outside every range.
-                    let below = r.min.is_some_and(|min| value.is_nan() || value < min);
-                    let above = r.max.is_some_and(|max| value.is_nan() || value > max);
-                    (below || above).then(|| {
-                        format!(
-                            "parameter {} = {value} is outside its allowed range [{}, {}]",
-                            var.name,
-                            r.min.map_or("-inf".to_owned(), |v| v.to_string()),
-                            r.max.map_or("inf".to_owned(), |v| v.to_string())
-                        )
-                    })
-                }
-                Value::Integer(i) => {
-                    let value = (i.get)(&self.model);
-                    let below = i.min.is_some_and(|min| value < min);
-                    let above = i.max.is_some_and(|max| value > max);
-                    (below || above).then(|| {
-                        format!(
-                            "parameter {} = {value} is outside its allowed range [{}, {}]",
-                            var.name,
-                            i.min.map_or("-inf".to_owned(), |v| v.to_string()),
-                            i.max.map_or("inf".to_owned(), |v| v.to_string())
-                        )
-                    })
-                }
-                Value::Boolean(_) => None,
-            };
-            if let Some(message) = violation {
+        for var in M::variables() {
+            if let Some(message) = parameter_out_of_range(var, &self.model) {
                 self.logger
                     .error(function.name(), format_args!("{message}"));
                 violations += 1;
@@ -368,6 +353,7 @@ impl<M: CoSimModel> Instance<M> {
         self.state = FmiState::Instantiated;
         self.time = 0.0;
         self.start_time = 0.0;
+        self.terminate_requested = false;
         self.event(FmiFunction::Reset, format_args!("reset to start values"));
         Status::Ok
     }
@@ -573,15 +559,67 @@ impl<M: CoSimModel> Instance<M> {
             interface: self.interface,
         };
         match self.model.do_step(&mut ctx, current_time, step_size) {
-            Ok(status) => {
+            Ok(StepOutcome::Completed) => {
                 self.time = end;
-                status
+                Status::Ok
             }
-            Err(e) => {
-                self.state = FmiState::StepFailed;
-                self.error(function, format_args!("at t = {current_time}: {e}"))
+            Ok(StepOutcome::CompletedWithWarning) => {
+                self.time = end;
+                Status::Warning
             }
+            Ok(StepOutcome::Discarded {
+                last_successful_time,
+            }) => self.discard(current_time, end, last_successful_time, false),
+            Ok(StepOutcome::Terminate {
+                last_successful_time,
+            }) => self.discard(current_time, end, last_successful_time, true),
+            // fmi2Error: the gate puts the instance in its error state.
+            Err(e) => self.error(function, format_args!("at t = {current_time}: {e}")),
         }
+    }
+
+    /// A step the model did not complete (FMI 2.0.4 §4.2.2, §4.2.4): the
+    /// slave stands at the last successful time in `stepFailed`, and says
+    /// whether it wants the simulation to end. A last successful time
+    /// outside the step is a bug of the model: `fmi2Error`.
+    #[cold]
+    #[inline(never)]
+    fn discard(
+        &mut self,
+        current_time: f64,
+        end: f64,
+        last_successful_time: f64,
+        terminate: bool,
+    ) -> Status {
+        let function = FmiFunction::DoStep;
+        // A discarded step ends before its end; a terminating one may end at it.
+        let inside = current_time <= last_successful_time
+            && (last_successful_time < end || (terminate && last_successful_time == end));
+        if !inside {
+            return self.error(
+                function,
+                format_args!(
+                    "the model stopped the step from {current_time} to {end} at                      {last_successful_time}, outside the step"
+                ),
+            );
+        }
+        self.time = last_successful_time;
+        self.state = FmiState::StepFailed;
+        self.terminate_requested = terminate;
+        self.logger.log_in(
+            function.name(),
+            Status::Discard,
+            LogCategory::StatusDiscard,
+            format_args!(
+                "the step from {current_time} to {end} stopped at {last_successful_time}{};                  fmi2LastSuccessfulTime is {last_successful_time}",
+                if terminate {
+                    ": the model asks to end the simulation (fmi2Terminated)"
+                } else {
+                    "; restore an FMU state to retry (a shorter step), or terminate"
+                }
+            ),
+        );
+        Status::Discard
     }
 
     /// Why the step of `step_size` from `current_time` cannot be made, if it
@@ -635,7 +673,87 @@ impl<M: CoSimModel> Instance<M> {
             start_time: self.start_time,
             interface: self.interface,
             state: self.state,
+            terminate_requested: self.terminate_requested,
         }
+    }
+
+    /// Checks an FMU state that comes from outside (deserialized bytes: a
+    /// valid checksum says they were written on purpose, not that they are a
+    /// state this FMU can be in) before it can replace the instance's values,
+    /// and lets the model rebuild what it derives from its parameters. The
+    /// layer checks what its own calls guarantee of every live instance: a
+    /// finite time, a machine state an instance of that interface is saved
+    /// in, every Real of the variable table finite (state derivatives aside:
+    /// `fmi2GetReal` refuses a non-finite one itself; and in the error state,
+    /// which a diverged step may have left), and, past initialization, every
+    /// fixed parameter in its declared range. Then the model's own hook
+    /// ([`CoSimModel::validate_restored`]). The reason of a refusal is logged
+    /// and returned.
+    pub(crate) fn validate_foreign_state(
+        &self,
+        function: FmiFunction,
+        data: &mut SnapshotData<M>,
+    ) -> Result<(), Status> {
+        let refuse =
+            |reason: fmt::Arguments<'_>| self.error(function, format_args!("refused: {reason}"));
+        if !(data.time.is_finite() && data.start_time.is_finite()) {
+            return Err(refuse(format_args!(
+                "the state's time {} (start time {}) is not finite",
+                data.time, data.start_time
+            )));
+        }
+        if !can_be_saved_in(data.interface, data.state) {
+            return Err(refuse(format_args!(
+                "the state claims the machine state {}, which a {} instance is never saved in",
+                data.state.name(),
+                data.interface.name()
+            )));
+        }
+        if data.terminate_requested && data.state != FmiState::StepFailed {
+            return Err(refuse(format_args!(
+                "the state says the model asked to terminate, which only a discarded step \
+                 does, but its machine state is {}",
+                data.state.name()
+            )));
+        }
+        if data.state != FmiState::Error {
+            for var in M::variables() {
+                let Some(get) = f64::getter(&var.value) else {
+                    continue;
+                };
+                let value = get(&data.model);
+                if var.derivative_of.is_none() && !value.is_finite() {
+                    return Err(refuse(format_args!(
+                        "the state holds {} = {value}, and only finite values are held by an \
+                         instance in {}",
+                        var.name,
+                        data.state.name()
+                    )));
+                }
+            }
+        }
+        // Tunable parameters are not among them: fmi2SetReal accepts any
+        // finite value for one while simulating, as it does for an input.
+        if ranges_hold_in(data.state)
+            && let Some(reason) = M::variables()
+                .iter()
+                .filter(|var| var.variability == Variability::Fixed)
+                .find_map(|var| parameter_out_of_range(var, &data.model))
+        {
+            return Err(refuse(format_args!(
+                "{reason}, and the state was taken after initialization ({})",
+                data.state.name()
+            )));
+        }
+        let mut ctx = Context {
+            logger: &self.logger,
+            function: function.name(),
+            resource_dir: &self.resource_dir,
+            interface: data.interface,
+        };
+        data.model
+            .validate_restored(&mut ctx, data.state)
+            .map_err(|e| refuse(format_args!("{e}")))
     }
 
     /// Restores everything a snapshot holds: the model, the time, the start
@@ -672,6 +790,7 @@ impl<M: CoSimModel> Instance<M> {
         self.time = data.time;
         self.start_time = data.start_time;
         self.state = data.state;
+        self.terminate_requested = data.terminate_requested;
         self.event(
             function,
             format_args!(
@@ -690,9 +809,58 @@ fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
     use FmiState::*;
     match state {
         Instantiated | InitializationMode | Terminated | Error => true,
-        StepComplete => interface == Interface::CoSimulation,
+        StepComplete | StepFailed => interface == Interface::CoSimulation,
         EventMode | ContinuousTimeMode => interface == Interface::ModelExchange,
-        // Asynchronous steps are never offered; a failed step ends in Error.
-        StepInProgress | StepFailed | StepCanceled | Fatal => false,
+        Fatal => false,
+    }
+}
+
+/// Whether the declared ranges of the parameters hold in `state`: they are
+/// checked by `fmi2ExitInitializationMode`, so they hold in every state after
+/// it; before it the importer may still be setting them, and an error state
+/// may come from a refused initialization.
+fn ranges_hold_in(state: FmiState) -> bool {
+    use FmiState::*;
+    match state {
+        StepComplete | StepFailed | Terminated | EventMode | ContinuousTimeMode => true,
+        Instantiated | InitializationMode | Error | Fatal => false,
+    }
+}
+
+/// Why the parameter `var` of `model` is outside its declared range, if it
+/// is a parameter and is outside (a NaN is outside every range).
+fn parameter_out_of_range<M>(var: &Variable<M>, model: &M) -> Option<String> {
+    if var.causality != Causality::Parameter {
+        return None;
+    }
+    let bound = |b: Option<String>, inf: &str| b.unwrap_or_else(|| inf.to_owned());
+    match &var.value {
+        Value::Real(r) => {
+            let value = (r.get)(model);
+            let below = r.min.is_some_and(|min| value.is_nan() || value < min);
+            let above = r.max.is_some_and(|max| value.is_nan() || value > max);
+            (below || above).then(|| {
+                format!(
+                    "parameter {} = {value} is outside its allowed range [{}, {}]",
+                    var.name,
+                    bound(r.min.map(|v| v.to_string()), "-inf"),
+                    bound(r.max.map(|v| v.to_string()), "inf")
+                )
+            })
+        }
+        Value::Integer(i) => {
+            let value = (i.get)(model);
+            let below = i.min.is_some_and(|min| value < min);
+            let above = i.max.is_some_and(|max| value > max);
+            (below || above).then(|| {
+                format!(
+                    "parameter {} = {value} is outside its allowed range [{}, {}]",
+                    var.name,
+                    bound(i.min.map(|v| v.to_string()), "-inf"),
+                    bound(i.max.map(|v| v.to_string()), "inf")
+                )
+            })
+        }
+        Value::Boolean(_) => None,
     }
 }

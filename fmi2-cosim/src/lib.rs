@@ -17,6 +17,7 @@ pub mod abi;
 pub mod describe;
 mod export;
 pub mod fmu_state;
+pub mod functions;
 mod instance;
 pub mod logging;
 pub mod model;
@@ -28,12 +29,12 @@ pub mod status;
 pub mod units;
 pub mod variables;
 
-pub use export::{EXPORTED_FUNCTIONS, MODEL_EXCHANGE_FUNCTIONS};
+pub use functions::{EXPORTED_FUNCTIONS, MODEL_EXCHANGE_FUNCTIONS};
 pub use instance::Instance;
 pub use logging::LogCategory;
 pub use model::{
     BaseUnit, CoSimModel, Context, DefaultExperiment, DisplayUnit, ModelError, ModelExchangeInfo,
-    ModelInfo, UnitDefinition,
+    ModelInfo, StepOutcome, UnitDefinition,
 };
 pub use model_exchange::{EventUpdate, ModelExchange};
 pub use status::{FmiState, Interface, Status};

@@ -235,6 +235,8 @@ mod tests {
         let mut m = StackMessage::new();
         m.write_fmt(args).unwrap();
         let ptr = m.as_c_ptr();
+        // SAFETY: `as_c_ptr` points to the message's NUL-terminated buffer,
+        // which `m` keeps alive until after the copy.
         unsafe { CStr::from_ptr(ptr) }.to_str().unwrap().to_owned()
     }
 

@@ -6,7 +6,7 @@ use std::fmt;
 use std::path::Path;
 
 use crate::logging::{LogCategory, Logger};
-use crate::status::{Interface, Status};
+use crate::status::{FmiState, Interface, Status};
 use crate::variables::Variable;
 
 /// `DefaultExperiment` of modelDescription.
@@ -90,6 +90,32 @@ impl fmt::Display for ModelError {
 
 impl std::error::Error for ModelError {}
 
+/// How a co-simulation step ended (the model's answer to
+/// [`CoSimModel::do_step`]); the layer maps it onto the standard's statuses
+/// and states (FMI 2.0.4 §4.2.2, §4.2.4). A model that cannot compute the
+/// step at all returns `Err(ModelError)` instead: `fmi2Error`, error state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum StepOutcome {
+    /// The step reached `current_time + step_size`: `fmi2OK`.
+    Completed,
+    /// The step reached its end and the model logged a warning through the
+    /// context: `fmi2Warning`.
+    CompletedWithWarning,
+    /// The model could not complete the step but stopped, consistently, at
+    /// `last_successful_time` (in `[current_time, current_time + step_size)`;
+    /// the model's values are those at that time): `fmi2Discard`, the slave
+    /// enters `stepFailed`, `fmi2GetRealStatus(fmi2LastSuccessfulTime)`
+    /// answers `last_successful_time` and `fmi2GetBooleanStatus(fmi2Terminated)`
+    /// false. The importer may restore an earlier FMU state and retry with a
+    /// shorter step.
+    Discarded { last_successful_time: f64 },
+    /// The model asks the importer to end the simulation (it reached the end
+    /// of what it can simulate) at `last_successful_time`, in the same range:
+    /// `fmi2Discard`, `stepFailed`, and `fmi2GetBooleanStatus(fmi2Terminated)`
+    /// answers true.
+    Terminate { last_successful_time: f64 },
+}
+
 /// What modelDescription's `<ModelExchange>` element and
 /// `numberOfEventIndicators` say of a model that implements
 /// [`ModelExchange`](crate::model_exchange::ModelExchange) as well.
@@ -133,14 +159,37 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
     ) -> Result<(), ModelError>;
 
     /// Advance from `current_time` by `step_size` (> 0, finite). Must not
-    /// allocate on its normal path. Returns `Status::Warning` when it logged a
-    /// warning, `Status::Ok` otherwise.
+    /// allocate on its normal path. Returns how the step ended (see
+    /// [`StepOutcome`]); `CompletedWithWarning` when it logged a warning.
     fn do_step(
         &mut self,
         ctx: &mut Context<'_>,
         current_time: f64,
         step_size: f64,
-    ) -> Result<Status, ModelError>;
+    ) -> Result<StepOutcome, ModelError>;
+
+    /// Called when an FMU state replaces the instance's values
+    /// (`fmi2SetFMUstate`, and `fmi2DeSerializeFMUstate` for bytes from
+    /// outside), on the candidate model value, after the layer checked that
+    /// every Real of the variable table is finite and, in `state`s past
+    /// initialization, that every fixed parameter is in its declared range
+    /// (tunable ones, like inputs, take any finite value while running). The
+    /// model checks the rest of its invariants (what its own constructor
+    /// would refuse) and rebuilds whatever it derives from its parameters,
+    /// so that a state with valid checksum but made-up values never runs.
+    /// `state` is the machine state the FMU state was taken in. An `Err` is
+    /// `fmi2Error`; the instance keeps its values.
+    ///
+    /// The default accepts: right for a model whose every value is in its
+    /// variable table.
+    fn validate_restored(
+        &mut self,
+        ctx: &mut Context<'_>,
+        state: FmiState,
+    ) -> Result<(), ModelError> {
+        let _ = (ctx, state);
+        Ok(())
+    }
 }
 
 /// What a model may use of its instance while the layer runs it: logging

@@ -68,17 +68,21 @@ impl Interface {
 }
 
 /// States of a co-simulation slave (FMI 2.0.4 Fig. 10) and of a model-exchange
-/// model (Fig. 6). `StepInProgress` and `StepCanceled` only occur with
-/// asynchronous steps, which this layer does not offer, but they stay in the
-/// table so that the masks read like the standard.
+/// model (Fig. 6) that an instance of this layer can be in. The standard's
+/// `stepInProgress` and `stepCanceled` exist only with asynchronous steps
+/// (`fmi2DoStep` returning `fmi2Pending`), which this layer never runs
+/// (`canRunAsynchronuously="false"`): they are left out, so that every state
+/// here is one an instance reaches (tested).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum FmiState {
     Instantiated,
     InitializationMode,
     StepComplete,
-    StepInProgress,
+    /// `fmi2DoStep` returned `fmi2Discard`: the step was not completed, the
+    /// instance stands at its last successful time (FMI 2.0.4 §4.2.4
+    /// `stepFailed`). The importer may read values and the status, restore
+    /// an FMU state, terminate or reset.
     StepFailed,
-    StepCanceled,
     Terminated,
     Error,
     Fatal,
@@ -89,6 +93,19 @@ pub enum FmiState {
 }
 
 impl FmiState {
+    /// Every state, in declaration order.
+    pub const ALL: [FmiState; 9] = [
+        FmiState::Instantiated,
+        FmiState::InitializationMode,
+        FmiState::StepComplete,
+        FmiState::StepFailed,
+        FmiState::Terminated,
+        FmiState::Error,
+        FmiState::Fatal,
+        FmiState::EventMode,
+        FmiState::ContinuousTimeMode,
+    ];
+
     #[inline(always)]
     const fn bit(self) -> u16 {
         1 << (self as u16)
@@ -99,9 +116,7 @@ impl FmiState {
             FmiState::Instantiated => "Instantiated",
             FmiState::InitializationMode => "InitializationMode",
             FmiState::StepComplete => "StepComplete",
-            FmiState::StepInProgress => "StepInProgress",
             FmiState::StepFailed => "StepFailed",
-            FmiState::StepCanceled => "StepCanceled",
             FmiState::Terminated => "Terminated",
             FmiState::Error => "Error",
             FmiState::Fatal => "Fatal",
@@ -140,9 +155,7 @@ const ANY_LIVE: StateMask = StateMask::of(&[
     Instantiated,
     InitializationMode,
     StepComplete,
-    StepInProgress,
     StepFailed,
-    StepCanceled,
     Terminated,
     Error,
     EventMode,
@@ -152,7 +165,6 @@ const AFTER_INSTANTIATION: StateMask = StateMask::of(&[
     InitializationMode,
     StepComplete,
     StepFailed,
-    StepCanceled,
     Terminated,
     Error,
     EventMode,
@@ -171,8 +183,10 @@ const REAL_SETTABLE: StateMask = StateMask::of(&[
 const DISCRETE_SETTABLE: StateMask =
     StateMask::of(&[Instantiated, InitializationMode, StepComplete, EventMode]);
 const CS_SETTABLE: StateMask = StateMask::of(&[Instantiated, InitializationMode, StepComplete]);
-const STATUS_QUERY: StateMask =
-    StateMask::of(&[StepComplete, StepInProgress, StepFailed, Terminated]);
+/// FMI 2.0.4 §4.2.4: the status of a slave can be asked after a step, a
+/// discarded step included (that is what fmi2LastSuccessfulTime and
+/// fmi2Terminated are for), and after termination.
+const STATUS_QUERY: StateMask = StateMask::of(&[StepComplete, StepFailed, Terminated]);
 /// Where a model-exchange model's continuous states and event indicators can be
 /// read (FMI 2.0.4 §3.2.3).
 const ME_READABLE: StateMask = StateMask::of(&[
@@ -230,6 +244,54 @@ pub enum FmiFunction {
 }
 
 impl FmiFunction {
+    /// Every function of the table, in declaration order.
+    pub const ALL: [FmiFunction; 41] = {
+        use FmiFunction::*;
+        [
+            SetDebugLogging,
+            FreeInstance,
+            SetupExperiment,
+            EnterInitializationMode,
+            ExitInitializationMode,
+            Terminate,
+            Reset,
+            GetReal,
+            GetInteger,
+            GetBoolean,
+            GetString,
+            SetReal,
+            SetInteger,
+            SetBoolean,
+            SetString,
+            GetFmuState,
+            SetFmuState,
+            FreeFmuState,
+            SerializedFmuStateSize,
+            SerializeFmuState,
+            DeSerializeFmuState,
+            GetDirectionalDerivative,
+            SetRealInputDerivatives,
+            GetRealOutputDerivatives,
+            DoStep,
+            CancelStep,
+            GetStatus,
+            GetRealStatus,
+            GetIntegerStatus,
+            GetBooleanStatus,
+            GetStringStatus,
+            EnterEventMode,
+            NewDiscreteStates,
+            EnterContinuousTimeMode,
+            CompletedIntegratorStep,
+            SetTime,
+            SetContinuousStates,
+            GetDerivatives,
+            GetEventIndicators,
+            GetContinuousStates,
+            GetNominalsOfContinuousStates,
+        ]
+    };
+
     pub fn name(self) -> &'static str {
         use FmiFunction::*;
         match self {
@@ -342,10 +404,12 @@ impl FmiFunction {
             GetDirectionalDerivative => AFTER_INSTANTIATION,
             SetRealInputDerivatives => CS_SETTABLE,
             GetRealOutputDerivatives => {
-                StateMask::of(&[StepComplete, StepFailed, StepCanceled, Terminated, Error])
+                StateMask::of(&[StepComplete, StepFailed, Terminated, Error])
             }
             DoStep => StateMask::of(&[StepComplete]),
-            CancelStep => StateMask::of(&[StepInProgress]),
+            // Only legal while an asynchronous step runs, which never happens
+            // here: refused in every state.
+            CancelStep => StateMask::of(&[]),
             GetStatus | GetRealStatus | GetIntegerStatus | GetBooleanStatus | GetStringStatus => {
                 STATUS_QUERY
             }
@@ -409,6 +473,109 @@ mod tests {
         assert!(!SetInteger.allowed(Interface::ModelExchange, ContinuousTimeMode));
         assert!(SetReal.allowed(Interface::ModelExchange, ContinuousTimeMode));
         assert!(!DoStep.allowed(Interface::ModelExchange, EventMode));
+    }
+
+    /// `ALL` lists every variant once (the match forgets none: adding a
+    /// variant without listing it fails to compile here).
+    #[test]
+    fn all_lists_every_function_and_state_once() {
+        for (i, f) in FmiFunction::ALL.iter().enumerate() {
+            assert_eq!(*f as usize, i, "{f:?}");
+            match f {
+                FmiFunction::SetDebugLogging
+                | FmiFunction::FreeInstance
+                | FmiFunction::SetupExperiment
+                | FmiFunction::EnterInitializationMode
+                | FmiFunction::ExitInitializationMode
+                | FmiFunction::Terminate
+                | FmiFunction::Reset
+                | FmiFunction::GetReal
+                | FmiFunction::GetInteger
+                | FmiFunction::GetBoolean
+                | FmiFunction::GetString
+                | FmiFunction::SetReal
+                | FmiFunction::SetInteger
+                | FmiFunction::SetBoolean
+                | FmiFunction::SetString
+                | FmiFunction::GetFmuState
+                | FmiFunction::SetFmuState
+                | FmiFunction::FreeFmuState
+                | FmiFunction::SerializedFmuStateSize
+                | FmiFunction::SerializeFmuState
+                | FmiFunction::DeSerializeFmuState
+                | FmiFunction::GetDirectionalDerivative
+                | FmiFunction::SetRealInputDerivatives
+                | FmiFunction::GetRealOutputDerivatives
+                | FmiFunction::DoStep
+                | FmiFunction::CancelStep
+                | FmiFunction::GetStatus
+                | FmiFunction::GetRealStatus
+                | FmiFunction::GetIntegerStatus
+                | FmiFunction::GetBooleanStatus
+                | FmiFunction::GetStringStatus
+                | FmiFunction::EnterEventMode
+                | FmiFunction::NewDiscreteStates
+                | FmiFunction::EnterContinuousTimeMode
+                | FmiFunction::CompletedIntegratorStep
+                | FmiFunction::SetTime
+                | FmiFunction::SetContinuousStates
+                | FmiFunction::GetDerivatives
+                | FmiFunction::GetEventIndicators
+                | FmiFunction::GetContinuousStates
+                | FmiFunction::GetNominalsOfContinuousStates => {}
+            }
+        }
+        for (i, s) in FmiState::ALL.iter().enumerate() {
+            assert_eq!(*s as usize, i, "{s:?}");
+            match s {
+                Instantiated | InitializationMode | StepComplete | StepFailed | Terminated
+                | Error | Fatal | EventMode | ContinuousTimeMode => {}
+            }
+        }
+    }
+
+    /// No dead states: every state of the table is one in which some
+    /// function is allowed. Where each is entered (the integration tests
+    /// drive each there, StepFailed in `tests/step_outcome.rs`):
+    /// Instantiated by fmi2Instantiate/fmi2Reset, InitializationMode by
+    /// fmi2EnterInitializationMode, StepComplete by fmi2ExitInitializationMode
+    /// (Co-Simulation) and completed steps, StepFailed by a discarded
+    /// fmi2DoStep, Terminated by fmi2Terminate, Error and Fatal by the
+    /// statuses of that name, EventMode and ContinuousTimeMode by Model
+    /// Exchange's mode changes (`instance.rs`, `model_exchange.rs`).
+    #[test]
+    fn no_state_is_dead() {
+        for state in FmiState::ALL {
+            assert!(
+                FmiFunction::ALL
+                    .iter()
+                    .any(|f| f.allowed_states().contains(state)),
+                "no function is allowed in {state:?}"
+            );
+        }
+        // A discarded step leaves the slave where the importer can ask why
+        // and go on from a saved state, and nowhere else.
+        use FmiFunction::*;
+        for f in [
+            GetReal,
+            GetRealStatus,
+            GetBooleanStatus,
+            SetFmuState,
+            Terminate,
+            Reset,
+            FreeInstance,
+        ] {
+            assert!(f.allowed(Interface::CoSimulation, StepFailed), "{f:?}");
+        }
+        for f in [DoStep, SetReal, SetInteger, ExitInitializationMode] {
+            assert!(!f.allowed(Interface::CoSimulation, StepFailed), "{f:?}");
+        }
+        assert!(
+            !FmiState::ALL
+                .iter()
+                .any(|s| CancelStep.allowed(Interface::CoSimulation, *s)),
+            "fmi2CancelStep is legal only during an asynchronous step"
+        );
     }
 
     #[test]

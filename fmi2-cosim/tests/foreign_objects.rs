@@ -14,7 +14,7 @@ use std::ptr;
 use fmi2_cosim::abi;
 use fmi2_cosim::fmi_sys::fmi2 as sys;
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, StepOutcome,
     UnitDefinition, Variable,
 };
 use serde::{Deserialize, Serialize};
@@ -27,8 +27,12 @@ thread_local! {
     static LIVE_BYTES: Cell<isize> = const { Cell::new(0) };
 }
 
+// SAFETY: allocation is delegated unchanged to `System`; the counting has no effect on the
+// memory returned.
 unsafe impl GlobalAlloc for CountingAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        // SAFETY: `layout` comes from the caller of `alloc`, under GlobalAlloc's contract,
+        // passed on unchanged.
         let p = unsafe { System.alloc(layout) };
         if !p.is_null() {
             let _ = LIVE_BYTES.try_with(|n| n.set(n.get() + layout.size() as isize));
@@ -37,6 +41,8 @@ unsafe impl GlobalAlloc for CountingAllocator {
     }
 
     unsafe fn dealloc(&self, p: *mut u8, layout: Layout) {
+        // SAFETY: `p` was allocated by `System` with `layout` (every allocation goes through
+        // `alloc` above).
         unsafe { System.dealloc(p, layout) };
         let _ = LIVE_BYTES.try_with(|n| n.set(n.get() - layout.size() as isize));
     }
@@ -104,9 +110,9 @@ macro_rules! integrator_model {
                 _: &mut Context<'_>,
                 _: f64,
                 h: f64,
-            ) -> Result<Status, ModelError> {
+            ) -> Result<StepOutcome, ModelError> {
                 self.y += self.u * h;
-                Ok(Status::Ok)
+                Ok(StepOutcome::Completed)
             }
         }
     };
@@ -125,6 +131,8 @@ fn instance<M: CoSimModel>(u: f64) -> sys::fmi2Component {
         componentEnvironment: ptr::null_mut(),
     };
     let guid = CString::new(fmi2_cosim::model_description::guid::<M>().unwrap()).unwrap();
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     unsafe {
         let c = abi::instantiate::<M>(
             c"instance".as_ptr(),
@@ -146,6 +154,8 @@ fn instance<M: CoSimModel>(u: f64) -> sys::fmi2Component {
 
 fn output<M: CoSimModel>(c: sys::fmi2Component) -> f64 {
     let mut y = f64::NAN;
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     assert_eq!(unsafe { abi::get_real::<M>(c, &1, 1, &mut y) }, OK);
     y
 }
@@ -154,6 +164,8 @@ fn output<M: CoSimModel>(c: sys::fmi2Component) -> f64 {
 fn another_models_instance_is_refused_and_left_untouched() {
     let left = instance::<Left>(1.0);
     let right = instance::<Right>(2.0);
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     unsafe {
         // Every kind of access through Left's entry points.
         assert_eq!(abi::set_real::<Left>(right, &0, 1, &5.0), ERROR);
@@ -177,6 +189,8 @@ fn another_models_instance_is_refused_and_left_untouched() {
 fn another_models_fmu_state_is_refused_and_left_untouched() {
     let left = instance::<Left>(1.0);
     let right = instance::<Right>(2.0);
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     unsafe {
         let mut right_state: sys::fmi2FMUstate = ptr::null_mut();
         assert_eq!(abi::get_fmu_state::<Right>(right, &mut right_state), OK);
@@ -230,6 +244,8 @@ fn a_step_ending_beyond_the_largest_time_is_refused() {
         componentEnvironment: ptr::null_mut(),
     };
     let guid = CString::new(fmi2_cosim::model_description::guid::<Left>().unwrap()).unwrap();
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     unsafe {
         let c = abi::instantiate::<Left>(
             c"late".as_ptr(),
@@ -262,8 +278,12 @@ fn a_step_ending_beyond_the_largest_time_is_refused() {
 fn free_instance_frees_the_fmu_states_left_to_it() {
     let live = || LIVE_BYTES.with(Cell::get);
     // The first instantiation fills the process-wide GUID table.
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     unsafe { abi::free_instance::<Left>(instance::<Left>(1.0)) };
     let before = live();
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     unsafe {
         let first = instance::<Left>(1.0);
         let second = instance::<Left>(2.0);

@@ -8,7 +8,7 @@ use std::ptr;
 use fmi2_cosim::abi;
 use fmi2_cosim::fmi_sys::fmi2 as sys;
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, StepOutcome,
     UnitDefinition, Variability, Variable,
 };
 use serde::{Deserialize, Serialize};
@@ -72,13 +72,13 @@ impl CoSimModel for Faulty {
         Ok(())
     }
 
-    fn do_step(&mut self, _: &mut Context<'_>, _: f64, h: f64) -> Result<Status, ModelError> {
+    fn do_step(&mut self, _: &mut Context<'_>, _: f64, h: f64) -> Result<StepOutcome, ModelError> {
         match self.mode {
             1 => panic!("model bug"),
             2 => Err(ModelError("diverged".into())),
             _ => {
                 self.output += self.input * h;
-                Ok(Status::Ok)
+                Ok(StepOutcome::Completed)
             }
         }
     }
@@ -99,6 +99,9 @@ impl Instance {
             componentEnvironment: ptr::null_mut(),
         };
         let guid = CString::new(fmi2_cosim::model_description::guid::<Faulty>().unwrap()).unwrap();
+        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+        // freed; the other pointers are to locals that outlive the call, with the lengths
+        // passed.
         let c = unsafe {
             abi::instantiate::<Faulty>(
                 c"faulty".as_ptr(),
@@ -112,11 +115,17 @@ impl Instance {
         };
         assert!(!c.is_null());
         let instance = Instance(c);
+        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+        // freed; the other pointers are to locals that outlive the call, with the lengths
+        // passed.
         assert_eq!(unsafe { abi::set_integer::<Faulty>(c, &2, 1, &mode) }, OK);
         instance
     }
 
     fn initialize(&self) -> sys::fmi2Status {
+        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+        // freed; the other pointers are to locals that outlive the call, with the lengths
+        // passed.
         unsafe {
             assert_eq!(
                 abi::setup_experiment::<Faulty>(self.0, 0, 0.0, 0.0, 0, 0.0),
@@ -128,12 +137,18 @@ impl Instance {
     }
 
     fn step(&self, t: f64) -> sys::fmi2Status {
+        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+        // freed; the other pointers are to locals that outlive the call, with the lengths
+        // passed.
         unsafe { abi::do_step::<Faulty>(self.0, t, 0.1, 1) }
     }
 }
 
 impl Drop for Instance {
     fn drop(&mut self) {
+        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+        // freed; the other pointers are to locals that outlive the call, with the lengths
+        // passed.
         unsafe { abi::free_instance::<Faulty>(self.0) };
     }
 }
@@ -147,10 +162,12 @@ fn a_panic_in_the_model_returns_error_instead_of_unwinding_into_c() {
     assert_eq!(inst.step(0.0), ERROR);
     // ...getters still answer, and fmi2Reset recovers.
     let mut y = f64::NAN;
-    assert_eq!(
-        unsafe { abi::get_real::<Faulty>(inst.0, &1, 1, &mut y) },
-        OK
-    );
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
+    let status = unsafe { abi::get_real::<Faulty>(inst.0, &1, 1, &mut y) };
+    assert_eq!(status, OK);
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     assert_eq!(unsafe { abi::reset::<Faulty>(inst.0) }, OK);
     assert_eq!(inst.initialize(), OK);
     assert_eq!(inst.step(0.0), OK);
@@ -161,6 +178,8 @@ fn a_failing_step_enters_the_error_state() {
     let inst = Instance::new(2);
     assert_eq!(inst.initialize(), OK);
     assert_eq!(inst.step(0.0), ERROR);
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     assert_eq!(unsafe { abi::terminate::<Faulty>(inst.0) }, ERROR);
 }
 
@@ -169,21 +188,25 @@ fn a_refused_initialization_enters_the_error_state() {
     let inst = Instance::new(3);
     assert_eq!(inst.initialize(), ERROR);
     assert_eq!(inst.step(0.0), ERROR);
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     assert_eq!(unsafe { abi::reset::<Faulty>(inst.0) }, OK);
 }
 
 #[test]
 fn a_healthy_model_integrates() {
     let inst = Instance::new(0);
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
     assert_eq!(unsafe { abi::set_real::<Faulty>(inst.0, &0, 1, &2.0) }, OK);
     assert_eq!(inst.initialize(), OK);
     for k in 0..10 {
         assert_eq!(inst.step(k as f64 * 0.1), OK);
     }
     let mut y = 0.0;
-    assert_eq!(
-        unsafe { abi::get_real::<Faulty>(inst.0, &1, 1, &mut y) },
-        OK
-    );
+    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
+    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
+    let status = unsafe { abi::get_real::<Faulty>(inst.0, &1, 1, &mut y) };
+    assert_eq!(status, OK);
     assert!((y - 2.0).abs() < 1e-12, "y = {y}");
 }

@@ -73,6 +73,8 @@ fn lossy(s: *const c_char) -> String {
     if s.is_null() {
         "(NULL)".to_owned()
     } else {
+        // SAFETY: non-NULL (checked above) and NUL-terminated: the FMU and the C logger shim
+        // pass C strings (`fmi2String`).
         unsafe { CStr::from_ptr(s) }.to_string_lossy().into_owned()
     }
 }
@@ -89,6 +91,9 @@ extern "C" fn fmi2_import_record(
     if environment.is_null() {
         return;
     }
+    // SAFETY: the environment is the boxed `LogSink` that `callbacks_for` passed as
+    // `componentEnvironment`; the `Instance` owns that box and frees the FMU instance (the
+    // only caller of the logger) before it; `LogSink` is shared through a Mutex.
     let sink = unsafe { &*(environment as *const LogSink) };
     let record = LogRecord {
         instance_name: lossy(instance_name),
@@ -134,6 +139,9 @@ impl Fmu {
 
     /// Like [`Fmu::load`], with the reason as an error (for tools).
     pub fn try_load(library: &Path, model_description: &str) -> Result<Fmu, String> {
+        // SAFETY: loading runs the library's initializers; an FMI 2.0 binary has none with
+        // preconditions, and the binding resolves each function with the standard's signature
+        // (fmi-sys).
         let binding = unsafe { Fmi2Binding::new(library) }
             .map_err(|e| format!("cannot load {}: {e}", library.display()))?;
         let description = Fmi2ModelDescription::deserialize(model_description)
@@ -239,6 +247,9 @@ impl Fmu {
         let name_c = CString::new(name).expect("no NUL");
         let guid_c = CString::new(guid).expect("no NUL");
         let location_c = resource_location.map(|l| CString::new(l).expect("no NUL"));
+        // SAFETY: every string is a CString alive for the call; the callbacks are boxed and
+        // kept by the returned `Instance`, so they outlive the FMU instance as the standard
+        // requires.
         let c = unsafe {
             self.binding.fmi2Instantiate(
                 name_c.as_ptr(),
@@ -370,14 +381,23 @@ impl Instance<'_> {
 
     pub fn setup(&mut self, start: f64) -> sys::fmi2Status {
         self.time = start;
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe { self.b().fmi2SetupExperiment(self.c, 0, 0.0, start, 0, 0.0) }
     }
 
     pub fn enter_init(&self) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe { self.b().fmi2EnterInitializationMode(self.c) }
     }
 
     pub fn exit_init(&self) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe { self.b().fmi2ExitInitializationMode(self.c) }
     }
 
@@ -404,16 +424,25 @@ impl Instance<'_> {
     }
 
     pub fn terminate(&self) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe { self.b().fmi2Terminate(self.c) }
     }
 
     pub fn reset(&mut self) -> sys::fmi2Status {
         self.time = 0.0;
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe { self.b().fmi2Reset(self.c) }
     }
 
     pub fn set_real(&self, vrs: &[u32], values: &[f64]) -> sys::fmi2Status {
         assert_eq!(vrs.len(), values.len());
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe {
             self.b()
                 .fmi2SetReal(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr())
@@ -422,6 +451,9 @@ impl Instance<'_> {
 
     pub fn set_integer(&self, vrs: &[u32], values: &[i32]) -> sys::fmi2Status {
         assert_eq!(vrs.len(), values.len());
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe {
             self.b()
                 .fmi2SetInteger(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr())
@@ -431,6 +463,9 @@ impl Instance<'_> {
     pub fn set_boolean(&self, vrs: &[u32], values: &[bool]) -> sys::fmi2Status {
         assert_eq!(vrs.len(), values.len());
         let values: Vec<sys::fmi2Boolean> = values.iter().map(|b| i32::from(*b)).collect();
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe {
             self.b()
                 .fmi2SetBoolean(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr())
@@ -439,6 +474,9 @@ impl Instance<'_> {
 
     pub fn get_real(&self, vrs: &[u32]) -> (sys::fmi2Status, Vec<f64>) {
         let mut values = vec![f64::NAN; vrs.len()];
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         let status = unsafe {
             self.b()
                 .fmi2GetReal(self.c, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
@@ -450,6 +488,9 @@ impl Instance<'_> {
     /// master's step loop.
     pub fn get_real_into(&self, vrs: &[u32], values: &mut [f64]) -> sys::fmi2Status {
         assert_eq!(vrs.len(), values.len());
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe {
             self.b()
                 .fmi2GetReal(self.c, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
@@ -463,6 +504,9 @@ impl Instance<'_> {
     }
 
     pub fn do_step(&mut self, h: f64) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         let status = unsafe { self.b().fmi2DoStep(self.c, self.time, h, 1) };
         if status <= WARNING {
             self.time += h;
@@ -471,6 +515,9 @@ impl Instance<'_> {
     }
 
     pub fn do_step_at(&self, t: f64, h: f64) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe { self.b().fmi2DoStep(self.c, t, h, 1) }
     }
 
@@ -489,20 +536,32 @@ impl Instance<'_> {
 
     pub fn get_state(&self) -> (sys::fmi2Status, sys::fmi2FMUstate) {
         let mut state: sys::fmi2FMUstate = ptr::null_mut();
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         let status = unsafe { self.b().fmi2GetFMUstate(self.c, &mut state) };
         (status, state)
     }
 
     pub fn set_state(&self, state: sys::fmi2FMUstate) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // `state` is handed back to the FMU as the caller got it, for the FMU to check (the
+        // crate's header); the other pointers are to locals valid for the call.
         unsafe { self.b().fmi2SetFMUstate(self.c, state) }
     }
 
     pub fn free_state(&self, state: &mut sys::fmi2FMUstate) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // `state` is handed back to the FMU as the caller got it, for the FMU to check (the
+        // crate's header); the other pointers are to locals valid for the call.
         unsafe { self.b().fmi2FreeFMUstate(self.c, state) }
     }
 
     pub fn serialize(&self, state: sys::fmi2FMUstate) -> (sys::fmi2Status, Vec<u8>) {
         let mut size = 0usize;
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // `state` is handed back to the FMU as the caller got it, for the FMU to check (the
+        // crate's header); the other pointers are to locals valid for the call.
         let status = unsafe {
             self.b()
                 .fmi2SerializedFMUstateSize(self.c, state, &mut size)
@@ -511,6 +570,9 @@ impl Instance<'_> {
             return (status, Vec::new());
         }
         let mut bytes = vec![0u8; size];
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // `state` is handed back to the FMU as the caller got it, for the FMU to check (the
+        // crate's header); the other pointers are to locals valid for the call.
         let status = unsafe {
             self.b()
                 .fmi2SerializeFMUstate(self.c, state, bytes.as_mut_ptr().cast(), size)
@@ -520,6 +582,9 @@ impl Instance<'_> {
 
     pub fn deserialize(&self, bytes: &[u8]) -> (sys::fmi2Status, sys::fmi2FMUstate) {
         let mut state: sys::fmi2FMUstate = ptr::null_mut();
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         let status = unsafe {
             self.b()
                 .fmi2DeSerializeFMUstate(self.c, bytes.as_ptr().cast(), bytes.len(), &mut state)
@@ -533,6 +598,9 @@ impl Instance<'_> {
             .map(|c| CString::new(*c).unwrap())
             .collect();
         let pointers: Vec<*const c_char> = owned.iter().map(|c| c.as_ptr()).collect();
+        // SAFETY: `self.c` is the live instance this `Instance` owns (freed only on drop);
+        // every pointer is to a local, or a slice of the length passed, valid for the call
+        // (the standard's signatures, through fmi-sys).
         unsafe {
             self.b().fmi2SetDebugLogging(
                 self.c,
@@ -550,6 +618,7 @@ impl Instance<'_> {
 
 impl Drop for Instance<'_> {
     fn drop(&mut self) {
+        // SAFETY: `self.c` is live and freed once, here; nothing uses it after.
         unsafe { self.fmu.binding.fmi2FreeInstance(self.c) };
     }
 }

@@ -70,6 +70,9 @@ impl Instance<'_> {
     }
 
     pub fn enter_event_mode(&self) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         unsafe { self.me().fmi2EnterEventMode(self.c) }
     }
 
@@ -82,17 +85,26 @@ impl Instance<'_> {
             nextEventTimeDefined: 7,
             nextEventTime: f64::NAN,
         };
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         let status = unsafe { self.me().fmi2NewDiscreteStates(self.c, &mut info) };
         (status, info)
     }
 
     pub fn enter_continuous_time_mode(&self) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         unsafe { self.me().fmi2EnterContinuousTimeMode(self.c) }
     }
 
     /// `fmi2CompletedIntegratorStep`; returns the status and the two flags.
     pub fn completed_integrator_step(&self) -> (sys::fmi2Status, bool, bool) {
         let (mut enter_event_mode, mut terminate) = (7, 7);
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         let status = unsafe {
             self.me()
                 .fmi2CompletedIntegratorStep(self.c, 1, &mut enter_event_mode, &mut terminate)
@@ -101,10 +113,16 @@ impl Instance<'_> {
     }
 
     pub fn set_time(&self, time: f64) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         unsafe { self.me().fmi2SetTime(self.c, time) }
     }
 
     pub fn set_continuous_states(&self, x: &[f64]) -> sys::fmi2Status {
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         unsafe {
             self.me()
                 .fmi2SetContinuousStates(self.c, x.as_ptr(), x.len())
@@ -113,12 +131,18 @@ impl Instance<'_> {
 
     pub fn get_continuous_states(&self, n: usize) -> (sys::fmi2Status, Vec<f64>) {
         let mut x = vec![f64::NAN; n];
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         let status = unsafe { self.me().fmi2GetContinuousStates(self.c, x.as_mut_ptr(), n) };
         (status, x)
     }
 
     pub fn get_derivatives(&self, n: usize) -> (sys::fmi2Status, Vec<f64>) {
         let mut dx = vec![f64::NAN; n];
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         let status = unsafe { self.me().fmi2GetDerivatives(self.c, dx.as_mut_ptr(), n) };
         (status, dx)
     }
@@ -130,12 +154,18 @@ impl Instance<'_> {
         } else {
             z.as_mut_ptr()
         };
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         let status = unsafe { self.me().fmi2GetEventIndicators(self.c, pointer, n) };
         (status, z)
     }
 
     pub fn get_nominals(&self, n: usize) -> (sys::fmi2Status, Vec<f64>) {
         let mut nominals = vec![f64::NAN; n];
+        // SAFETY: `self.c` is the live Model Exchange instance this `Instance` owns (freed
+        // only on drop); every pointer is to a local or a slice of the length passed, valid
+        // for the call (the standard's signatures, through fmi-sys).
         let status = unsafe {
             self.me()
                 .fmi2GetNominalsOfContinuousStates(self.c, nominals.as_mut_ptr(), n)

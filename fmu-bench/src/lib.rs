@@ -237,6 +237,8 @@ impl<'a, const I: usize, const O: usize> AbiSlave<'a, I, O> {
         let vr = |name: &str| fmu.variable(name).vr;
         let mut instance = fmu.instantiate(name, false);
         for (switch, on) in switches {
+            // SAFETY: `instance.c` is live (the instance owns it); one value
+            // reference and one value, both temporaries alive for the call.
             let status = unsafe {
                 fmu.binding
                     .fmi2SetBoolean(instance.c, &vr(switch), 1, &i32::from(*on))
@@ -259,6 +261,8 @@ impl<'a, const I: usize, const O: usize> AbiSlave<'a, I, O> {
     /// fmi2SetReal of every input.
     #[inline]
     pub fn set_inputs(&self, values: &[f64; I]) {
+        // SAFETY: `self.instance.c` is live (the instance owns it); both
+        // arrays have `I` elements, as passed.
         let status = unsafe {
             self.instance.fmu.binding.fmi2SetReal(
                 self.instance.c,
@@ -281,6 +285,8 @@ impl<'a, const I: usize, const O: usize> AbiSlave<'a, I, O> {
     #[inline]
     pub fn get_outputs(&self) -> [f64; O] {
         let mut values = [0.0; O];
+        // SAFETY: `self.instance.c` is live (the instance owns it); both
+        // arrays have `O` elements, as passed, and `values` is writable.
         let status = unsafe {
             self.instance.fmu.binding.fmi2GetReal(
                 self.instance.c,

@@ -14,8 +14,8 @@
 
 use fmi2_cosim::variables::Value;
 use fmi2_cosim::{
-    BaseUnit, Causality, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
-    UnitDefinition, Variability, Variable, units,
+    BaseUnit, Causality, CoSimModel, Context, DefaultExperiment, FmiState, ModelError, ModelInfo,
+    StepOutcome, UnitDefinition, Variability, Variable, units,
 };
 use piezo_models::{
     ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel, PiezoController,
@@ -720,13 +720,7 @@ impl CoSimModel for PiezoControllerFmu {
             })?;
         // The controller starts with empty integrators and de-energized
         // backlash memories (seed 000 eq. 1: zero initial state).
-        self.controller = PiezoController::new(self.params.clone()).map_err(|e| {
-            let name = fmi_name(&e.parameter).unwrap_or("a parameter");
-            ModelError(format!(
-                "parameter {name} ({}) = {} is not allowed: {}",
-                e.parameter, e.value, e.allowed
-            ))
-        })?;
+        self.controller = PiezoController::new(self.params.clone()).map_err(refused_parameter)?;
         self.saturation_reported = [false; 3];
         ctx.event(format_args!(
             "controller built from the parameters: feedforward {} ({:?}), decoupling {} ({:?}), feedback x/y/theta {}/{}/{}",
@@ -748,7 +742,7 @@ impl CoSimModel for PiezoControllerFmu {
         ctx: &mut Context<'_>,
         current_time: f64,
         step_size: f64,
-    ) -> Result<Status, ModelError> {
+    ) -> Result<StepOutcome, ModelError> {
         // The inputs are finite: fmi2SetReal refuses a non-finite value, and
         // fmi2DeSerializeFMUstate a state that holds one (the FMI layer).
         let [x_ref, y_ref, theta_ref] = self.references;
@@ -768,11 +762,77 @@ impl CoSimModel for PiezoControllerFmu {
         if self.controller.limited() != [0; 3] {
             self.report_limiting(ctx, current_time);
         }
-        Ok(Status::Ok)
+        Ok(StepOutcome::Completed)
+    }
+
+    fn validate_restored(
+        &mut self,
+        _ctx: &mut Context<'_>,
+        state: FmiState,
+    ) -> Result<(), ModelError> {
+        self.check_restored(state)
     }
 }
 
+/// A parameter piezo-models refuses, named as the importer knows it.
+fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
+    let name = fmi_name(&e.parameter).unwrap_or("a parameter");
+    ModelError(format!(
+        "parameter {name} ({}) = {} is not allowed: {}",
+        e.parameter, e.value, e.allowed
+    ))
+}
+
 impl PiezoControllerFmu {
+    /// The restored-state check of [`CoSimModel::validate_restored`]: past
+    /// initialization the controller was built from the parameters (so they
+    /// pass piezo-models' validation, the selector codes are the selectors,
+    /// and the controller holds the same parameters) and its last sample is
+    /// finite. Before it, `exit_initialization_mode` checks and rebuilds
+    /// everything.
+    fn check_restored(&self, state: FmiState) -> Result<(), ModelError> {
+        if matches!(
+            state,
+            FmiState::Instantiated | FmiState::InitializationMode | FmiState::Error
+        ) {
+            return Ok(());
+        }
+        // The PI gains are tunable: fmi2SetReal takes any finite value for
+        // them while running (as the layer does for every tunable), so a
+        // state may hold gains that validate() would refuse; the rest is
+        // checked as at initialization.
+        let defaults = ControllerParams::default();
+        let fixed_part = ControllerParams {
+            translation_gains: defaults.translation_gains,
+            rotation_gains: defaults.rotation_gains,
+            ..self.params.clone()
+        };
+        fixed_part.validate().map_err(refused_parameter)?;
+        let selectors = (
+            selected(&HysteresisModel::CODES, self.selector_codes[0]),
+            selected(&DecouplingModel::CODES, self.selector_codes[1]),
+        );
+        if selectors
+            != (
+                Some(self.params.hysteresis_model),
+                Some(self.params.decoupling_model),
+            )
+            || self.controller.params() != &self.params
+        {
+            return Err(ModelError(
+                "the controller's parameters or selectors differ from the FMU's: the state \
+                 was not taken from an instance of this FMU"
+                    .to_owned(),
+            ));
+        }
+        if !sample_is_finite(self.controller.output()) {
+            return Err(ModelError(
+                "the controller's last sample is not finite".to_owned(),
+            ));
+        }
+        Ok(())
+    }
+
     #[cold]
     #[inline(never)]
     fn non_finite_step(&self, current_time: f64, step_size: f64) -> ModelError {

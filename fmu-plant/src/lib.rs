@@ -9,9 +9,9 @@
 //! [`FlexureStage`] (its step, and its ODE form `piezo_models::flexure_stage::ode`).
 
 use fmi2_cosim::{
-    BaseUnit, CoSimModel, Context, DefaultExperiment, EventUpdate, Interface, ModelError,
-    ModelExchange, ModelExchangeInfo, ModelInfo, Status, UnitDefinition, Variability, Variable,
-    units,
+    BaseUnit, CoSimModel, Context, DefaultExperiment, EventUpdate, FmiState, Interface, ModelError,
+    ModelExchange, ModelExchangeInfo, ModelInfo, Status, StepOutcome, UnitDefinition, Variability,
+    Variable, units,
 };
 use piezo_models::flexure_stage::ode::{self, NUMBER_OF_STATES};
 use piezo_models::{FlexureStage, FlexureStageParams};
@@ -852,13 +852,7 @@ impl CoSimModel for FlexureStageFmu {
         }
         // The stage starts de-energized and at rest, whatever the inputs: the
         // actuators have no history before t0.
-        self.stage = FlexureStage::new(self.params.clone()).map_err(|e| {
-            let name = fmi_name(&e.parameter).unwrap_or("a parameter");
-            ModelError(format!(
-                "parameter {name} ({}) = {} is not allowed: {}",
-                e.parameter, e.value, e.allowed
-            ))
-        })?;
+        self.stage = FlexureStage::new(self.params.clone()).map_err(refused_parameter)?;
         self.clip_reported = [false; 3];
         ctx.event(format_args!("stage built from the parameters, at rest"));
         Ok(())
@@ -871,7 +865,7 @@ impl CoSimModel for FlexureStageFmu {
         ctx: &mut Context<'_>,
         current_time: f64,
         step_size: f64,
-    ) -> Result<Status, ModelError> {
+    ) -> Result<StepOutcome, ModelError> {
         let report = self.stage.step(self.commands, step_size);
         if let Some(fault) = report.fault {
             // Never hand a diverged state on as outputs: the importer gets
@@ -883,13 +877,67 @@ impl CoSimModel for FlexureStageFmu {
         let unreported: [bool; 3] =
             std::array::from_fn(|c| report.clipped[c] & !self.clip_reported[c]);
         if unreported == [false; 3] {
-            return Ok(Status::Ok);
+            return Ok(StepOutcome::Completed);
         }
-        Ok(self.report_clipping(ctx, current_time, report.clipped))
+        Ok(
+            match self.report_clipping(ctx, current_time, report.clipped) {
+                Status::Ok => StepOutcome::Completed,
+                _ => StepOutcome::CompletedWithWarning,
+            },
+        )
+    }
+
+    fn validate_restored(
+        &mut self,
+        _ctx: &mut Context<'_>,
+        state: FmiState,
+    ) -> Result<(), ModelError> {
+        self.check_restored(state)
     }
 }
 
+/// A parameter piezo-models refuses, named as the importer knows it.
+fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
+    let name = fmi_name(&e.parameter).unwrap_or("a parameter");
+    ModelError(format!(
+        "parameter {name} ({}) = {} is not allowed: {}",
+        e.parameter, e.value, e.allowed
+    ))
+}
+
 impl FlexureStageFmu {
+    /// The restored-state check of [`CoSimModel::validate_restored`]: past
+    /// initialization the stage was built from the parameters (so they pass
+    /// piezo-models' validation, and the stage holds the same ones) and its
+    /// state is in the physical domain. Before it, `exit_initialization_mode`
+    /// checks and rebuilds everything.
+    fn check_restored(&self, state: FmiState) -> Result<(), ModelError> {
+        if matches!(
+            state,
+            FmiState::Instantiated | FmiState::InitializationMode | FmiState::Error
+        ) {
+            return Ok(());
+        }
+        self.params.validate().map_err(refused_parameter)?;
+        if self.stage.params() != &self.params {
+            return Err(ModelError(
+                "the stage's parameters differ from the FMU's: the state was not taken from \
+                 an instance of this FMU"
+                    .to_owned(),
+            ));
+        }
+        if let Some(fault) = self.stage.check_state() {
+            return Err(ModelError(format!(
+                "the stage's {} = {} is non-finite or beyond {} um / {} rad",
+                fault.variable,
+                fault.value,
+                piezo_models::flexure_stage::DIVERGED_DISPLACEMENT_UM,
+                piezo_models::flexure_stage::DIVERGED_ROTATION_RAD
+            )));
+        }
+        Ok(())
+    }
+
     #[cold]
     #[inline(never)]
     fn diverged(

@@ -26,23 +26,30 @@ fn note_allocation() {
     });
 }
 
+// SAFETY: every call is passed on unchanged to `System`, which upholds
+// GlobalAlloc's contract; the counting touches no memory it hands out.
 unsafe impl GlobalAlloc for CountingAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         note_allocation();
+        // SAFETY: the caller's `layout`, under GlobalAlloc's contract.
         unsafe { System.alloc(layout) }
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         note_allocation();
+        // SAFETY: the caller's `layout`, under GlobalAlloc's contract.
         unsafe { System.alloc_zeroed(layout) }
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
         note_allocation();
+        // SAFETY: `ptr` was allocated by `System` with `layout` (every
+        // allocation goes through this allocator); the caller's `new_size`.
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: `ptr` was allocated by `System` with `layout` (as above).
         unsafe { System.dealloc(ptr, layout) }
     }
 }

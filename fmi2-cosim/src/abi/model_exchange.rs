@@ -6,31 +6,24 @@
 
 use fmi_sys::fmi2 as sys;
 
-use super::call;
+use std::mem::MaybeUninit;
+
+use super::{call, slice_in, slice_out, value_out};
+use crate::Instance;
 use crate::model_exchange::ModelExchange;
 use crate::status::{FmiFunction, Status};
 
-/// The array argument of a vector call as a slice; refuses NULL when `n > 0`.
-///
-/// # Safety
-/// When non-NULL, `values` must point to `n` elements.
-unsafe fn vector<'a, T>(
-    inst: &crate::Instance<impl ModelExchange>,
-    function: FmiFunction,
-    values: *mut T,
-    n: usize,
-    name: &str,
-) -> Result<&'a mut [T], Status> {
-    if n == 0 {
-        return Ok(&mut []);
+/// An output vector of the importer, zeroed so that the model can be handed
+/// a plain `&mut [f64]` (what it does not write reads as 0, never as
+/// uninitialized memory).
+fn zeroed(out: &mut [MaybeUninit<f64>]) -> &mut [f64] {
+    for x in out.iter_mut() {
+        x.write(0.0);
     }
-    if values.is_null() {
-        return Err(inst.error(
-            function,
-            format_args!("{name}[] is NULL but its length is {n}"),
-        ));
-    }
-    Ok(unsafe { std::slice::from_raw_parts_mut(values, n) })
+    // SAFETY: every element was just written; `MaybeUninit<f64>` has the
+    // layout of `f64`, so the slice is one of initialized `f64`s with the
+    // same length and lifetime.
+    unsafe { &mut *(out as *mut [MaybeUninit<f64>] as *mut [f64]) }
 }
 
 fn to_c(b: bool) -> sys::fmi2Boolean {
@@ -44,6 +37,7 @@ fn to_c(b: bool) -> sys::fmi2Boolean {
 /// # Safety
 /// `c` as for every FMI function.
 pub unsafe fn enter_event_mode<M: ModelExchange>(c: sys::fmi2Component) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
@@ -61,31 +55,36 @@ pub unsafe fn new_discrete_states<M: ModelExchange>(
     event_info: *mut sys::fmi2EventInfo,
 ) -> sys::fmi2Status {
     let function = FmiFunction::NewDiscreteStates;
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `event_info` is the importer's output struct when non-NULL
+        // (this function's contract).
+        let out = match unsafe { value_out(inst, function, event_info, "fmi2eventInfo") } {
+            Ok(out) => out,
+            Err(status) => return status,
+        };
+        match inst.new_discrete_states() {
+            Ok(info) => {
+                let update = info.update;
+                out.write(sys::fmi2EventInfo {
+                    newDiscreteStatesNeeded: to_c(info.new_discrete_states_needed),
+                    terminateSimulation: to_c(update.terminate_simulation),
+                    nominalsOfContinuousStatesChanged: to_c(update.nominals_changed),
+                    valuesOfContinuousStatesChanged: to_c(update.values_changed),
+                    nextEventTimeDefined: to_c(update.next_event_time.is_some()),
+                    nextEventTime: update.next_event_time.unwrap_or(0.0),
+                });
+                Status::Ok
+            }
+            Err(status) => status,
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
             function,
             |f| write!(f, "fmi2eventInfo = {event_info:?}"),
-            |inst| {
-                if event_info.is_null() {
-                    return inst.error(function, format_args!("fmi2eventInfo is NULL"));
-                }
-                match inst.new_discrete_states() {
-                    Ok(info) => {
-                        let update = info.update;
-                        *event_info = sys::fmi2EventInfo {
-                            newDiscreteStatesNeeded: to_c(info.new_discrete_states_needed),
-                            terminateSimulation: to_c(update.terminate_simulation),
-                            nominalsOfContinuousStatesChanged: to_c(update.nominals_changed),
-                            valuesOfContinuousStatesChanged: to_c(update.values_changed),
-                            nextEventTimeDefined: to_c(update.next_event_time.is_some()),
-                            nextEventTime: update.next_event_time.unwrap_or(0.0),
-                        };
-                        Status::Ok
-                    }
-                    Err(status) => status,
-                }
-            },
+            body,
         )
     }
 }
@@ -95,6 +94,7 @@ pub unsafe fn new_discrete_states<M: ModelExchange>(
 pub unsafe fn enter_continuous_time_mode<M: ModelExchange>(
     c: sys::fmi2Component,
 ) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
@@ -114,29 +114,30 @@ pub unsafe fn completed_integrator_step<M: ModelExchange>(
     terminate_simulation: *mut sys::fmi2Boolean,
 ) -> sys::fmi2Status {
     let function = FmiFunction::CompletedIntegratorStep;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |_| Ok(()),
-            |inst| {
-                if enter_event_mode.is_null() || terminate_simulation.is_null() {
-                    return inst.error(
-                        function,
-                        format_args!("enterEventMode or terminateSimulation is NULL"),
-                    );
-                }
-                let status = inst.completed_integrator_step();
-                if status <= Status::Warning {
-                    // No step events: the model has nothing to do between steps
-                    // that an event would serve.
-                    *enter_event_mode = sys::fmi2False as _;
-                    *terminate_simulation = sys::fmi2False as _;
-                }
-                status
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: both are the importer's output variables when non-NULL
+        // (this function's contract).
+        let flags = unsafe {
+            (
+                value_out(inst, function, enter_event_mode, "enterEventMode"),
+                value_out(inst, function, terminate_simulation, "terminateSimulation"),
+            )
+        };
+        let (enter_event_mode, terminate_simulation) = match flags {
+            (Ok(enter), Ok(terminate)) => (enter, terminate),
+            (Err(status), _) | (_, Err(status)) => return status,
+        };
+        let status = inst.completed_integrator_step();
+        if status <= Status::Warning {
+            // No step events: the model has nothing to do between steps
+            // that an event would serve.
+            enter_event_mode.write(sys::fmi2False as _);
+            terminate_simulation.write(sys::fmi2False as _);
+        }
+        status
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |_| Ok(()), body) }
 }
 
 /// # Safety
@@ -145,6 +146,7 @@ pub unsafe fn set_time<M: ModelExchange>(
     c: sys::fmi2Component,
     time: sys::fmi2Real,
 ) -> sys::fmi2Status {
+    // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe {
         call::<M, _, _>(
             c,
@@ -163,17 +165,16 @@ pub unsafe fn set_continuous_states<M: ModelExchange>(
     nx: usize,
 ) -> sys::fmi2Status {
     let function = FmiFunction::SetContinuousStates;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "nx = {nx}"),
-            |inst| match vector(inst, function, x.cast_mut(), nx, "x") {
-                Ok(states) => inst.set_continuous_states(states),
-                Err(status) => status,
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `x` points to `nx` values when non-NULL (this function's
+        // contract).
+        match unsafe { slice_in(inst, function, x, nx, "x") } {
+            Ok(states) => inst.set_continuous_states(states),
+            Err(status) => status,
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "nx = {nx}"), body) }
 }
 
 /// # Safety
@@ -184,17 +185,16 @@ pub unsafe fn get_continuous_states<M: ModelExchange>(
     nx: usize,
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetContinuousStates;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "nx = {nx}"),
-            |inst| match vector(inst, function, x, nx, "x") {
-                Ok(states) => inst.get_continuous_states(states),
-                Err(status) => status,
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `x` points to `nx` writable values when non-NULL (this
+        // function's contract).
+        match unsafe { slice_out(inst, function, x, nx, "x") } {
+            Ok(out) => inst.get_continuous_states(zeroed(out)),
+            Err(status) => status,
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "nx = {nx}"), body) }
 }
 
 /// # Safety
@@ -205,17 +205,16 @@ pub unsafe fn get_derivatives<M: ModelExchange>(
     nx: usize,
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetDerivatives;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "nx = {nx}"),
-            |inst| match vector(inst, function, derivatives, nx, "derivatives") {
-                Ok(out) => inst.get_derivatives(out),
-                Err(status) => status,
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `derivatives` points to `nx` writable values when non-NULL (this
+        // function's contract).
+        match unsafe { slice_out(inst, function, derivatives, nx, "derivatives") } {
+            Ok(out) => inst.get_derivatives(zeroed(out)),
+            Err(status) => status,
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "nx = {nx}"), body) }
 }
 
 /// # Safety
@@ -226,17 +225,16 @@ pub unsafe fn get_event_indicators<M: ModelExchange>(
     ni: usize,
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetEventIndicators;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "ni = {ni}"),
-            |inst| match vector(inst, function, indicators, ni, "eventIndicators") {
-                Ok(out) => inst.get_event_indicators(out),
-                Err(status) => status,
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `indicators` points to `ni` writable values when non-NULL (this
+        // function's contract).
+        match unsafe { slice_out(inst, function, indicators, ni, "eventIndicators") } {
+            Ok(out) => inst.get_event_indicators(zeroed(out)),
+            Err(status) => status,
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "ni = {ni}"), body) }
 }
 
 /// # Safety
@@ -247,15 +245,14 @@ pub unsafe fn get_nominals_of_continuous_states<M: ModelExchange>(
     nx: usize,
 ) -> sys::fmi2Status {
     let function = FmiFunction::GetNominalsOfContinuousStates;
-    unsafe {
-        call::<M, _, _>(
-            c,
-            function,
-            |f| write!(f, "nx = {nx}"),
-            |inst| match vector(inst, function, nominals, nx, "x_nominal") {
-                Ok(out) => inst.get_nominals(out),
-                Err(status) => status,
-            },
-        )
-    }
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `nominals` points to `nx` writable values when non-NULL (this
+        // function's contract).
+        match unsafe { slice_out(inst, function, nominals, nx, "x_nominal") } {
+            Ok(out) => inst.get_nominals(zeroed(out)),
+            Err(status) => status,
+        }
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "nx = {nx}"), body) }
 }

@@ -1,0 +1,521 @@
+//! The model contract seen through the C entry points: how each
+//! [`StepOutcome`] maps onto fmi2DoStep's status, the time, the state machine
+//! and the status queries (FMI 2.0.4 §4.2.2, §4.2.4), and how an FMU state
+//! from outside (deserialized bytes with a valid checksum but made-up values)
+//! is checked before it can replace an instance's values.
+
+use std::ffi::CString;
+use std::ptr;
+
+use fmi2_cosim::abi;
+use fmi2_cosim::fmi_sys::fmi2 as sys;
+use fmi2_cosim::{
+    BaseUnit, CoSimModel, Context, DefaultExperiment, FmiState, ModelError, ModelInfo, StepOutcome,
+    UnitDefinition, Variability, Variable,
+};
+use serde::{Deserialize, Serialize};
+
+/// `y' = u`; `z = gain_twice · y`, where `gain_twice` is derived from the
+/// parameter `gain` (a cache the model rebuilds on restore). `mode` selects
+/// how the next step ends.
+#[derive(Clone, Serialize, Deserialize)]
+struct Stepper {
+    u: f64,
+    y: f64,
+    gain: f64,
+    mode: i32,
+    /// 2 · gain, computed at initialization and on restore, never set.
+    gain_twice: f64,
+}
+
+/// Values of `mode`.
+const COMPLETE: i32 = 0;
+const DISCARD_HALFWAY: i32 = 1;
+const TERMINATE_HALFWAY: i32 = 2;
+const DISCARD_BEFORE_THE_STEP: i32 = 3;
+const DISCARD_AT_THE_END: i32 = 4;
+
+/// Beyond this |y| the model's own invariant is broken.
+const Y_LIMIT: f64 = 1e6;
+
+static VARIABLES: &[Variable<Stepper>] = &[
+    Variable::real_input("u", "input", "1", |m| m.u, |m, v| m.u = v),
+    Variable::real_output("y", "integral of u", "1", |m| m.y),
+    Variable::real_output("z", "2 gain y", "1", |m| m.gain_twice * m.y),
+    Variable::real_parameter(
+        "gain",
+        "gain of z",
+        "1",
+        Variability::Fixed,
+        |m: &Stepper| m.gain,
+        |m, v| m.gain = v,
+    )
+    .range(Some(0.0), Some(10.0)),
+    Variable::integer_parameter(
+        "mode",
+        "how the next step ends",
+        Variability::Tunable,
+        |m: &Stepper| m.mode,
+        |m, v| m.mode = v,
+    )
+    .integer_range(Some(0), Some(4)),
+];
+
+impl CoSimModel for Stepper {
+    const INFO: ModelInfo = ModelInfo {
+        model_identifier: "Stepper",
+        model_name: "Stepper",
+        description: "ends its steps as told",
+        author: "tests",
+        version: "0",
+        license: "MIT",
+        default_experiment: DefaultExperiment {
+            start_time: 0.0,
+            stop_time: 1.0,
+            step_size: 0.1,
+        },
+    };
+    const UNITS: &'static [UnitDefinition] = &[UnitDefinition {
+        name: "1",
+        base: BaseUnit::NONE,
+        display_units: &[],
+    }];
+
+    fn variables() -> &'static [Variable<Self>] {
+        VARIABLES
+    }
+
+    fn new() -> Self {
+        Stepper {
+            u: 0.0,
+            y: 0.0,
+            gain: 1.0,
+            mode: COMPLETE,
+            gain_twice: 2.0,
+        }
+    }
+
+    fn exit_initialization_mode(&mut self, _: &mut Context<'_>, _: f64) -> Result<(), ModelError> {
+        self.gain_twice = 2.0 * self.gain;
+        Ok(())
+    }
+
+    fn do_step(&mut self, _: &mut Context<'_>, t: f64, h: f64) -> Result<StepOutcome, ModelError> {
+        let half = |m: &mut Stepper| {
+            m.y += m.u * h / 2.0;
+            t + h / 2.0
+        };
+        Ok(match self.mode {
+            DISCARD_HALFWAY => StepOutcome::Discarded {
+                last_successful_time: half(self),
+            },
+            TERMINATE_HALFWAY => StepOutcome::Terminate {
+                last_successful_time: half(self),
+            },
+            DISCARD_BEFORE_THE_STEP => StepOutcome::Discarded {
+                last_successful_time: t - h,
+            },
+            DISCARD_AT_THE_END => StepOutcome::Discarded {
+                last_successful_time: t + h,
+            },
+            _ => {
+                self.y += self.u * h;
+                StepOutcome::Completed
+            }
+        })
+    }
+
+    fn validate_restored(&mut self, _: &mut Context<'_>, _: FmiState) -> Result<(), ModelError> {
+        if self.y.abs() > Y_LIMIT {
+            return Err(ModelError(format!("y = {} is beyond {Y_LIMIT}", self.y)));
+        }
+        self.gain_twice = 2.0 * self.gain;
+        Ok(())
+    }
+}
+
+const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
+const DISCARD: sys::fmi2Status = sys::fmi2Status_fmi2Discard;
+const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
+
+const U: u32 = 0;
+const Y: u32 = 1;
+const Z: u32 = 2;
+const GAIN: u32 = 3;
+const MODE: u32 = 4;
+
+/// An instance of `Stepper`, freed on drop.
+struct Slave(sys::fmi2Component);
+
+impl Slave {
+    fn instantiate() -> Slave {
+        let callbacks = sys::fmi2CallbackFunctions {
+            logger: None,
+            allocateMemory: None,
+            freeMemory: None,
+            stepFinished: None,
+            componentEnvironment: ptr::null_mut(),
+        };
+        let guid = CString::new(fmi2_cosim::model_description::guid::<Stepper>().unwrap()).unwrap();
+        // SAFETY: every pointer is valid for the call; the GUID and the
+        // callbacks outlive it (the layer copies what it keeps).
+        let c = unsafe {
+            abi::instantiate::<Stepper>(
+                c"stepper".as_ptr(),
+                sys::fmi2Type_fmi2CoSimulation,
+                guid.as_ptr(),
+                ptr::null(),
+                &callbacks,
+                0,
+                0,
+            )
+        };
+        assert!(!c.is_null());
+        Slave(c)
+    }
+
+    /// Initialized at t = 0 with gain 1.25 and input 2.
+    fn initialized() -> Slave {
+        let slave = Slave::instantiate();
+        assert_eq!(slave.set_real(GAIN, 1.25), OK);
+        assert_eq!(slave.set_real(U, 2.0), OK);
+        // SAFETY: `slave.0` is a live instance of Stepper.
+        unsafe {
+            assert_eq!(
+                abi::setup_experiment::<Stepper>(slave.0, 0, 0.0, 0.0, 0, 0.0),
+                OK
+            );
+            assert_eq!(abi::enter_initialization_mode::<Stepper>(slave.0), OK);
+            assert_eq!(abi::exit_initialization_mode::<Stepper>(slave.0), OK);
+        }
+        slave
+    }
+
+    fn set_real(&self, vr: u32, value: f64) -> sys::fmi2Status {
+        // SAFETY: one value reference and one value, both on the stack.
+        unsafe { abi::set_real::<Stepper>(self.0, &vr, 1, &value) }
+    }
+
+    fn set_mode(&self, mode: i32) -> sys::fmi2Status {
+        // SAFETY: as in `set_real`.
+        unsafe { abi::set_integer::<Stepper>(self.0, &MODE, 1, &mode) }
+    }
+
+    fn real(&self, vr: u32) -> f64 {
+        let mut value = f64::NAN;
+        // SAFETY: as in `set_real`.
+        let status = unsafe { abi::get_real::<Stepper>(self.0, &vr, 1, &mut value) };
+        assert_eq!(status, OK);
+        value
+    }
+
+    fn step(&self, t: f64, h: f64) -> sys::fmi2Status {
+        // SAFETY: `self.0` is a live instance of Stepper.
+        unsafe { abi::do_step::<Stepper>(self.0, t, h, 1) }
+    }
+
+    fn last_successful_time(&self) -> (sys::fmi2Status, f64) {
+        let mut time = f64::NAN;
+        // SAFETY: `time` is valid for a write.
+        let status = unsafe {
+            abi::get_real_status::<Stepper>(
+                self.0,
+                sys::fmi2StatusKind_fmi2LastSuccessfulTime,
+                &mut time,
+            )
+        };
+        (status, time)
+    }
+
+    fn terminated(&self) -> (sys::fmi2Status, sys::fmi2Boolean) {
+        let mut flag = -1;
+        // SAFETY: `flag` is valid for a write.
+        let status = unsafe {
+            abi::get_boolean_status::<Stepper>(
+                self.0,
+                sys::fmi2StatusKind_fmi2Terminated,
+                &mut flag,
+            )
+        };
+        (status, flag)
+    }
+
+    fn terminate(&self) -> sys::fmi2Status {
+        // SAFETY: `self.0` is a live instance of Stepper.
+        unsafe { abi::terminate::<Stepper>(self.0) }
+    }
+
+    fn get_state(&self) -> sys::fmi2FMUstate {
+        let mut state: sys::fmi2FMUstate = ptr::null_mut();
+        // SAFETY: `state` is a NULL slot the layer fills.
+        let status = unsafe { abi::get_fmu_state::<Stepper>(self.0, &mut state) };
+        assert_eq!(status, OK);
+        state
+    }
+
+    fn set_state(&self, state: sys::fmi2FMUstate) -> sys::fmi2Status {
+        // SAFETY: `state` was made by this layer for Stepper, or is refused.
+        unsafe { abi::set_fmu_state::<Stepper>(self.0, state) }
+    }
+
+    fn serialize(&self, state: sys::fmi2FMUstate) -> Vec<u8> {
+        let mut size = 0;
+        // SAFETY: `state` is a live state of this instance; the buffer has
+        // the size the layer asked for.
+        unsafe {
+            assert_eq!(
+                abi::serialized_fmu_state_size::<Stepper>(self.0, state, &mut size),
+                OK
+            );
+            let mut bytes = vec![0u8; size];
+            assert_eq!(
+                abi::serialize_fmu_state::<Stepper>(self.0, state, bytes.as_mut_ptr().cast(), size),
+                OK
+            );
+            bytes
+        }
+    }
+
+    /// Deserializes `bytes` into a new FMU state: the status and the state.
+    fn deserialize(&self, bytes: &[u8]) -> (sys::fmi2Status, sys::fmi2FMUstate) {
+        let mut state: sys::fmi2FMUstate = ptr::null_mut();
+        // SAFETY: `bytes` is a live slice; `state` a NULL slot.
+        let status = unsafe {
+            abi::deserialize_fmu_state::<Stepper>(
+                self.0,
+                bytes.as_ptr().cast(),
+                bytes.len(),
+                &mut state,
+            )
+        };
+        (status, state)
+    }
+}
+
+impl Drop for Slave {
+    fn drop(&mut self) {
+        // SAFETY: `self.0` is live; freeing it frees its FMU states too.
+        unsafe { abi::free_instance::<Stepper>(self.0) };
+    }
+}
+
+/// Header (magic, version, GUID, payload length) and trailer (CRC-32) of a
+/// serialized state: `fmu_state`'s documented byte form.
+const HEADER_LEN: usize = 8 + 4 + 38 + 8;
+const CRC_LEN: usize = 4;
+
+/// `bytes` with the one occurrence, in the payload, of the f64 `from`
+/// replaced by `to`, and the checksum recomputed: bytes written on purpose.
+fn forge(bytes: &[u8], from: f64, to: f64) -> Vec<u8> {
+    let mut out = bytes.to_vec();
+    let payload = HEADER_LEN..out.len() - CRC_LEN;
+    let needle = from.to_le_bytes();
+    let hits: Vec<usize> = out[payload.clone()]
+        .windows(8)
+        .enumerate()
+        .filter(|(_, w)| *w == needle)
+        .map(|(i, _)| HEADER_LEN + i)
+        .collect();
+    assert_eq!(hits.len(), 1, "{from} occurs {} times", hits.len());
+    out[hits[0]..hits[0] + 8].copy_from_slice(&to.to_le_bytes());
+    let crc = crc32fast::hash(&out[..payload.end]);
+    out[payload.end..].copy_from_slice(&crc.to_le_bytes());
+    out
+}
+
+#[test]
+fn a_discarded_step_stops_at_the_last_successful_time_in_step_failed() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.step(0.0, 0.1), OK);
+    let saved = slave.get_state();
+    assert_eq!(slave.set_mode(DISCARD_HALFWAY), OK);
+    assert_eq!(slave.step(0.1, 0.1), DISCARD);
+    // The slave stands where the model stopped, and says so.
+    let (status, time) = slave.last_successful_time();
+    assert_eq!(status, OK);
+    assert!((time - 0.15).abs() < 1e-15, "{time}");
+    assert_eq!(slave.terminated(), (OK, 0));
+    assert!((slave.real(Y) - 0.3).abs() < 1e-12);
+    // fmi2DoStepStatus is for asynchronous steps only.
+    let mut step_status = OK;
+    // SAFETY: `step_status` is valid for a write.
+    let status = unsafe {
+        abi::get_status::<Stepper>(
+            slave.0,
+            sys::fmi2StatusKind_fmi2DoStepStatus,
+            &mut step_status,
+        )
+    };
+    assert_eq!(status, DISCARD);
+    // The importer goes back to the saved state and retries with a shorter
+    // step.
+    assert_eq!(slave.set_state(saved), OK);
+    assert_eq!(slave.last_successful_time(), (OK, 0.1));
+    assert_eq!(slave.set_mode(COMPLETE), OK);
+    assert_eq!(slave.step(0.1, 0.05), OK);
+    assert_eq!(slave.last_successful_time(), (OK, 0.15000000000000002));
+    assert!((slave.real(Y) - 0.3).abs() < 1e-12);
+}
+
+#[test]
+fn step_failed_refuses_inputs() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.set_mode(DISCARD_HALFWAY), OK);
+    assert_eq!(slave.step(0.0, 0.1), DISCARD);
+    assert_eq!(slave.set_real(U, 1.0), ERROR);
+}
+
+#[test]
+fn a_step_is_refused_after_a_discard_and_terminate_is_allowed() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.set_mode(DISCARD_HALFWAY), OK);
+    assert_eq!(slave.step(0.0, 0.1), DISCARD);
+    assert_eq!(slave.terminate(), OK);
+    let slave = Slave::initialized();
+    assert_eq!(slave.set_mode(DISCARD_HALFWAY), OK);
+    assert_eq!(slave.step(0.0, 0.1), DISCARD);
+    // fmi2DoStep is not allowed in stepFailed: an illegal call, fmi2Error.
+    assert_eq!(slave.step(0.05, 0.1), ERROR);
+}
+
+#[test]
+fn a_terminate_request_is_a_discard_with_fmi2_terminated_true() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.set_mode(TERMINATE_HALFWAY), OK);
+    assert_eq!(slave.step(0.0, 0.2), DISCARD);
+    assert_eq!(slave.terminated(), (OK, 1));
+    assert_eq!(slave.last_successful_time(), (OK, 0.1));
+    // The flag survives an FMU state round trip through bytes, and a
+    // state in stepFailed restores into stepFailed.
+    let state = slave.get_state();
+    let bytes = slave.serialize(state);
+    let other = Slave::initialized();
+    assert_eq!(other.terminated(), (OK, 0));
+    let (status, copy) = other.deserialize(&bytes);
+    assert_eq!(status, OK);
+    assert_eq!(other.set_state(copy), OK);
+    assert_eq!(other.terminated(), (OK, 1));
+    assert_eq!(other.last_successful_time(), (OK, 0.1));
+    assert_eq!(other.step(0.1, 0.1), ERROR, "stepFailed allows no step");
+    assert_eq!(slave.terminate(), OK);
+    // fmi2Reset clears the request.
+    // SAFETY: `other.0` is live.
+    let status = unsafe { abi::reset::<Stepper>(other.0) };
+    assert_eq!(status, OK);
+    let other = Slave::initialized();
+    assert_eq!(other.terminated(), (OK, 0));
+}
+
+#[test]
+fn a_last_successful_time_outside_the_step_is_a_model_error() {
+    for mode in [DISCARD_BEFORE_THE_STEP, DISCARD_AT_THE_END] {
+        let slave = Slave::initialized();
+        assert_eq!(slave.set_mode(mode), OK);
+        assert_eq!(slave.step(0.0, 0.1), ERROR, "mode {mode}");
+        // The error state: status queries and steps are refused.
+        assert_eq!(slave.last_successful_time().0, ERROR);
+    }
+}
+
+#[test]
+fn a_forged_parameter_out_of_its_range_is_refused_and_the_instance_keeps_working() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.step(0.0, 0.1), OK);
+    let state = slave.get_state();
+    let bytes = slave.serialize(state);
+    // Intact bytes restore.
+    assert_eq!(slave.deserialize(&bytes).0, OK);
+    for (from, to, what) in [
+        (1.25, 20.0, "gain above its range"),
+        (1.25, -1.0, "gain below its range"),
+        (1.25, f64::NAN, "gain NaN"),
+        (0.2, f64::NAN, "y NaN"),
+        (0.2, f64::INFINITY, "y infinite"),
+        (0.2, 1e9, "y beyond the model's own limit"),
+    ] {
+        let forged = forge(&bytes, from, to);
+        let (status, forged_state) = slave.deserialize(&forged);
+        assert_eq!(status, ERROR, "{what}");
+        assert!(forged_state.is_null(), "{what}: no state made");
+        // The refusal put the instance in its error state (fmi2Error) with
+        // its values untouched; restoring a state of its own recovers it.
+        assert!((slave.real(Y) - 0.2).abs() < 1e-12, "{what}");
+        assert_eq!(slave.set_state(state), OK, "{what}");
+        assert_eq!(slave.last_successful_time(), (OK, 0.1), "{what}");
+    }
+    assert_eq!(slave.step(0.1, 0.1), OK);
+    assert!((slave.real(Y) - 0.4).abs() < 1e-12);
+    assert!((slave.real(Z) - 2.5 * 0.4).abs() < 1e-12);
+}
+
+#[test]
+fn a_forged_cache_is_rebuilt_from_the_parameters() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.step(0.0, 0.1), OK);
+    let bytes = slave.serialize(slave.get_state());
+    // gain_twice = 2.5 replaced by 7: still finite, and no variable of the
+    // table; the model derives it again from gain.
+    let forged = forge(&bytes, 2.5, 7.0);
+    let other = Slave::initialized();
+    let (status, state) = other.deserialize(&forged);
+    assert_eq!(status, OK);
+    assert_eq!(other.set_state(state), OK);
+    assert!((other.real(Z) - 2.5 * 0.2).abs() < 1e-12);
+}
+
+/// Before initialization the importer may still be setting parameters: a
+/// state taken then may hold one outside its range, and restores;
+/// fmi2ExitInitializationMode refuses it as it would have.
+#[test]
+fn ranges_are_not_enforced_on_a_state_taken_before_initialization() {
+    let slave = Slave::instantiate();
+    assert_eq!(slave.set_real(GAIN, 20.0), OK);
+    let bytes = slave.serialize(slave.get_state());
+    let other = Slave::instantiate();
+    let (status, state) = other.deserialize(&bytes);
+    assert_eq!(status, OK);
+    assert_eq!(other.set_state(state), OK);
+    // SAFETY: `other.0` is live.
+    unsafe {
+        assert_eq!(abi::enter_initialization_mode::<Stepper>(other.0), OK);
+        assert_eq!(abi::exit_initialization_mode::<Stepper>(other.0), ERROR);
+    }
+}
+
+/// The gate turns (pointer, length) into a slice only when it can be one: a
+/// misaligned array is refused with fmi2Error instead of being read.
+#[test]
+fn a_misaligned_array_is_refused_at_the_gate() {
+    let slave = Slave::initialized();
+    let storage = [0u64; 3];
+    // One byte into an 8-aligned buffer: misaligned for u32 and f64.
+    let misaligned = storage.as_ptr().cast::<u8>().wrapping_add(1);
+    let mut value = 0.0;
+    // SAFETY: the layer checks the alignment before it reads `vr`, and
+    // refuses; `value` is a local.
+    let status =
+        unsafe { abi::get_real::<Stepper>(slave.0, misaligned.cast::<u32>(), 1, &mut value) };
+    assert_eq!(status, ERROR);
+    // Refused without a read: the instance is in its error state, values
+    // intact, and recovers through a reset.
+    assert!((slave.real(Y) - 0.0).abs() < 1e-15);
+    // SAFETY: `slave.0` is live.
+    let status = unsafe { abi::reset::<Stepper>(slave.0) };
+    assert_eq!(status, OK);
+}
+
+/// fmi2SetReal/Integer take any finite value for a tunable parameter while
+/// running (its range is checked at initialization), so a state holding
+/// one outside its range is a state an instance can be in, and restores.
+#[test]
+fn a_tunable_parameter_outside_its_range_after_initialization_restores() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.set_mode(7), OK);
+    assert_eq!(slave.step(0.0, 0.1), OK);
+    let bytes = slave.serialize(slave.get_state());
+    let other = Slave::initialized();
+    let (status, state) = other.deserialize(&bytes);
+    assert_eq!(status, OK);
+    assert_eq!(other.set_state(state), OK);
+    assert_eq!(other.last_successful_time(), (OK, 0.1));
+}
