@@ -202,9 +202,18 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
         .map(|u| u.index)
         .collect();
     assert_eq!(listed, outputs, "ModelStructure/Outputs");
-    // InitialUnknowns: the outputs, and the states and state derivatives
-    // (FMI 2.0.4 §2.2.8; here all of them are calculated), in index order.
+    // InitialUnknowns: the outputs, the calculated parameters, and the states
+    // and state derivatives (FMI 2.0.4 §2.2.8; here all of them are
+    // calculated), in index order.
     let mut expected = outputs.clone();
+    expected.extend(
+        md.model_variables
+            .variables
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.causality == Causality::CalculatedParameter)
+            .map(|(i, _)| i as u32 + 1),
+    );
     for unknown in &md.model_structure.derivatives.unknowns {
         expected.push(unknown.index);
         expected.push(crate::model_exchange::state_of(fmu, unknown.index));
