@@ -18,7 +18,7 @@
 //!
 //! `-- --nocapture` shows the figures.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 

@@ -76,6 +76,9 @@ impl Fuzzer<'_> {
         let is_legal = self.legal_now(slot, Function::SetupExperiment);
         let valid = start.is_finite() && (!stop_defined || (!stop.is_nan() && stop >= start));
         self.begin("fmi2SetupExperiment", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             self.fmu.binding.fmi2SetupExperiment(
                 self.live(slot).c,
@@ -135,6 +138,9 @@ impl Fuzzer<'_> {
                 &[OK]
             };
         self.begin("fmi2ExitInitializationMode", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe { self.fmu.binding.fmi2ExitInitializationMode(c) };
         self.check(
             slot,
@@ -212,17 +218,17 @@ impl Fuzzer<'_> {
             [OK]
         };
         self.begin("fmi2SetDebugLogging", Some(slot));
+        let categories = if null_array || (n == 0 && self.rng.random_bool(0.5)) {
+            ptr::null()
+        } else {
+            pointers.as_ptr()
+        };
+        // SAFETY: `c` is the live instance in `slot`; `categories` is NULL or
+        // holds `n` pointers, each NULL or to a live NUL-terminated name.
         let status = unsafe {
-            self.fmu.binding.fmi2SetDebugLogging(
-                c,
-                logging_on,
-                n,
-                if null_array || (n == 0 && self.rng.random_bool(0.5)) {
-                    ptr::null()
-                } else {
-                    pointers.as_ptr()
-                },
-            )
+            self.fmu
+                .binding
+                .fmi2SetDebugLogging(c, logging_on, n, categories)
         };
         self.check(slot, "fmi2SetDebugLogging", status, &allowed, !is_legal, || {
             format!("loggingOn {logging_on}, {n} categories {names:?}, NULL array {null_array}, NULL entry {null_entry}")
@@ -255,6 +261,9 @@ impl Fuzzer<'_> {
         let mut strings: Vec<sys::fmi2String> = vec![ptr::null(); len];
         let b = &self.fmu.binding;
         self.begin(function.name(), Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             match kind {
                 ValueType::Real => b.fmi2GetReal(
@@ -484,6 +493,9 @@ impl Fuzzer<'_> {
         let b = &self.fmu.binding;
         let c = live.c;
         self.begin(function.name(), Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             match kind {
                 ValueType::Real => b.fmi2SetReal(
@@ -609,6 +621,9 @@ impl Fuzzer<'_> {
                 &[OK, WARNING, ERROR]
             };
         self.begin("fmi2DoStep", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe { self.fmu.binding.fmi2DoStep(c, t, h, no_prior) };
         self.check(slot, "fmi2DoStep", status, allowed, !is_legal, || {
             format!("currentCommunicationPoint {t} (FMU time {time}), communicationStepSize {h}")
@@ -634,6 +649,9 @@ impl Fuzzer<'_> {
         let n = self.rng.random_range(0..3);
         let b = &self.fmu.binding;
         self.begin(function.name(), Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             match which {
                 NotOffered::GetDirectionalDerivative => b.fmi2GetDirectionalDerivative(
@@ -697,6 +715,9 @@ impl Fuzzer<'_> {
         let mut string: sys::fmi2String = ptr::null();
         let b = &self.fmu.binding;
         self.begin(function.name(), Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             match query {
                 StatusQuery::Status => b.fmi2GetStatus(

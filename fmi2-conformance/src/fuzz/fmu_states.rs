@@ -38,6 +38,9 @@ impl Fuzzer<'_> {
         let c = self.live(slot).c;
         let is_legal = self.legal_now(slot, Function::GetFmuState);
         self.begin("fmi2GetFMUstate", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             self.fmu.binding.fmi2GetFMUstate(
                 c,
@@ -102,6 +105,9 @@ impl Fuzzer<'_> {
             &[ERROR]
         };
         self.begin("fmi2SetFMUstate", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe { self.fmu.binding.fmi2SetFMUstate(c, state) };
         let log = self.check(slot, "fmi2SetFMUstate", status, allowed, !is_legal, || {
             format!("own state {own:?}, same interface {same_interface}, forged {forged}")
@@ -150,6 +156,10 @@ impl Fuzzer<'_> {
                 }
                 let mut pointer = self.handles[index].ptr;
                 self.begin("fmi2FreeFMUstate", Some(slot));
+                // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or
+                // holds at least the length passed with it, and each FMU-state argument is
+                // NULL, a live state of this FMU, or an object the module documentation lists,
+                // which the layer must refuse.
                 let status = unsafe { self.fmu.binding.fmi2FreeFMUstate(c, &mut pointer) };
                 self.check(
                     slot,
@@ -163,6 +173,10 @@ impl Fuzzer<'_> {
             6 => {
                 let mut null_state: sys::fmi2FMUstate = ptr::null_mut();
                 self.begin("fmi2FreeFMUstate", Some(slot));
+                // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or
+                // holds at least the length passed with it, and each FMU-state argument is
+                // NULL, a live state of this FMU, or an object the module documentation lists,
+                // which the layer must refuse.
                 let status = unsafe { self.fmu.binding.fmi2FreeFMUstate(c, &mut null_state) };
                 let allowed = if is_legal { [OK] } else { [ERROR] };
                 self.check(
@@ -176,6 +190,10 @@ impl Fuzzer<'_> {
             }
             7 => {
                 self.begin("fmi2FreeFMUstate", Some(slot));
+                // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or
+                // holds at least the length passed with it, and each FMU-state argument is
+                // NULL, a live state of this FMU, or an object the module documentation lists,
+                // which the layer must refuse.
                 let status = unsafe { self.fmu.binding.fmi2FreeFMUstate(c, ptr::null_mut()) };
                 self.check(
                     slot,
@@ -190,6 +208,10 @@ impl Fuzzer<'_> {
                 let (_, mut foreign) = self.state_argument(0.0);
                 let before = foreign;
                 self.begin("fmi2FreeFMUstate", Some(slot));
+                // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or
+                // holds at least the length passed with it, and each FMU-state argument is
+                // NULL, a live state of this FMU, or an object the module documentation lists,
+                // which the layer must refuse.
                 let status = unsafe { self.fmu.binding.fmi2FreeFMUstate(c, &mut foreign) };
                 let allowed = if is_legal && before.is_null() {
                     [OK]
@@ -218,6 +240,9 @@ impl Fuzzer<'_> {
         let is_legal = self.legal_now(slot, Function::SerializedFmuStateSize);
         let mut size = usize::MAX;
         self.begin("fmi2SerializedFMUstateSize", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             self.fmu.binding.fmi2SerializedFMUstateSize(
                 c,
@@ -256,6 +281,10 @@ impl Fuzzer<'_> {
         let mut needed = 0usize;
         if own.is_some() && state_legal {
             self.begin("fmi2SerializedFMUstateSize", Some(slot));
+            // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds
+            // at least the length passed with it, and each FMU-state argument is NULL, a live
+            // state of this FMU, or an object the module documentation lists, which the layer
+            // must refuse.
             let status = unsafe {
                 self.fmu
                     .binding
@@ -282,6 +311,9 @@ impl Fuzzer<'_> {
         let null_buffer = !benign && self.chance(0.04);
         let mut buffer = vec![0u8; size.max(1)];
         self.begin("fmi2SerializeFMUstate", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             self.fmu.binding.fmi2SerializeFMUstate(
                 c,
@@ -416,6 +448,9 @@ impl Fuzzer<'_> {
             }
         };
         self.begin("fmi2DeSerializeFMUstate", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             self.fmu.binding.fmi2DeSerializeFMUstate(
                 c,

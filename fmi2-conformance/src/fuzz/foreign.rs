@@ -181,6 +181,7 @@ impl Fuzzer<'_> {
         let log = foreign.instance.take_log();
         foreign.instance.time = {
             let mut time = 0.0;
+            // SAFETY: `foreign.instance.c` is the other FMU's live instance and `time` a local.
             unsafe {
                 foreign.instance.fmu.binding.fmi2GetRealStatus(
                     foreign.instance.c,

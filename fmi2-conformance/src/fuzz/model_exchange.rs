@@ -119,6 +119,9 @@ impl Fuzzer<'_> {
             nextEventTime: f64::NAN,
         };
         self.begin("fmi2NewDiscreteStates", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             self.fmu
                 .binding
@@ -162,15 +165,19 @@ impl Fuzzer<'_> {
         let is_legal = self.legal_now(slot, Function::CompletedIntegratorStep);
         let (mut enter_event_mode, mut terminate) = (7, 7);
         self.begin("fmi2CompletedIntegratorStep", Some(slot));
+        let no_set_fmu_state_prior = self.rng.random_range(0..2);
+        let enter_event_mode_out: *mut sys::fmi2Boolean = if null {
+            ptr::null_mut()
+        } else {
+            &mut enter_event_mode
+        };
+        // SAFETY: `c` is the live instance in `slot`; the flags point to
+        // locals, or NULL (the case under test, which the layer must refuse).
         let status = unsafe {
             self.fmu.binding.fmi2CompletedIntegratorStep(
                 c,
-                self.rng.random_range(0..2),
-                if null {
-                    ptr::null_mut()
-                } else {
-                    &mut enter_event_mode
-                },
+                no_set_fmu_state_prior,
+                enter_event_mode_out,
                 &mut terminate,
             )
         };
@@ -208,6 +215,9 @@ impl Fuzzer<'_> {
         let c = self.live(slot).c;
         let is_legal = self.legal_now(slot, Function::SetTime);
         self.begin("fmi2SetTime", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe { self.fmu.binding.fmi2SetTime(c, t) };
         let allowed = if is_legal && t.is_finite() {
             [OK]
@@ -238,6 +248,9 @@ impl Fuzzer<'_> {
         let finite = values.iter().all(|v| v.is_finite());
         let valid = n == nx && (n == 0 || !pointer.is_null()) && finite;
         self.begin("fmi2SetContinuousStates", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe { self.fmu.binding.fmi2SetContinuousStates(c, pointer, n) };
         let allowed = if is_legal && valid { [OK] } else { [ERROR] };
         self.check(

@@ -235,9 +235,13 @@ impl<'a> Fuzzer<'a> {
         let b = &self.fmu.binding;
         self.begin("fmi2GetTypesPlatform", None);
         self.report.calls_without_status += 1;
+        // SAFETY: the function takes no argument and returns a static NUL-terminated string
+        // (FMI 2.0.4 §2.1.4), which the binding keeps loaded.
         let platform = unsafe { std::ffi::CStr::from_ptr(b.fmi2GetTypesPlatform()) };
         self.begin("fmi2GetVersion", None);
         self.report.calls_without_status += 1;
+        // SAFETY: the function takes no argument and returns a static NUL-terminated string
+        // (FMI 2.0.4 §2.1.4), which the binding keeps loaded.
         let version = unsafe { std::ffi::CStr::from_ptr(b.fmi2GetVersion()) };
         if platform.to_bytes() != b"default" || version.to_bytes() != b"2.0" {
             self.fail(format!("platform {platform:?}, version {version:?}"));
@@ -300,6 +304,8 @@ impl<'a> Fuzzer<'a> {
         let location_c = location.map(|l| CString::new(l).unwrap());
         self.begin("fmi2Instantiate", Some(slot));
         self.report.calls_without_status += 1;
+        // SAFETY: every string is NULL or a live CString, and the callbacks are NULL or boxed
+        // in the `Live` slot, so they outlive the instance that logs through them.
         let c = unsafe {
             self.fmu.binding.fmi2Instantiate(
                 if null_name {
@@ -390,6 +396,8 @@ impl<'a> Fuzzer<'a> {
         let live = self.slots[slot].take().expect("a live instance");
         self.begin("fmi2FreeInstance", Some(slot));
         self.report.calls_without_status += 1;
+        // SAFETY: `live.c` is a live instance, freed once: its slot was emptied above and the
+        // states it owned were dropped from `handles`.
         unsafe { self.fmu.binding.fmi2FreeInstance(live.c) };
         // Messages sent while freeing (call tracing) belong to the instance.
         for record in live.sink.take() {
@@ -404,6 +412,8 @@ impl<'a> Fuzzer<'a> {
     pub(super) fn free_handle(&mut self, slot: usize, index: usize) {
         let mut pointer = self.handles[index].ptr;
         self.begin("fmi2FreeFMUstate", Some(slot));
+        // SAFETY: `c` is the live instance in `slot` and `pointer` one of its own states, freed
+        // once (its handle is removed below).
         let status = unsafe {
             self.fmu
                 .binding
