@@ -261,51 +261,24 @@ impl Fuzzer<'_> {
         let mut strings: Vec<sys::fmi2String> = vec![ptr::null(); len];
         let b = &self.fmu.binding;
         self.begin(function.name(), Some(slot));
-        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
-        // least the length passed with it, and each FMU-state argument is NULL, a live state of
-        // this FMU, or an object the module documentation lists, which the layer must refuse.
+        // The values argument: NULL, or the array of the call's type.
+        fn out<T>(null: bool, values: &mut [T]) -> *mut T {
+            if null {
+                ptr::null_mut()
+            } else {
+                values.as_mut_ptr()
+            }
+        }
+        // SAFETY: `c` is the live instance in `slot`; the
+        // arrays are NULL or hold `vrs.len()` values, and `n` exceeds that only
+        // with a NULL array, which the layer must refuse before reading any
+        // (the case under test).
         let status = unsafe {
             match kind {
-                ValueType::Real => b.fmi2GetReal(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null_mut()
-                    } else {
-                        reals.as_mut_ptr()
-                    },
-                ),
-                ValueType::Integer => b.fmi2GetInteger(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null_mut()
-                    } else {
-                        ints.as_mut_ptr()
-                    },
-                ),
-                ValueType::Boolean => b.fmi2GetBoolean(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null_mut()
-                    } else {
-                        ints.as_mut_ptr()
-                    },
-                ),
-                ValueType::String => b.fmi2GetString(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null_mut()
-                    } else {
-                        strings.as_mut_ptr()
-                    },
-                ),
+                ValueType::Real => b.fmi2GetReal(c, vr_ptr, n, out(null_values, &mut reals)),
+                ValueType::Integer => b.fmi2GetInteger(c, vr_ptr, n, out(null_values, &mut ints)),
+                ValueType::Boolean => b.fmi2GetBoolean(c, vr_ptr, n, out(null_values, &mut ints)),
+                ValueType::String => b.fmi2GetString(c, vr_ptr, n, out(null_values, &mut strings)),
             }
         };
         // A state derivative is computed when read: from states or
@@ -493,51 +466,20 @@ impl Fuzzer<'_> {
         let b = &self.fmu.binding;
         let c = live.c;
         self.begin(function.name(), Some(slot));
-        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
-        // least the length passed with it, and each FMU-state argument is NULL, a live state of
-        // this FMU, or an object the module documentation lists, which the layer must refuse.
+        // The values argument: NULL, or the array of the call's type.
+        fn values<T>(null: bool, values: &[T]) -> *const T {
+            if null { ptr::null() } else { values.as_ptr() }
+        }
+        // SAFETY: `c` is the live instance in `slot`; the
+        // arrays are NULL or hold `vrs.len()` values (strings: a static one), and `n` exceeds that only
+        // with a NULL array, which the layer must refuse before reading any
+        // (the case under test).
         let status = unsafe {
             match kind {
-                ValueType::Real => b.fmi2SetReal(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null()
-                    } else {
-                        reals.as_ptr()
-                    },
-                ),
-                ValueType::Integer => b.fmi2SetInteger(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null()
-                    } else {
-                        ints.as_ptr()
-                    },
-                ),
-                ValueType::Boolean => b.fmi2SetBoolean(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null()
-                    } else {
-                        ints.as_ptr()
-                    },
-                ),
-                ValueType::String => b.fmi2SetString(
-                    c,
-                    vr_ptr,
-                    n,
-                    if null_values {
-                        ptr::null()
-                    } else {
-                        strings.as_ptr()
-                    },
-                ),
+                ValueType::Real => b.fmi2SetReal(c, vr_ptr, n, values(null_values, &reals)),
+                ValueType::Integer => b.fmi2SetInteger(c, vr_ptr, n, values(null_values, &ints)),
+                ValueType::Boolean => b.fmi2SetBoolean(c, vr_ptr, n, values(null_values, &ints)),
+                ValueType::String => b.fmi2SetString(c, vr_ptr, n, values(null_values, &strings)),
             }
         };
         self.check(slot, function.name(), status, allowed, !is_legal, || {
@@ -715,56 +657,19 @@ impl Fuzzer<'_> {
         let mut string: sys::fmi2String = ptr::null();
         let b = &self.fmu.binding;
         self.begin(function.name(), Some(slot));
-        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
-        // least the length passed with it, and each FMU-state argument is NULL, a live state of
-        // this FMU, or an object the module documentation lists, which the layer must refuse.
+        // The value argument: NULL, or the local of the query's type.
+        fn out<T>(null: bool, value: &mut T) -> *mut T {
+            if null { ptr::null_mut() } else { value }
+        }
+        // SAFETY: `c` is the live instance in `slot`; the value pointer is NULL
+        // (the case under test, which the layer must refuse) or a local.
         let status = unsafe {
             match query {
-                StatusQuery::Status => b.fmi2GetStatus(
-                    c,
-                    kind,
-                    if null_value {
-                        ptr::null_mut()
-                    } else {
-                        &mut status_value
-                    },
-                ),
-                StatusQuery::Real => b.fmi2GetRealStatus(
-                    c,
-                    kind,
-                    if null_value {
-                        ptr::null_mut()
-                    } else {
-                        &mut real
-                    },
-                ),
-                StatusQuery::Integer => b.fmi2GetIntegerStatus(
-                    c,
-                    kind,
-                    if null_value {
-                        ptr::null_mut()
-                    } else {
-                        &mut int
-                    },
-                ),
-                StatusQuery::Boolean => b.fmi2GetBooleanStatus(
-                    c,
-                    kind,
-                    if null_value {
-                        ptr::null_mut()
-                    } else {
-                        &mut int
-                    },
-                ),
-                StatusQuery::String => b.fmi2GetStringStatus(
-                    c,
-                    kind,
-                    if null_value {
-                        ptr::null_mut()
-                    } else {
-                        &mut string
-                    },
-                ),
+                StatusQuery::Status => b.fmi2GetStatus(c, kind, out(null_value, &mut status_value)),
+                StatusQuery::Real => b.fmi2GetRealStatus(c, kind, out(null_value, &mut real)),
+                StatusQuery::Integer => b.fmi2GetIntegerStatus(c, kind, out(null_value, &mut int)),
+                StatusQuery::Boolean => b.fmi2GetBooleanStatus(c, kind, out(null_value, &mut int)),
+                StatusQuery::String => b.fmi2GetStringStatus(c, kind, out(null_value, &mut string)),
             }
         };
         // A synchronous slave answers the last successful time and whether it
