@@ -60,16 +60,21 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 
 use crate::{DISCARD, ERROR, Fmu, Interface, LogRecord, LogSink, OK, State, WARNING, allowed};
 
+// The call vocabulary (an enum per family of FMI functions).
+mod function;
+// Random choices: functions, values, value references, pointers, bytes.
+mod generator;
+// The oracle's model of each instance and the checks every call gets.
+mod oracle;
+// The fuzzer's state, the random walk, bursts, instance lifetimes.
+mod runner;
+// What a run did, and the trail a failure prints.
+mod report;
+// The calls themselves, by family.
 mod calls;
 mod fmu_states;
 mod foreign;
-mod function;
-mod generator;
-/// The fuzzer's Model Exchange calls.
 mod model_exchange;
-mod oracle;
-mod report;
-mod runner;
 
 use function::*;
 use oracle::*;
