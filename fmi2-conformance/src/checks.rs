@@ -148,7 +148,11 @@ pub fn exports_every_function_and_nothing_else(fmu: &Fmu) {
 }
 
 pub fn reports_platform_and_version(fmu: &Fmu) {
+    // SAFETY: the function takes no argument and returns a static NUL-terminated string (FMI
+    // 2.0.4 §2.1.4), which the binding keeps loaded.
     let platform = unsafe { CStr::from_ptr(fmu.binding.fmi2GetTypesPlatform()) };
+    // SAFETY: the function takes no argument and returns a static NUL-terminated string (FMI
+    // 2.0.4 §2.1.4), which the binding keeps loaded.
     let version = unsafe { CStr::from_ptr(fmu.binding.fmi2GetVersion()) };
     assert_eq!(platform.to_str().unwrap(), "default");
     assert_eq!(version.to_str().unwrap(), "2.0");
@@ -202,9 +206,18 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
         .map(|u| u.index)
         .collect();
     assert_eq!(listed, outputs, "ModelStructure/Outputs");
-    // InitialUnknowns: the outputs, and the states and state derivatives
-    // (FMI 2.0.4 §2.2.8; here all of them are calculated), in index order.
+    // InitialUnknowns: the outputs, the calculated parameters, and the states
+    // and state derivatives (FMI 2.0.4 §2.2.8; here all of them are
+    // calculated), in index order.
     let mut expected = outputs.clone();
+    expected.extend(
+        md.model_variables
+            .variables
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.causality == Causality::CalculatedParameter)
+            .map(|(i, _)| i as u32 + 1),
+    );
     for unknown in &md.model_structure.derivatives.unknowns {
         expected.push(unknown.index);
         expected.push(crate::model_exchange::state_of(fmu, unknown.index));
@@ -280,72 +293,60 @@ pub fn instantiate_refuses_bad_arguments(fmu: &Fmu) {
     let callbacks = crate::callbacks_for(&sink);
     let guid = std::ffi::CString::new(fmu.guid.clone()).unwrap();
     let name = c"probe";
-    unsafe {
-        // NULL GUID.
-        let c = b.fmi2Instantiate(
-            name.as_ptr(),
-            sys::fmi2Type_fmi2CoSimulation,
-            ptr::null(),
-            ptr::null(),
-            &callbacks,
-            0,
-            0,
-        );
-        assert!(c.is_null(), "NULL GUID accepted");
-        assert!(has_message(&sink.take(), "fmuGUID"));
-        // Model exchange, where it is not offered; an fmuType that is neither.
-        let c = b.fmi2Instantiate(
-            name.as_ptr(),
-            sys::fmi2Type_fmi2ModelExchange,
-            guid.as_ptr(),
-            ptr::null(),
-            &callbacks,
-            0,
-            0,
-        );
-        if fmu.offers_model_exchange() {
-            assert!(!c.is_null(), "model exchange refused: {:#?}", sink.take());
-            b.fmi2FreeInstance(c);
-            sink.take();
-        } else {
-            assert!(c.is_null(), "model exchange accepted");
-            assert!(has_message(&sink.take(), "co-simulation only"));
-        }
-        let c = b.fmi2Instantiate(
-            name.as_ptr(),
-            2,
-            guid.as_ptr(),
-            ptr::null(),
-            &callbacks,
-            0,
-            0,
-        );
-        assert!(c.is_null(), "fmuType 2 accepted");
-        assert!(has_message(&sink.take(), "fmuType"));
-        // NULL instance name.
-        let c = b.fmi2Instantiate(
-            ptr::null(),
-            sys::fmi2Type_fmi2CoSimulation,
-            guid.as_ptr(),
-            ptr::null(),
-            &callbacks,
-            0,
-            0,
-        );
-        assert!(c.is_null(), "NULL instanceName accepted");
-        assert!(has_message(&sink.take(), "instanceName"));
-        // NULL callbacks: nothing to log with, but no crash.
-        let c = b.fmi2Instantiate(
-            name.as_ptr(),
-            sys::fmi2Type_fmi2CoSimulation,
-            guid.as_ptr(),
-            ptr::null(),
-            ptr::null(),
-            0,
-            0,
-        );
-        assert!(c.is_null(), "NULL functions accepted");
+    let instantiate = |name: *const c_char,
+                       fmu_type: sys::fmi2Type,
+                       guid: *const c_char,
+                       functions: *const sys::fmi2CallbackFunctions| {
+        // SAFETY: each pointer is NULL (the arguments under test) or points
+        // to a NUL-terminated string or to callbacks that outlive the call;
+        // the sink the callbacks log to outlives the instances.
+        unsafe { b.fmi2Instantiate(name, fmu_type, guid, ptr::null(), functions, 0, 0) }
+    };
+    // NULL GUID.
+    let c = instantiate(
+        name.as_ptr(),
+        sys::fmi2Type_fmi2CoSimulation,
+        ptr::null(),
+        &callbacks,
+    );
+    assert!(c.is_null(), "NULL GUID accepted");
+    assert!(has_message(&sink.take(), "fmuGUID"));
+    // Model exchange, where it is not offered; an fmuType that is neither.
+    let c = instantiate(
+        name.as_ptr(),
+        sys::fmi2Type_fmi2ModelExchange,
+        guid.as_ptr(),
+        &callbacks,
+    );
+    if fmu.offers_model_exchange() {
+        assert!(!c.is_null(), "model exchange refused: {:#?}", sink.take());
+        // SAFETY: `c` is the instance just made, freed once.
+        unsafe { b.fmi2FreeInstance(c) };
+        sink.take();
+    } else {
+        assert!(c.is_null(), "model exchange accepted");
+        assert!(has_message(&sink.take(), "co-simulation only"));
     }
+    let c = instantiate(name.as_ptr(), 2, guid.as_ptr(), &callbacks);
+    assert!(c.is_null(), "fmuType 2 accepted");
+    assert!(has_message(&sink.take(), "fmuType"));
+    // NULL instance name.
+    let c = instantiate(
+        ptr::null(),
+        sys::fmi2Type_fmi2CoSimulation,
+        guid.as_ptr(),
+        &callbacks,
+    );
+    assert!(c.is_null(), "NULL instanceName accepted");
+    assert!(has_message(&sink.take(), "instanceName"));
+    // NULL callbacks: nothing to log with, but no crash.
+    let c = instantiate(
+        name.as_ptr(),
+        sys::fmi2Type_fmi2CoSimulation,
+        guid.as_ptr(),
+        ptr::null(),
+    );
+    assert!(c.is_null(), "NULL functions accepted");
 }
 
 pub fn resource_locations_in_every_spelling(fmu: &Fmu) {
@@ -379,6 +380,9 @@ fn probe(inst: &mut Instance<'_>, function: &str) -> sys::fmi2Status {
     let mut boolean = [0i32];
     let mut string: [*const c_char; 1] = [ptr::null()];
     let real_input = real_vr;
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     unsafe {
         match function {
             "fmi2SetDebugLogging" => b.fmi2SetDebugLogging(c, 1, 0, ptr::null()),
@@ -638,6 +642,9 @@ pub fn free_instance_in_every_state(fmu: &Fmu) {
             drop(inst);
         }
     }
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     unsafe { fmu.binding.fmi2FreeInstance(ptr::null_mut()) };
 }
 
@@ -648,11 +655,19 @@ pub fn foreign_instance_pointers_are_refused(fmu: &Fmu) {
     inst.initialize();
     let (status, mut state) = inst.get_state();
     assert_eq!(status, OK);
-    unsafe {
-        assert_eq!(fmu.binding.fmi2DoStep(ptr::null_mut(), 0.0, 1e-4, 1), ERROR);
-        assert_eq!(fmu.binding.fmi2DoStep(state, 0.0, 1e-4, 1), ERROR);
-        assert_eq!(fmu.binding.fmi2Terminate(state), ERROR);
-    }
+    let b = &fmu.binding;
+    // SAFETY: NULL and a live FMU state of this FMU where an instance belongs:
+    // what the layer must recognize as not an instance (FMI 2.0.4 §2.1.5
+    // leaves it to the FMU); the state's memory is live and larger than the
+    // eight bytes the layer reads to tell.
+    let statuses = unsafe {
+        [
+            b.fmi2DoStep(ptr::null_mut(), 0.0, 1e-4, 1),
+            b.fmi2DoStep(state, 0.0, 1e-4, 1),
+            b.fmi2Terminate(state),
+        ]
+    };
+    assert_eq!(statuses, [ERROR; 3]);
     assert_eq!(inst.free_state(&mut state), OK);
     assert!(state.is_null(), "fmi2FreeFMUstate sets *FMUstate to NULL");
     // The instance itself is untouched by the refused calls.
@@ -676,6 +691,9 @@ pub fn type_mismatch_is_refused(fmu: &Fmu) {
     inst.initialize();
     let real = fmu.real_input().vr;
     let mut value = 0i32;
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     let status = unsafe { fmu.binding.fmi2GetInteger(inst.c, &real, 1, &mut value) };
     assert_eq!(status, ERROR);
     assert_logged(&inst.take_log(), "fmi2GetInteger", "not Integer");
@@ -687,43 +705,62 @@ pub fn null_arrays(fmu: &Fmu) {
     let vr = fmu.real_input().vr;
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
-    unsafe {
-        assert_eq!(b.fmi2GetReal(inst.c, ptr::null(), 0, ptr::null_mut()), OK);
-        assert_eq!(b.fmi2SetReal(inst.c, ptr::null(), 0, ptr::null()), OK);
-        assert_eq!(
+    // SAFETY: `inst.c` is a live instance; NULL arrays of length 0 are valid
+    // arguments (nothing is read or written).
+    let statuses = unsafe {
+        [
+            b.fmi2GetReal(inst.c, ptr::null(), 0, ptr::null_mut()),
+            b.fmi2SetReal(inst.c, ptr::null(), 0, ptr::null()),
             b.fmi2GetBoolean(inst.c, ptr::null(), 0, ptr::null_mut()),
-            OK
-        );
-        assert_eq!(b.fmi2SetDebugLogging(inst.c, 1, 0, ptr::null()), OK);
-    }
+            b.fmi2SetDebugLogging(inst.c, 1, 0, ptr::null()),
+        ]
+    };
+    assert_eq!(statuses, [OK; 4]);
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     let status = unsafe { b.fmi2GetReal(inst.c, ptr::null(), 1, [0.0].as_mut_ptr()) };
     assert_eq!(status, ERROR, "vr[] NULL with nvr = 1 accepted");
     assert_logged(&inst.take_log(), "fmi2GetReal", "vr[] is NULL");
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
     assert_eq!(
+        // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the
+        // ones under test, which the layer must refuse without touching them, and every other
+        // pointer is to a local that outlives the call with at least the length passed.
         unsafe { b.fmi2GetReal(inst.c, &vr, 1, ptr::null_mut()) },
         ERROR
     );
     assert_logged(&inst.take_log(), "fmi2GetReal", "value[] is NULL");
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     assert_eq!(unsafe { b.fmi2SetReal(inst.c, &vr, 1, ptr::null()) }, ERROR);
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
     assert_eq!(
+        // SAFETY: `inst.c` is a live instance and `state` a local pointer it writes.
         unsafe { b.fmi2SetDebugLogging(inst.c, 1, 2, ptr::null()) },
         ERROR
     );
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
+    // SAFETY: `inst.c` is a live instance and `state` a local pointer it writes.
     assert_eq!(unsafe { b.fmi2GetFMUstate(inst.c, ptr::null_mut()) }, ERROR);
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     assert_eq!(unsafe { b.fmi2SetFMUstate(inst.c, ptr::null_mut()) }, ERROR);
     let mut inst = fmu.instantiate("null-arrays", false);
     inst.initialize();
     assert_eq!(
+        // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the
+        // ones under test, which the layer must refuse without touching them, and every other
+        // pointer is to a local that outlives the call with at least the length passed.
         unsafe {
             b.fmi2GetRealStatus(
                 inst.c,
@@ -895,6 +932,7 @@ pub fn fmu_state_restores_bit_for_bit(fmu: &Fmu) {
     );
     // Getting a state into an existing one reuses it.
     assert_eq!(
+        // SAFETY: `inst.c` is a live instance and `state` a local pointer it writes.
         unsafe { fmu.binding.fmi2GetFMUstate(inst.c, &mut state) },
         OK
     );
@@ -965,6 +1003,8 @@ pub fn corrupted_states_are_refused(fmu: &Fmu) {
     inst.initialize();
     let (_, mut state) = inst.get_state();
     let mut buffer = vec![0u8; bytes.len() - 1];
+    // SAFETY: `inst.c` is a live instance, `state` one of its states, and `buffer` holds
+    // `buffer.len()` bytes (one too few, the case under test).
     let status = unsafe {
         fmu.binding
             .fmi2SerializeFMUstate(inst.c, state, buffer.as_mut_ptr().cast(), buffer.len())
@@ -983,6 +1023,9 @@ pub fn status_queries(fmu: &Fmu) {
     }
     let mut time = 0.0;
     assert_eq!(
+        // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the
+        // ones under test, which the layer must refuse without touching them, and every other
+        // pointer is to a local that outlives the call with at least the length passed.
         unsafe {
             b.fmi2GetRealStatus(
                 inst.c,
@@ -995,6 +1038,9 @@ pub fn status_queries(fmu: &Fmu) {
     assert!((time - 5e-4).abs() < 1e-15, "last successful time {time}");
     let mut terminated = 1;
     assert_eq!(
+        // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the
+        // ones under test, which the layer must refuse without touching them, and every other
+        // pointer is to a local that outlives the call with at least the length passed.
         unsafe {
             b.fmi2GetBooleanStatus(inst.c, sys::fmi2StatusKind_fmi2Terminated, &mut terminated)
         },
@@ -1003,6 +1049,9 @@ pub fn status_queries(fmu: &Fmu) {
     assert_eq!(terminated, 0);
     let mut status = OK;
     assert_eq!(
+        // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the
+        // ones under test, which the layer must refuse without touching them, and every other
+        // pointer is to a local that outlives the call with at least the length passed.
         unsafe { b.fmi2GetStatus(inst.c, sys::fmi2StatusKind_fmi2DoStepStatus, &mut status) },
         DISCARD
     );

@@ -16,6 +16,7 @@ pub mod checks;
 pub mod fuzz;
 pub mod model_exchange;
 pub mod table;
+pub mod workspace;
 
 /// The states the harness drives an instance into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -206,14 +207,54 @@ pub fn allowed_in(function: &str, state: State) -> bool {
     states.contains(&state)
 }
 
-/// Defines one `#[test]` per conformance check for an FMU: `$library` is the
-/// path of the built binary, `$description` its modelDescription text.
+/// Defines one `#[test]` per conformance check for an FMU: `$fmu` is an
+/// expression giving its [`Fmu`] (usually [`workspace::load`]), loaded once
+/// for all of them. With no list, every co-simulation check; with
+/// `model_exchange`, the Model Exchange checks as well; or the checks named.
 #[macro_export]
 macro_rules! conformance_tests {
-    ($library:expr, $description:expr; $($check:ident),* $(,)?) => {
+    ($fmu:expr, model_exchange) => {
+        $crate::conformance_tests!($fmu; @co_simulation
+            model_exchange_vectors_match_the_variables,
+            model_exchange_arguments_are_checked,
+            non_finite_derivatives_are_refused,
+            derivative_dependencies_hold,
+        );
+    };
+    ($fmu:expr; @co_simulation $($more:ident),* $(,)?) => {
+        $crate::conformance_tests!($fmu;
+            exports_every_function_and_nothing_else,
+            reports_platform_and_version,
+            model_description_declares_capabilities,
+            declared_dependencies_hold,
+            instantiate_refuses_bad_arguments,
+            resource_locations_in_every_spelling,
+            state_machine_allows_exactly_the_standard_calls,
+            free_instance_in_every_state,
+            foreign_instance_pointers_are_refused,
+            unknown_value_references_are_refused,
+            type_mismatch_is_refused,
+            null_arrays,
+            non_finite_and_partial_sets_change_nothing,
+            fixed_parameters_after_initialization,
+            calculated_variables_are_not_settable,
+            step_sizes_must_be_positive_and_finite,
+            communication_points_must_continue,
+            fmu_state_restores_bit_for_bit,
+            corrupted_states_are_refused,
+            fmu_state_restores_every_machine_state,
+            status_queries,
+            reset_restores_start_values,
+            logging_follows_debug_logging,
+            instances_are_independent,
+            instances_step_identically_in_threads,
+            $($more,)*
+        );
+    };
+    ($fmu:expr; $($check:ident),* $(,)?) => {
         fn __conformance_fmu() -> &'static $crate::Fmu {
             static FMU: ::std::sync::OnceLock<$crate::Fmu> = ::std::sync::OnceLock::new();
-            FMU.get_or_init(|| $crate::Fmu::load(&$library, &$description))
+            FMU.get_or_init(|| $fmu)
         }
         $(
             #[test]
@@ -222,4 +263,46 @@ macro_rules! conformance_tests {
             }
         )*
     };
+    ($fmu:expr) => {
+        $crate::conformance_tests!($fmu; @co_simulation);
+    };
+}
+
+/// Reading Integer and Boolean values, which the importer's [`Instance`] does
+/// not offer (its users exchange Reals).
+pub trait GetDiscrete {
+    fn get_integer(&self, vrs: &[u32]) -> (fmi_sys::fmi2::fmi2Status, Vec<i32>);
+    /// Booleans as the FMU wrote them (`fmi2True` is 1).
+    fn get_boolean(
+        &self,
+        vrs: &[u32],
+    ) -> (fmi_sys::fmi2::fmi2Status, Vec<fmi_sys::fmi2::fmi2Boolean>);
+}
+
+impl GetDiscrete for Instance<'_> {
+    fn get_integer(&self, vrs: &[u32]) -> (fmi_sys::fmi2::fmi2Status, Vec<i32>) {
+        let mut values = vec![0; vrs.len()];
+        // SAFETY: `self.c` is a live instance of the binding's FMU, and both
+        // arrays hold `vrs.len()` elements.
+        let status = unsafe {
+            self.fmu
+                .binding
+                .fmi2GetInteger(self.c, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
+        };
+        (status, values)
+    }
+
+    fn get_boolean(
+        &self,
+        vrs: &[u32],
+    ) -> (fmi_sys::fmi2::fmi2Status, Vec<fmi_sys::fmi2::fmi2Boolean>) {
+        let mut values = vec![0; vrs.len()];
+        // SAFETY: as for `get_integer`.
+        let status = unsafe {
+            self.fmu
+                .binding
+                .fmi2GetBoolean(self.c, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
+        };
+        (status, values)
+    }
 }

@@ -18,34 +18,14 @@
 //!
 //! `-- --nocapture` shows the figures.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 use std::time::Instant;
 
-/// (cdylib crate name, model identifier, source folders of the binary).
-const FMUS: [(&str, &str, &[&str]); 2] = [
-    (
-        "fmu_plant",
-        "FlexureStage",
-        &[
-            "fmu-plant/src",
-            "fmi2-cosim/src",
-            "fmi2-cosim/linker",
-            "piezo-models/src",
-            "piezo-models/presets",
-        ],
-    ),
-    (
-        "fmu_controller",
-        "PiezoController",
-        &[
-            "fmu-controller/src",
-            "fmi2-cosim/src",
-            "fmi2-cosim/linker",
-            "piezo-models/src",
-            "piezo-models/presets",
-        ],
-    ),
+/// (FMU crate, model identifier).
+const FMUS: [(&str, &str); 2] = [
+    ("fmu-plant", "FlexureStage"),
+    ("fmu-controller", "PiezoController"),
 ];
 
 const VALGRIND_CYCLES: u64 = 250;
@@ -57,15 +37,11 @@ const RSS_BASELINE: u64 = 1_000;
 /// leaves room for pages the allocator touches late and not for a leak.
 const RSS_GROWTH_LIMIT_KIB: u64 = 256;
 
-fn root() -> &'static Path {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-}
-
 /// The built binary and committed description of FMU `index`.
 fn fmu(index: usize) -> (PathBuf, PathBuf, &'static str) {
-    let (crate_name, id, sources) = FMUS[index];
-    let library = fmi2_conformance::cdylib_path(crate_name, root(), sources);
-    let description = root().join(format!("modelDescription/{id}.xml"));
+    let (package, id) = FMUS[index];
+    let library = fmi2_conformance::cdylib_path(package);
+    let description = fmi2_conformance::workspace::committed_description_path(id);
     (library, description, id)
 }
 
@@ -109,7 +85,7 @@ fn leak_line(report: &str, kind: &str) -> (u64, u64) {
 
 fn lifetimes_under_valgrind(index: usize) {
     let (library, description, id) = fmu(index);
-    let suppressions = root().join("fmi2-conformance/valgrind.supp");
+    let suppressions = fmi2_conformance::workspace::root().join("fmi2-conformance/valgrind.supp");
     let started = Instant::now();
     let output = Command::new(valgrind())
         .args([

@@ -29,7 +29,10 @@ use fmi_sys::fmi2 as sys;
 use fmi_sys::fmi2::Fmi2Binding;
 
 pub mod archive;
+mod cdylib;
 pub mod model_exchange;
+
+pub use cdylib::{cdylib_path, cdylib_sources};
 
 pub use archive::{FmuArchive, OpenError};
 /// The variable attributes an importer sorts by (fmi-schema's types).
@@ -621,65 +624,4 @@ impl Drop for Instance<'_> {
         // SAFETY: `self.c` is live and freed once, here; nothing uses it after.
         unsafe { self.fmu.binding.fmi2FreeInstance(self.c) };
     }
-}
-
-/// Path of a cdylib built in the same target directory as the running test
-/// (`target/<profile>/lib<name>.so`), refused when any source file under
-/// `source_dirs` (relative to the workspace root) is newer: `cargo test`
-/// rebuilds the rlib the test links, not the cdylib it loads, so a stale
-/// binary would be tested silently.
-pub fn cdylib_path(crate_name: &str, workspace_root: &Path, source_dirs: &[&str]) -> PathBuf {
-    let exe = std::env::current_exe().expect("the test knows its path");
-    // target/<profile>/deps/<test binary>
-    let profile_dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("test binaries live in target/<profile>/deps");
-    let file = format!(
-        "{}{}{}",
-        std::env::consts::DLL_PREFIX,
-        crate_name,
-        std::env::consts::DLL_SUFFIX
-    );
-    let path = profile_dir.join(file);
-    let built = std::fs::metadata(&path)
-        .and_then(|m| m.modified())
-        .unwrap_or_else(|e| {
-            panic!(
-                "{}: {e}; build the cdylib first (cargo build -p <fmu crate>)",
-                path.display()
-            )
-        });
-    for dir in source_dirs {
-        if let Some(newer) = newer_file(&workspace_root.join(dir), built) {
-            panic!(
-                "{} is older than {}: rebuild it (cargo build) before running the ABI tests",
-                path.display(),
-                newer.display()
-            );
-        }
-    }
-    path
-}
-
-fn newer_file(dir: &Path, than: std::time::SystemTime) -> Option<PathBuf> {
-    let entries = std::fs::read_dir(dir).ok()?;
-    for entry in entries.flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            if let Some(found) = newer_file(&path, than) {
-                return Some(found);
-            }
-        } else if path
-            .extension()
-            .is_some_and(|e| e == "rs" || e == "json" || e == "map")
-            && entry
-                .metadata()
-                .and_then(|m| m.modified())
-                .is_ok_and(|m| m > than)
-        {
-            return Some(path);
-        }
-    }
-    None
 }

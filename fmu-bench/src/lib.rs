@@ -177,29 +177,11 @@ pub fn workspace_root() -> PathBuf {
         .to_owned()
 }
 
-/// The source directories each cdylib is built from: a file in them newer than
-/// the binary means the binary is stale and its timings would not be those of
-/// the current code.
-const CONTROLLER_SOURCES: &[&str] = &[
-    "fmu-controller/src",
-    "fmi2-cosim/src",
-    "fmi2-cosim/linker",
-    "piezo-models/src",
-    "piezo-models/presets",
-];
-const PLANT_SOURCES: &[&str] = &[
-    "fmu-plant/src",
-    "fmi2-cosim/src",
-    "fmi2-cosim/linker",
-    "piezo-models/src",
-    "piezo-models/presets",
-];
-
 /// `libfmu_controller.so` of the profile the running binary was built in
 /// (`target/release` under `cargo bench`) with the committed description.
 /// Panics when the binary is missing or older than its sources.
 pub fn load_controller() -> Fmu {
-    let library = fmi2_import::cdylib_path("fmu_controller", &workspace_root(), CONTROLLER_SOURCES);
+    let library = fmi2_import::cdylib_path("fmu-controller");
     Fmu::load(
         &library,
         include_str!("../../modelDescription/PiezoController.xml"),
@@ -208,7 +190,7 @@ pub fn load_controller() -> Fmu {
 
 /// `libfmu_plant.so`, as [`load_controller`].
 pub fn load_plant() -> Fmu {
-    let library = fmi2_import::cdylib_path("fmu_plant", &workspace_root(), PLANT_SOURCES);
+    let library = fmi2_import::cdylib_path("fmu-plant");
     Fmu::load(
         &library,
         include_str!("../../modelDescription/FlexureStage.xml"),

@@ -6,21 +6,7 @@ use fmi2_conformance::{ERROR, Fmu, OK};
 use fmu_controller::PiezoControllerFmu;
 
 fn controller() -> Fmu {
-    Fmu::load(
-        &fmi2_conformance::cdylib_path(
-            "fmu_controller",
-            std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/..")),
-            &[
-                "fmu-controller/src",
-                "fmi2-cosim/src",
-                "fmi2-cosim/linker",
-                "piezo-models/src",
-                "piezo-models/presets",
-            ],
-        ),
-        &fmi2_cosim::model_description::model_description::<PiezoControllerFmu>()
-            .expect("the description renders"),
-    )
+    fmi2_conformance::workspace::load::<PiezoControllerFmu>("fmu-controller")
 }
 
 #[test]

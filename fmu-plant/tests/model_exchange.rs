@@ -19,8 +19,6 @@
 //! fingerprints computed from them (coupling spans and loop widths, major
 //! loops, the 790 Hz θ mode) the same. `-- --nocapture` prints the figures.
 
-use std::path::Path;
-
 use fmi2_conformance::{Fmu, Instance, OK, WARNING};
 use fmu_plant::FlexureStageFmu;
 use ode_solvers::{Dop853, SVector, System};
@@ -40,22 +38,7 @@ const TOLERANCE_UM: f64 = 1e-6;
 const SOLVER_TOLERANCE: f64 = 1e-10;
 
 fn plant() -> Fmu {
-    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-    Fmu::load(
-        &fmi2_conformance::cdylib_path(
-            "fmu_plant",
-            root,
-            &[
-                "fmu-plant/src",
-                "fmi2-cosim/src",
-                "fmi2-cosim/linker",
-                "piezo-models/src",
-                "piezo-models/presets",
-            ],
-        ),
-        &fmi2_cosim::model_description::model_description::<FlexureStageFmu>()
-            .expect("the description renders"),
-    )
+    fmi2_conformance::workspace::load::<FlexureStageFmu>("fmu-plant")
 }
 
 /// The right-hand side through the C ABI, on states scaled by their nominals.

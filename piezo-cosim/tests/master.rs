@@ -71,17 +71,9 @@ fn root() -> PathBuf {
         .to_owned()
 }
 
-const SOURCES: [&str; 4] = [
-    "fmi2-cosim/src",
-    "fmi2-cosim/linker",
-    "piezo-models/src",
-    "piezo-models/presets",
-];
-
 /// An unpacked FMU folder: modelDescription.xml and binaries/<platform>/.
-fn fmu_folder(into: &Path, cdylib: &str, crate_dir: &str, identifier: &str) -> PathBuf {
-    let sources: Vec<&str> = SOURCES.iter().copied().chain([crate_dir]).collect();
-    let library = fmi2_import::cdylib_path(cdylib, &root(), &sources);
+fn fmu_folder(into: &Path, package: &str, identifier: &str) -> PathBuf {
+    let library = fmi2_import::cdylib_path(package);
     let folder = into.join(identifier);
     let binaries = folder
         .join("binaries")
@@ -110,13 +102,8 @@ struct Fmus {
 
 fn fmus() -> Fmus {
     let dir = tempfile::tempdir().unwrap();
-    let plant = fmu_folder(dir.path(), "fmu_plant", "fmu-plant/src", "FlexureStage");
-    let controller = fmu_folder(
-        dir.path(),
-        "fmu_controller",
-        "fmu-controller/src",
-        "PiezoController",
-    );
+    let plant = fmu_folder(dir.path(), "fmu-plant", "FlexureStage");
+    let controller = fmu_folder(dir.path(), "fmu-controller", "PiezoController");
     Fmus {
         _dir: dir,
         plant,

@@ -149,6 +149,9 @@ pub fn model_exchange_arguments_are_checked(fmu: &Fmu) {
     refused("fmi2SetContinuousStates", "nx is", &|i| {
         i.set_continuous_states(&vec![1.0; n - 1])
     });
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     refused("fmi2SetContinuousStates", "x[] is NULL", &|i| unsafe {
         b.fmi2SetContinuousStates(i.c, ptr::null(), n)
     });
@@ -167,6 +170,9 @@ pub fn model_exchange_arguments_are_checked(fmu: &Fmu) {
     refused("fmi2GetDerivatives", "nx is", &|i| {
         i.get_derivatives(n + 1).0
     });
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     refused("fmi2GetDerivatives", "NULL", &|i| unsafe {
         b.fmi2GetDerivatives(i.c, ptr::null_mut(), n)
     });
@@ -180,23 +186,36 @@ pub fn model_exchange_arguments_are_checked(fmu: &Fmu) {
         i.get_event_indicators(fmu.number_of_event_indicators() + 1)
             .0
     });
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     refused("fmi2CompletedIntegratorStep", "NULL", &|i| unsafe {
         let mut flag = 0;
         b.fmi2CompletedIntegratorStep(i.c, 1, ptr::null_mut(), &mut flag)
     });
     refused("fmi2NewDiscreteStates", "NULL", &|i| {
         assert_eq!(i.enter_event_mode(), OK);
+        // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the
+        // ones under test, which the layer must refuse without touching them, and every other
+        // pointer is to a local that outlives the call with at least the length passed.
         unsafe { b.fmi2NewDiscreteStates(i.c, ptr::null_mut()) }
     });
     // With no event indicators, a NULL vector of length 0 is a valid call.
     let inst = moving(fmu, "no-indicators");
     if fmu.number_of_event_indicators() == 0 {
         assert_eq!(
+            // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are
+            // the ones under test, which the layer must refuse without touching them, and every
+            // other pointer is to a local that outlives the call with at least the length
+            // passed.
             unsafe { b.fmi2GetEventIndicators(inst.c, ptr::null_mut(), 0) },
             OK
         );
     }
     // A co-simulation call on a model-exchange instance says why it is refused.
+    // SAFETY: `inst.c` (or `c`) is a live instance of this FMU; the NULL arguments are the ones
+    // under test, which the layer must refuse without touching them, and every other pointer is
+    // to a local that outlives the call with at least the length passed.
     assert_eq!(unsafe { b.fmi2DoStep(inst.c, 0.0, 1e-4, 1) }, ERROR);
     let log = inst.take_log();
     assert!(

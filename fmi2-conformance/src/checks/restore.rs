@@ -88,6 +88,7 @@ fn continuation(inst: &mut Instance<'_>, state: State) -> Trace {
             } else {
                 // Legal in Terminated, not in Error.
                 let mut time = f64::NAN;
+                // SAFETY: `inst.c` is a live instance and `time` a local.
                 let status = unsafe {
                     inst.fmu.binding.fmi2GetRealStatus(
                         inst.c,

@@ -8,66 +8,9 @@
 
 use super::*;
 
-/// Model Exchange functions and their weights in the random choice.
-pub(super) const FUNCTIONS: &[(&str, u32)] = &[
-    ("fmi2EnterEventMode", 4),
-    ("fmi2NewDiscreteStates", 4),
-    ("fmi2EnterContinuousTimeMode", 6),
-    ("fmi2CompletedIntegratorStep", 6),
-    ("fmi2SetTime", 6),
-    ("fmi2SetContinuousStates", 6),
-    ("fmi2GetDerivatives", 8),
-    ("fmi2GetEventIndicators", 2),
-    ("fmi2GetContinuousStates", 4),
-    ("fmi2GetNominalsOfContinuousStates", 3),
-];
-
-/// A Model Exchange function called with `c`, a pointer that is not an
-/// instance of the FMU, with otherwise plausible arguments.
-///
-/// # Safety
-/// As for the other calls on foreign pointers: `c` is NULL or points to at
-/// least eight readable bytes.
-pub(super) unsafe fn call_on_pointer(
-    b: &fmi_sys::fmi2::Fmi2Binding,
-    function: &str,
-    c: sys::fmi2Component,
-) -> sys::fmi2Status {
-    let mut vector = [0.0f64; 32];
-    let mut flags = [0i32; 2];
-    let mut info = crate::model_exchange::EventInfo {
-        newDiscreteStatesNeeded: 0,
-        terminateSimulation: 0,
-        nominalsOfContinuousStatesChanged: 0,
-        valuesOfContinuousStatesChanged: 0,
-        nextEventTimeDefined: 0,
-        nextEventTime: 0.0,
-    };
-    unsafe {
-        match function {
-            "fmi2EnterEventMode" => b.fmi2EnterEventMode(c),
-            "fmi2NewDiscreteStates" => b.fmi2NewDiscreteStates(c, &mut info),
-            "fmi2EnterContinuousTimeMode" => b.fmi2EnterContinuousTimeMode(c),
-            "fmi2CompletedIntegratorStep" => {
-                let [a, t] = &mut flags;
-                b.fmi2CompletedIntegratorStep(c, 1, a, t)
-            }
-            "fmi2SetTime" => b.fmi2SetTime(c, 0.0),
-            "fmi2SetContinuousStates" => b.fmi2SetContinuousStates(c, vector.as_ptr(), 19),
-            "fmi2GetDerivatives" => b.fmi2GetDerivatives(c, vector.as_mut_ptr(), 19),
-            "fmi2GetEventIndicators" => b.fmi2GetEventIndicators(c, vector.as_mut_ptr(), 0),
-            "fmi2GetContinuousStates" => b.fmi2GetContinuousStates(c, vector.as_mut_ptr(), 19),
-            "fmi2GetNominalsOfContinuousStates" => {
-                b.fmi2GetNominalsOfContinuousStates(c, vector.as_mut_ptr(), 19)
-            }
-            other => unreachable!("no call for {other}"),
-        }
-    }
-}
-
 /// How a vector argument is passed.
 #[derive(Clone, Copy, Debug)]
-enum Vector {
+pub(super) enum Vector {
     /// The model's length.
     Right,
     /// Another length (never one past the buffer).
@@ -77,62 +20,44 @@ enum Vector {
 }
 
 impl Fuzzer<'_> {
-    pub(super) fn call_model_exchange(
-        &mut self,
-        slot: usize,
-        function: &'static str,
-        benign: bool,
-    ) {
-        match function {
-            "fmi2EnterEventMode" | "fmi2EnterContinuousTimeMode" => {
-                self.mode_change(slot, function)
+    /// fmi2SetTime at a random time: mostly forward, sometimes backward or
+    /// not finite.
+    pub(super) fn random_set_time(&mut self, slot: usize, benign: bool) {
+        let time = self.live(slot).model.time;
+        let t = if benign {
+            time + 1e-6
+        } else {
+            match self.rng.random_range(0..20) {
+                0..10 => time + 10f64.powf(self.rng.random_range(-9.0..-3.0)),
+                10..13 => time - 10f64.powf(self.rng.random_range(-9.0..-3.0)),
+                13 => f64::NAN,
+                14 => self.pick(&[f64::INFINITY, f64::NEG_INFINITY]),
+                15 => self.pick(&[1e300, -1e300, f64::MAX]),
+                16 => 5e-324,
+                _ => f64::from_bits(self.rng.random()),
             }
-            "fmi2NewDiscreteStates" => self.new_discrete_states(slot, benign),
-            "fmi2CompletedIntegratorStep" => self.completed_integrator_step(slot, benign),
-            "fmi2SetTime" => {
-                let time = self.live(slot).model.time;
-                let t = if benign {
-                    time + 1e-6
-                } else {
-                    match self.rng.random_range(0..20) {
-                        0..10 => time + 10f64.powf(self.rng.random_range(-9.0..-3.0)),
-                        10..13 => time - 10f64.powf(self.rng.random_range(-9.0..-3.0)),
-                        13 => f64::NAN,
-                        14 => self.pick(&[f64::INFINITY, f64::NEG_INFINITY]),
-                        15 => self.pick(&[1e300, -1e300, f64::MAX]),
-                        16 => 5e-324,
-                        _ => f64::from_bits(self.rng.random()),
-                    }
-                };
-                self.set_time(slot, t);
-            }
-            "fmi2SetContinuousStates" => {
-                let n = self.fmu.number_of_states();
-                let values: Vec<f64> = (0..n)
-                    .map(|_| match self.rng.random_range(0..100) {
-                        0..80 => self.rng.random_range(-10.0..10.0),
-                        80..85 => 0.0,
-                        85..90 => self.pick(&[1e6, -1e6, 1e300, f64::MAX]),
-                        90..93 => f64::NAN,
-                        93..96 => self.pick(&[f64::INFINITY, f64::NEG_INFINITY]),
-                        _ => f64::from_bits(self.rng.random()),
-                    })
-                    .collect();
-                let shape = self.vector_shape(benign);
-                self.set_continuous_states(slot, &values, shape, true);
-            }
-            "fmi2GetDerivatives"
-            | "fmi2GetEventIndicators"
-            | "fmi2GetContinuousStates"
-            | "fmi2GetNominalsOfContinuousStates" => {
-                let shape = self.vector_shape(benign);
-                self.get_vector(slot, function, shape);
-            }
-            other => unreachable!("no call for {other}"),
-        }
+        };
+        self.set_time(slot, t);
     }
 
-    fn vector_shape(&mut self, benign: bool) -> Vector {
+    /// fmi2SetContinuousStates with states the fuzzer chose.
+    pub(super) fn random_set_continuous_states(&mut self, slot: usize, benign: bool) {
+        let n = self.fmu.number_of_states();
+        let values: Vec<f64> = (0..n)
+            .map(|_| match self.rng.random_range(0..100) {
+                0..80 => self.rng.random_range(-10.0..10.0),
+                80..85 => 0.0,
+                85..90 => self.pick(&[1e6, -1e6, 1e300, f64::MAX]),
+                90..93 => f64::NAN,
+                93..96 => self.pick(&[f64::INFINITY, f64::NEG_INFINITY]),
+                _ => f64::from_bits(self.rng.random()),
+            })
+            .collect();
+        let shape = self.vector_shape(benign);
+        self.set_continuous_states(slot, &values, shape, true);
+    }
+
+    pub(super) fn vector_shape(&mut self, benign: bool) -> Vector {
         if benign {
             return Vector::Right;
         }
@@ -151,31 +76,40 @@ impl Fuzzer<'_> {
     }
 
     /// fmi2EnterEventMode, fmi2EnterContinuousTimeMode.
-    fn mode_change(&mut self, slot: usize, function: &'static str) {
+    pub(super) fn mode_change(&mut self, slot: usize, change: ModeChange) {
+        let function = Function::ModeChange(change);
         let c = self.live(slot).c;
         let is_legal = self.legal_now(slot, function);
-        self.begin(function, Some(slot));
+        self.begin(function.name(), Some(slot));
+        let b = &self.fmu.binding;
+        // SAFETY: `c` is the live instance in `slot`.
         let status = unsafe {
-            match function {
-                "fmi2EnterEventMode" => self.fmu.binding.fmi2EnterEventMode(c),
-                _ => self.fmu.binding.fmi2EnterContinuousTimeMode(c),
+            match change {
+                ModeChange::EnterEventMode => b.fmi2EnterEventMode(c),
+                ModeChange::EnterContinuousTimeMode => b.fmi2EnterContinuousTimeMode(c),
             }
         };
         let allowed = if is_legal { [OK] } else { [ERROR] };
-        self.check(slot, function, status, &allowed, !is_legal, String::new);
+        self.check(
+            slot,
+            function.name(),
+            status,
+            &allowed,
+            !is_legal,
+            String::new,
+        );
         if status == OK {
-            self.live_mut(slot).state = if function == "fmi2EnterEventMode" {
-                State::EventMode
-            } else {
-                State::ContinuousTimeMode
+            self.live_mut(slot).state = match change {
+                ModeChange::EnterEventMode => State::EventMode,
+                ModeChange::EnterContinuousTimeMode => State::ContinuousTimeMode,
             };
         }
     }
 
-    fn new_discrete_states(&mut self, slot: usize, benign: bool) {
+    pub(super) fn new_discrete_states(&mut self, slot: usize, benign: bool) {
         let null = !benign && self.chance(0.05);
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, "fmi2NewDiscreteStates");
+        let is_legal = self.legal_now(slot, Function::NewDiscreteStates);
         let mut info = crate::model_exchange::EventInfo {
             newDiscreteStatesNeeded: 7,
             terminateSimulation: 7,
@@ -185,6 +119,9 @@ impl Fuzzer<'_> {
             nextEventTime: f64::NAN,
         };
         self.begin("fmi2NewDiscreteStates", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe {
             self.fmu
                 .binding
@@ -222,21 +159,25 @@ impl Fuzzer<'_> {
         }
     }
 
-    fn completed_integrator_step(&mut self, slot: usize, benign: bool) {
+    pub(super) fn completed_integrator_step(&mut self, slot: usize, benign: bool) {
         let null = !benign && self.chance(0.05);
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, "fmi2CompletedIntegratorStep");
+        let is_legal = self.legal_now(slot, Function::CompletedIntegratorStep);
         let (mut enter_event_mode, mut terminate) = (7, 7);
         self.begin("fmi2CompletedIntegratorStep", Some(slot));
+        let no_set_fmu_state_prior = self.rng.random_range(0..2);
+        let enter_event_mode_out: *mut sys::fmi2Boolean = if null {
+            ptr::null_mut()
+        } else {
+            &mut enter_event_mode
+        };
+        // SAFETY: `c` is the live instance in `slot`; the flags point to
+        // locals, or NULL (the case under test, which the layer must refuse).
         let status = unsafe {
             self.fmu.binding.fmi2CompletedIntegratorStep(
                 c,
-                self.rng.random_range(0..2),
-                if null {
-                    ptr::null_mut()
-                } else {
-                    &mut enter_event_mode
-                },
+                no_set_fmu_state_prior,
+                enter_event_mode_out,
                 &mut terminate,
             )
         };
@@ -272,8 +213,11 @@ impl Fuzzer<'_> {
 
     fn set_time(&mut self, slot: usize, t: f64) {
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, "fmi2SetTime");
+        let is_legal = self.legal_now(slot, Function::SetTime);
         self.begin("fmi2SetTime", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe { self.fmu.binding.fmi2SetTime(c, t) };
         let allowed = if is_legal && t.is_finite() {
             [OK]
@@ -300,10 +244,13 @@ impl Fuzzer<'_> {
             Vector::Null(n) => (ptr::null(), n),
         };
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, "fmi2SetContinuousStates");
+        let is_legal = self.legal_now(slot, Function::SetContinuousStates);
         let finite = values.iter().all(|v| v.is_finite());
         let valid = n == nx && (n == 0 || !pointer.is_null()) && finite;
         self.begin("fmi2SetContinuousStates", Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
+        // least the length passed with it, and each FMU-state argument is NULL, a live state of
+        // this FMU, or an object the module documentation lists, which the layer must refuse.
         let status = unsafe { self.fmu.binding.fmi2SetContinuousStates(c, pointer, n) };
         let allowed = if is_legal && valid { [OK] } else { [ERROR] };
         self.check(
@@ -320,13 +267,14 @@ impl Fuzzer<'_> {
     }
 
     /// The four getters of vectors; returns the values when the call succeeded.
-    fn get_vector(
+    pub(super) fn get_vector(
         &mut self,
         slot: usize,
-        function: &'static str,
+        getter: VectorGetter,
         shape: Vector,
     ) -> Option<Vec<f64>> {
-        let expected = if function == "fmi2GetEventIndicators" {
+        let function = Function::GetVector(getter);
+        let expected = if getter == VectorGetter::EventIndicators {
             self.fmu.number_of_event_indicators()
         } else {
             self.fmu.number_of_states()
@@ -341,20 +289,23 @@ impl Fuzzer<'_> {
         let is_legal = self.legal_now(slot, function);
         let valid = n == expected && (n == 0 || !pointer.is_null());
         let b = &self.fmu.binding;
-        self.begin(function, Some(slot));
+        self.begin(function.name(), Some(slot));
+        // SAFETY: `c` is the live instance in `slot`; `pointer` is NULL or
+        // `buffer`, whose 33 values are more than any length the fuzzer passes
+        // with it.
         let status = unsafe {
-            match function {
-                "fmi2GetDerivatives" => b.fmi2GetDerivatives(c, pointer, n),
-                "fmi2GetEventIndicators" => b.fmi2GetEventIndicators(c, pointer, n),
-                "fmi2GetContinuousStates" => b.fmi2GetContinuousStates(c, pointer, n),
-                _ => b.fmi2GetNominalsOfContinuousStates(c, pointer, n),
+            match getter {
+                VectorGetter::Derivatives => b.fmi2GetDerivatives(c, pointer, n),
+                VectorGetter::EventIndicators => b.fmi2GetEventIndicators(c, pointer, n),
+                VectorGetter::ContinuousStates => b.fmi2GetContinuousStates(c, pointer, n),
+                VectorGetter::Nominals => b.fmi2GetNominalsOfContinuousStates(c, pointer, n),
             }
         };
         let live = &self.live(slot).model;
         // Derivatives are computed from whatever the states are: from states
         // the fuzzer set, or parameters it changed, they may be out of the
         // model's domain, which the model reports as an error.
-        let may_fail = function == "fmi2GetDerivatives"
+        let may_fail = getter == VectorGetter::Derivatives
             && (!self.pristine_model_exchange(slot) || live.failed);
         let allowed: &[sys::fmi2Status] = if !is_legal || !valid {
             &[ERROR]
@@ -364,59 +315,32 @@ impl Fuzzer<'_> {
             &[OK]
         };
         let tainted = live.tainted;
-        self.check(slot, function, status, allowed, !is_legal, || {
+        self.check(slot, function.name(), status, allowed, !is_legal, || {
             format!("{shape:?} of {expected}")
         });
         if status != OK {
             return None;
         }
         let values = buffer[..n].to_vec();
-        let bad = match function {
+        let bad = match getter {
             // The layer never hands out a non-finite derivative.
-            "fmi2GetDerivatives" => values.iter().any(|v| !v.is_finite()),
-            "fmi2GetNominalsOfContinuousStates" => {
-                values.iter().any(|v| !(v.is_finite() && *v > 0.0))
-            }
-            "fmi2GetContinuousStates" => !tainted && values.iter().any(|v| !v.is_finite()),
-            _ => values.iter().any(|v| v.is_nan()),
+            VectorGetter::Derivatives => values.iter().any(|v| !v.is_finite()),
+            VectorGetter::Nominals => values.iter().any(|v| !(v.is_finite() && *v > 0.0)),
+            VectorGetter::ContinuousStates => !tainted && values.iter().any(|v| !v.is_finite()),
+            VectorGetter::EventIndicators => values.iter().any(|v| v.is_nan()),
         };
         if bad {
-            self.fail(format!("{function} returned fmi2OK with {values:?}"));
+            self.fail(format!(
+                "{} returned fmi2OK with {values:?}",
+                function.name()
+            ));
         }
         Some(values)
     }
 
-    /// A run of legal calls that drives a model-exchange instance into
-    /// continuous-time mode and integrates it with explicit Euler steps, with
-    /// input changes, events and FMU states in between.
-    pub(super) fn burst_model_exchange(&mut self, slot: usize) {
-        let path: &[&'static str] = match self.live(slot).state {
-            State::Instantiated => &[
-                "fmi2SetupExperiment",
-                "fmi2EnterInitializationMode",
-                "fmi2ExitInitializationMode",
-                "fmi2EnterContinuousTimeMode",
-            ],
-            State::InitializationMode => {
-                &["fmi2ExitInitializationMode", "fmi2EnterContinuousTimeMode"]
-            }
-            State::EventMode => &["fmi2EnterContinuousTimeMode"],
-            State::ContinuousTimeMode => &[],
-            State::Terminated | State::Error => &[
-                "fmi2Reset",
-                "fmi2SetupExperiment",
-                "fmi2EnterInitializationMode",
-                "fmi2ExitInitializationMode",
-                "fmi2EnterContinuousTimeMode",
-            ],
-            State::StepComplete => unreachable!("a model-exchange instance"),
-        };
-        for function in path {
-            self.call(slot, function, true);
-            if self.live(slot).state == State::Error {
-                return;
-            }
-        }
+    /// Explicit Euler steps of a model-exchange instance in continuous-time
+    /// mode, with input changes, events and FMU states in between.
+    pub(super) fn run_model_exchange(&mut self, slot: usize) {
         let steps = self.rng.random_range(10..200);
         let terminate = self.chance(0.3);
         for _ in 0..steps {
@@ -424,23 +348,23 @@ impl Fuzzer<'_> {
                 return;
             }
             match self.rng.random_range(0..12) {
-                0..2 => self.set(slot, "fmi2SetReal", true),
-                2 => self.get(slot, "fmi2GetReal", true),
+                0..2 => self.set(slot, ValueType::Real, true),
+                2 => self.get(slot, ValueType::Real, true),
                 3 if self.chance(0.1) => self.get_fmu_state(slot, true),
                 3 if self.chance(0.1) => self.set_fmu_state(slot, true),
                 4 => {
                     // An event, as at a jump of a discrete input.
-                    self.mode_change(slot, "fmi2EnterEventMode");
+                    self.mode_change(slot, ModeChange::EnterEventMode);
                     self.new_discrete_states(slot, true);
                     if self.live(slot).state == State::EventMode {
-                        self.mode_change(slot, "fmi2EnterContinuousTimeMode");
+                        self.mode_change(slot, ModeChange::EnterContinuousTimeMode);
                     }
                 }
                 _ => self.euler_step(slot),
             }
         }
         if terminate && self.live(slot).state == State::ContinuousTimeMode {
-            self.simple(slot, "fmi2Terminate");
+            self.simple(slot, Simple::Terminate);
         }
     }
 
@@ -454,10 +378,10 @@ impl Fuzzer<'_> {
         // within that; the fuzzer's fixed steps stay at or below 5 us
         // (at most 15 V).
         let h = self.pick(&[1e-6, 2e-6, 5e-6]);
-        let Some(x) = self.get_vector(slot, "fmi2GetContinuousStates", Vector::Right) else {
+        let Some(x) = self.get_vector(slot, VectorGetter::ContinuousStates, Vector::Right) else {
             return;
         };
-        let Some(dx) = self.get_vector(slot, "fmi2GetDerivatives", Vector::Right) else {
+        let Some(dx) = self.get_vector(slot, VectorGetter::Derivatives, Vector::Right) else {
             return;
         };
         let t = self.live(slot).model.time + h;
