@@ -21,7 +21,7 @@
 
 use fmi2_cosim::variables::{BooleanVariable, IntegerVariable, RealVariable, Value};
 use fmi2_cosim::{
-    Causality, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, Status,
+    Causality, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, StepOutcome,
     UnitDefinition, Variability, Variable, units,
 };
 use serde::{Deserialize, Serialize};
@@ -310,7 +310,7 @@ impl CoSimModel for Feedthrough {
         _ctx: &mut Context<'_>,
         current_time: f64,
         step_size: f64,
-    ) -> Result<Status, ModelError> {
+    ) -> Result<StepOutcome, ModelError> {
         if !self.boolean_tunable_parameter {
             let integral = self.real_continuous_local
                 + self.real_tunable_parameter * self.real_continuous_input * step_size;
@@ -324,7 +324,7 @@ impl CoSimModel for Feedthrough {
             self.real_continuous_local = integral;
         }
         self.integer_discrete_local = self.integer_discrete_local.saturating_add(1);
-        Ok(Status::Ok)
+        Ok(StepOutcome::Completed)
     }
 }
 
