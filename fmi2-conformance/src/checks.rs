@@ -492,40 +492,19 @@ fn probe(inst: &mut Instance<'_>, function: &str) -> sys::fmi2Status {
     }
 }
 
-const INSTANCE_FUNCTIONS: [&str; 31] = [
-    "fmi2SetDebugLogging",
-    "fmi2SetupExperiment",
-    "fmi2EnterInitializationMode",
-    "fmi2ExitInitializationMode",
-    "fmi2Terminate",
-    "fmi2Reset",
-    "fmi2GetReal",
-    "fmi2GetInteger",
-    "fmi2GetBoolean",
-    "fmi2GetString",
-    "fmi2SetReal",
-    "fmi2SetInteger",
-    "fmi2SetBoolean",
-    "fmi2SetString",
-    "fmi2GetFMUstate",
-    "fmi2SetFMUstate",
-    "fmi2FreeFMUstate",
-    "fmi2SerializedFMUstateSize",
-    "fmi2SerializeFMUstate",
-    "fmi2DeSerializeFMUstate",
-    "fmi2GetDirectionalDerivative",
-    "fmi2SetRealInputDerivatives",
-    "fmi2GetRealOutputDerivatives",
-    "fmi2DoStep",
-    "fmi2CancelStep",
-    "fmi2GetStatus",
-    "fmi2GetRealStatus",
-    "fmi2GetIntegerStatus",
-    "fmi2GetBooleanStatus",
-    "fmi2GetStringStatus",
-    // Listed last: it ends the instance.
-    "fmi2FreeInstance",
-];
+/// The co-simulation and common functions that take an instance, from the
+/// layer's one list of FMI functions, with `fmi2FreeInstance` last: it ends
+/// the instance.
+fn instance_functions() -> impl Iterator<Item = &'static str> {
+    fmi2_cosim::functions::EXPORTED_FUNCTIONS
+        .iter()
+        .copied()
+        .filter(|name| {
+            *name != "fmi2FreeInstance"
+                && fmi2_cosim::functions::by_name(name).is_some_and(|f| f.state_checked.is_some())
+        })
+        .chain(["fmi2FreeInstance"])
+}
 
 /// Functions that are legal in a state but not offered by this kind of FMU:
 /// refused with "not offered" instead of "illegal call sequence".
@@ -579,10 +558,8 @@ pub fn state_machine_allows_exactly_the_standard_calls(fmu: &Fmu) {
     };
     for interface in interfaces(fmu) {
         for &state in interface.states() {
-            for function in INSTANCE_FUNCTIONS
-                .iter()
-                .chain(model_exchange)
-                .copied()
+            for function in instance_functions()
+                .chain(model_exchange.iter().copied())
                 .filter(|f| *f != "fmi2FreeInstance")
             {
                 let mut inst = fmu.instantiate_for(interface, "state-machine");

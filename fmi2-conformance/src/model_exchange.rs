@@ -11,40 +11,23 @@ pub use fmi2_import::model_exchange::{EventInfo, state_of, state_references};
 
 use crate::State;
 
-/// The Model Exchange functions (FMI 2.0.4 §3.2.2).
-pub const MODEL_EXCHANGE_FUNCTIONS: [&str; 10] = [
-    "fmi2EnterEventMode",
-    "fmi2NewDiscreteStates",
-    "fmi2EnterContinuousTimeMode",
-    "fmi2CompletedIntegratorStep",
-    "fmi2SetTime",
-    "fmi2SetContinuousStates",
-    "fmi2GetDerivatives",
-    "fmi2GetEventIndicators",
-    "fmi2GetContinuousStates",
-    "fmi2GetNominalsOfContinuousStates",
-];
+/// The Model Exchange functions (FMI 2.0.4 §3.2.2), from the layer's one
+/// list of FMI functions.
+pub use fmi2_cosim::functions::MODEL_EXCHANGE_FUNCTIONS;
 
-/// Functions of a co-simulation slave only: never legal on a model-exchange
-/// instance.
-const CO_SIMULATION_FUNCTIONS: [&str; 9] = [
-    "fmi2SetRealInputDerivatives",
-    "fmi2GetRealOutputDerivatives",
-    "fmi2DoStep",
-    "fmi2CancelStep",
-    "fmi2GetStatus",
-    "fmi2GetRealStatus",
-    "fmi2GetIntegerStatus",
-    "fmi2GetBooleanStatus",
-    "fmi2GetStringStatus",
-];
+/// Whether `function` belongs to a co-simulation slave only: never legal on a
+/// model-exchange instance.
+fn co_simulation_only(function: &str) -> bool {
+    fmi2_cosim::functions::by_name(function)
+        .is_some_and(|f| f.interfaces == fmi2_cosim::functions::Interfaces::CoSimulation)
+}
 
 /// Whether the standard allows `function` on a model-exchange instance in
 /// `state` (FMI 2.0.4 §3.2.3, the table of the model-exchange state machine).
 /// Written from the standard, not from the layer under test.
 pub fn allowed_in_model_exchange(function: &str, state: State) -> bool {
     use State::*;
-    if CO_SIMULATION_FUNCTIONS.contains(&function) {
+    if co_simulation_only(function) {
         return false;
     }
     let live: &[State] = &[

@@ -305,7 +305,12 @@ impl Fuzzer<'_> {
         }
         let live = self.live(slot);
         let tainted = live.model.tainted;
-        let unreliable = tainted || live.model.failed || live.model.wild_states;
+        // A state restored from forged bytes has unknown values, but the layer
+        // refuses a state with a non-finite Real unless it was taken in the
+        // error state: only a failed step, wild continuous states or the error
+        // state excuse a non-finite value.
+        let unreliable =
+            live.model.failed || live.model.wild_states || (tainted && live.state == State::Error);
         for (i, index) in resolved.expect("valid").into_iter().enumerate() {
             let var = &self.fmu.variables[index];
             let expected = live.model.values[index];

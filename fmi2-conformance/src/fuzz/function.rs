@@ -235,3 +235,39 @@ pub(super) fn path_to_running(interface: Interface, state: State) -> &'static [F
         | (Interface::ModelExchange, State::StepComplete | State::ContinuousTimeMode) => &[],
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The vocabulary spells every instance-taking function of the layer's
+    /// one list, each once, in the interface the list gives it: a function
+    /// added to the layer and not to the fuzzer (or misspelled here) fails.
+    #[test]
+    fn the_vocabulary_is_the_layers_function_list() {
+        use fmi2_cosim::functions::{ALL, Interfaces};
+        let listed = |interfaces: &[Interfaces]| -> Vec<&'static str> {
+            ALL.iter()
+                .filter(|f| f.state_checked.is_some() && interfaces.contains(&f.interfaces))
+                .map(|f| f.name)
+                .collect()
+        };
+        let mut co_simulation: Vec<_> = FUNCTIONS.iter().map(|(f, _)| f.name()).collect();
+        let mut model_exchange: Vec<_> = MODEL_EXCHANGE_FUNCTIONS
+            .iter()
+            .map(|(f, _)| f.name())
+            .collect();
+        let mut expected_co_simulation = listed(&[Interfaces::Both, Interfaces::CoSimulation]);
+        let mut expected_model_exchange = listed(&[Interfaces::ModelExchange]);
+        for list in [
+            &mut co_simulation,
+            &mut model_exchange,
+            &mut expected_co_simulation,
+            &mut expected_model_exchange,
+        ] {
+            list.sort_unstable();
+        }
+        assert_eq!(co_simulation, expected_co_simulation);
+        assert_eq!(model_exchange, expected_model_exchange);
+    }
+}
