@@ -91,13 +91,12 @@ mod tests {
 
     #[test]
     fn counts_the_allocations_of_the_closure_only() {
-        let outside = vec![1u8; 16];
+        let outside: Vec<u8> = (0..16).collect();
         let mut sum = 0;
         let n = allocations_of(|| {
-            let a = vec![0u64; 4];
-            let mut b = Vec::with_capacity(1);
-            b.push(1u8);
-            b.push(2); // a realloc
+            let a: Vec<u64> = std::hint::black_box(vec![0; 4]);
+            let mut b: Vec<u8> = Vec::with_capacity(1);
+            b.extend([1, 2]); // grows: a realloc
             sum = a.len() + b.len();
         });
         assert_eq!(sum, 6);

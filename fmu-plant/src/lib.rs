@@ -773,15 +773,6 @@ const BLOCKS: &[&[Variable<FlexureStageFmu>]] = &[
 static VARIABLES: [Variable<FlexureStageFmu>; piezo_fmu_tables::total_len(BLOCKS)] =
     fmi2_cosim::variables::concat(BLOCKS);
 
-/// The FMI name of the parameter the model calls `path` (its serde path, as in
-/// the JSON preset), through the table's `model_path`.
-fn fmi_name(path: &str) -> Option<&'static str> {
-    VARIABLES
-        .iter()
-        .find(|v| v.model_path.is_some_and(|p| p.replace(' ', "") == path))
-        .map(|v| v.name)
-}
-
 impl CoSimModel for FlexureStageFmu {
     const INFO: ModelInfo = ModelInfo {
         model_identifier: "FlexureStage",
@@ -831,13 +822,8 @@ impl CoSimModel for FlexureStageFmu {
         }
         // The stage starts de-energized and at rest, whatever the inputs: the
         // actuators have no history before t0.
-        self.stage = FlexureStage::new(self.params.clone()).map_err(|e| {
-            let name = fmi_name(&e.parameter).unwrap_or("a parameter");
-            ModelError(format!(
-                "parameter {name} ({}) = {} is not allowed: {}",
-                e.parameter, e.value, e.allowed
-            ))
-        })?;
+        self.stage = FlexureStage::new(self.params.clone())
+            .map_err(|e| piezo_fmu_tables::refused_parameter(&VARIABLES, &e))?;
         self.clip_reported = [false; 3];
         ctx.event(format_args!("stage built from the parameters, at rest"));
         Ok(())

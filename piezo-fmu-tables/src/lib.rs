@@ -11,7 +11,7 @@
 //! the join.
 
 use fmi2_cosim::variables::Value;
-use fmi2_cosim::{BaseUnit, Causality, UnitDefinition, Variable};
+use fmi2_cosim::{BaseUnit, Causality, ModelError, UnitDefinition, Variable};
 use piezo_models::{ParamError, Range};
 
 #[doc(hidden)]
@@ -53,6 +53,25 @@ pub const MICROMETRE_PER_VOLT_SQUARED: UnitDefinition = UnitDefinition {
 /// variable's description ([`check_declared_ranges`] tests both).
 pub const fn with_range<M>(variable: Variable<M>, range: Range) -> Variable<M> {
     variable.range(range.min_value(), range.max_value())
+}
+
+/// The FMI name of the parameter the model calls `path` (its serde path, as
+/// in the JSON presets), through the table's `model_path`.
+pub fn fmi_name<M>(variables: &[Variable<M>], path: &str) -> Option<&'static str> {
+    variables
+        .iter()
+        .find(|v| v.model_path.is_some_and(|p| p.replace(' ', "") == path))
+        .map(|v| v.name)
+}
+
+/// The error an FMU returns for a parameter its model refuses, naming the
+/// parameter by its FMI name and its serde path.
+pub fn refused_parameter<M>(variables: &[Variable<M>], error: &ParamError) -> ModelError {
+    let name = fmi_name(variables, &error.parameter).unwrap_or("a parameter");
+    ModelError(format!(
+        "parameter {name} ({}) = {} is not allowed: {}",
+        error.parameter, error.value, error.allowed
+    ))
 }
 
 /// How many variables `blocks` hold together: the length of the table
