@@ -164,25 +164,11 @@ macro_rules! output {
     };
 }
 
-/// A Real parameter whose value lives at `params.<path>`, in the range
-/// piezo-models declares for it (an open end is stated in the description);
-/// tunable ones also reach the running controller.
-macro_rules! parameter {
-    (fixed $name:expr, $description:expr, $unit:expr, $range:expr, $($path:tt)+) => {
-        piezo_fmu_tables::with_range(
-            Variable::real_parameter(
-                $name,
-                $description,
-                $unit,
-                Variability::Fixed,
-                |m: &PiezoControllerFmu| m.params.$($path)+,
-                |m: &mut PiezoControllerFmu, v: f64| m.params.$($path)+ = v,
-            ),
-            $range,
-        )
-        .model_path(stringify!($($path)+))
-    };
-    (tunable $name:expr, $description:expr, $unit:expr, $range:expr, $($path:tt)+) => {
+/// A tunable Real parameter whose value lives at `params.<path>`, in the
+/// range piezo-models declares for it (an open end is stated in the
+/// description); a new value also reaches the running controller.
+macro_rules! tunable_parameter {
+    ($name:expr, $description:expr, $unit:expr, $range:expr, $($path:tt)+) => {
         piezo_fmu_tables::with_range(
             Variable::real_parameter(
                 $name,
@@ -257,10 +243,10 @@ macro_rules! inverse_pi_parameters {
         const A4: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, a,
             concat!($who, ": a4 of the cubic G(y)"), "V", $model; 4 => 3);
         const THRESHOLDS: &[Variable<PiezoControllerFmu>] = &[
-            parameter!(fixed concat!($prefix, ".c"),
+            piezo_fmu_tables::fixed_parameter!(PiezoControllerFmu, concat!($prefix, ".c"),
                 concat!($who, ": scale c of the dead-zone thresholds d = c·[0,1,3,5,7,9], > 0 (Guo et al. eq. 5)"),
                 "um", InversePiParams::THRESHOLD_SCALE, $model.c),
-            parameter!(fixed concat!($prefix, ".u1max"),
+            piezo_fmu_tables::fixed_parameter!(PiezoControllerFmu, concat!($prefix, ".u1max"),
                 concat!($who, ": u1max, scale of the backlash thresholds r = [0,…,6.5]·u1max/10, > 0 (Guo et al. eq. 5)"),
                 "um", InversePiParams::THRESHOLD_SCALE, $model.u1max),
         ];
@@ -293,30 +279,13 @@ const MODEL_SELECTORS: &[Variable<PiezoControllerFmu>] = &[
 
 // The four Bouc-Wen models of the inverse Bouc-Wen feedforward and the
 // model-based decoupling (seed 001 eq. 3-16).
-const BOUC_WEN_X: &[Variable<PiezoControllerFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    PiezoControllerFmu,
-    "bouc_wen.x",
-    "H_XX, Bouc-Wen model of each x-pair channel (PZT2, PZT3) to x",
-    bouc_wen.x
-);
-const BOUC_WEN_Y: &[Variable<PiezoControllerFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    PiezoControllerFmu,
-    "bouc_wen.y",
-    "H_YY, Bouc-Wen model of PZT1's channel to y",
-    bouc_wen.y
-);
-const BOUC_WEN_X_FROM_Y: &[Variable<PiezoControllerFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    PiezoControllerFmu,
-    "bouc_wen.x_from_y",
-    "H_XY, coupling of PZT1's channel into x",
-    bouc_wen.x_from_y
-);
-const BOUC_WEN_Y_FROM_X: &[Variable<PiezoControllerFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    PiezoControllerFmu,
-    "bouc_wen.y_from_x",
-    "H_YX, coupling of the x pair's mean command into y",
-    bouc_wen.y_from_x
-);
+piezo_fmu_tables::bouc_wen_blocks! {
+    PiezoControllerFmu;
+    BOUC_WEN_X = ("bouc_wen.x", "H_XX, Bouc-Wen model of each x-pair channel (PZT2, PZT3) to x", bouc_wen.x);
+    BOUC_WEN_Y = ("bouc_wen.y", "H_YY, Bouc-Wen model of PZT1's channel to y", bouc_wen.y);
+    BOUC_WEN_X_FROM_Y = ("bouc_wen.x_from_y", "H_XY, coupling of PZT1's channel into x", bouc_wen.x_from_y);
+    BOUC_WEN_Y_FROM_X = ("bouc_wen.y_from_x", "H_YX, coupling of the x pair's mean command into y", bouc_wen.y_from_x);
+}
 
 /// Inputs and outputs: the names users wire.
 const PORTS: &[Variable<PiezoControllerFmu>] = &[
@@ -479,27 +448,58 @@ const SETTINGS: &[Variable<PiezoControllerFmu>] = &[
         "Close the theta_z PI loop (Guo et al. eq. 10)",
         feedback_theta
     ),
-    parameter!(tunable "translation.kp",
+    tunable_parameter!(
+        "translation.kp",
         "Proportional gain of the x and y PI laws (Guo et al. §3.2: 0.05)",
-        "V/um", PiGains::GAIN, translation_gains.kp),
-    parameter!(tunable "translation.ki",
+        "V/um",
+        PiGains::GAIN,
+        translation_gains.kp
+    ),
+    tunable_parameter!(
+        "translation.ki",
         "Integral gain of the x and y PI laws (Guo et al. §3.2: 50)",
-        "V/(um.s)", PiGains::GAIN, translation_gains.ki),
-    parameter!(tunable "rotation.kp",
+        "V/(um.s)",
+        PiGains::GAIN,
+        translation_gains.ki
+    ),
+    tunable_parameter!(
+        "rotation.kp",
         "Proportional gain of the theta_z PI law, on the differential error e_theta·L/2 (Guo et al. §3.2: 0.06)",
-        "V/um", PiGains::GAIN, rotation_gains.kp),
-    parameter!(tunable "rotation.ki",
+        "V/um",
+        PiGains::GAIN,
+        rotation_gains.kp
+    ),
+    tunable_parameter!(
+        "rotation.ki",
         "Integral gain of the theta_z PI law, on e_theta·L/2 (Guo et al. §3.2: 70)",
-        "V/(um.s)", PiGains::GAIN, rotation_gains.ki),
-    parameter!(fixed "L",
+        "V/(um.s)",
+        PiGains::GAIN,
+        rotation_gains.ki
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "L",
         "Distance between the x sensors s2 and s3 (and PZT2, PZT3): theta_z = (s2 − s3)/L, > 0",
-        "mm", ControllerParams::SENSOR_SPACING_MM, sensor_spacing_mm),
-    parameter!(fixed "command_min",
+        "mm",
+        ControllerParams::SENSOR_SPACING_MM,
+        sensor_spacing_mm
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "command_min",
         "Lowest command of every channel (PI's recommended E-505 input: -2 V, -20 V at the stack)",
-        "V", Range::FINITE, command_min),
-    parameter!(fixed "command_max",
+        "V",
+        Range::FINITE,
+        command_min
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "command_max",
         "Highest command of every channel (PI's recommended E-505 input: 12 V, 120 V at the stack)",
-        "V", Range::FINITE, command_max),
+        "V",
+        Range::FINITE,
+        command_max
+    ),
 ];
 
 const X_MODEL: &[Variable<PiezoControllerFmu>] =
@@ -525,15 +525,30 @@ const DECOUPLING_Q: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling", q,
 /// The rest the models start from, added after the first release: appended
 /// so that the value references of everything above stay as they were.
 const RESTS: &[Variable<PiezoControllerFmu>] = &[
-    parameter!(fixed "x.rest_cycle",
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "x.rest_cycle",
         "Inverse P-I model of the x pair: its memories start where a demand 0 → rest_cycle → 0 leaves them, the loop an operated actuator rests on (0: eq. 1's zero memories)",
-        "um", InversePiParams::REST_CYCLE, x_model.rest_cycle),
-    parameter!(fixed "y.rest_cycle",
+        "um",
+        InversePiParams::REST_CYCLE,
+        x_model.rest_cycle
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "y.rest_cycle",
         "Inverse P-I model of y: its memories start where a demand 0 → rest_cycle → 0 leaves them (0: eq. 1's zero memories)",
-        "um", InversePiParams::REST_CYCLE, y_model.rest_cycle),
-    parameter!(fixed "bouc_wen.rest_cycle",
+        "um",
+        InversePiParams::REST_CYCLE,
+        y_model.rest_cycle
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "bouc_wen.rest_cycle",
         "The Bouc-Wen models (ABW-XY) start at the 0 V end of their loop between 0 and this command, where an operated actuator rests (0: h = 0)",
-        "V", BoucWenModels::REST_CYCLE, bouc_wen.rest_cycle),
+        "V",
+        BoucWenModels::REST_CYCLE,
+        bouc_wen.rest_cycle
+    ),
 ];
 
 /// The blocks of the table, in value-reference order.

@@ -167,25 +167,6 @@ const UNITS: &[UnitDefinition] = &[
     piezo_fmu_tables::MICROMETRE_PER_VOLT_SQUARED,
 ];
 
-/// A fixed Real parameter whose value lives at `params.<path>`, in the range
-/// piezo-models declares for it (an open end is stated in the description).
-macro_rules! parameter {
-    ($name:expr, $description:expr, $unit:literal, $range:expr, $($path:tt)+) => {
-        piezo_fmu_tables::with_range(
-            Variable::real_parameter(
-                $name,
-                $description,
-                $unit,
-                Variability::Fixed,
-                |m: &FlexureStageFmu| m.params.$($path)+,
-                |m: &mut FlexureStageFmu, v: f64| m.params.$($path)+ = v,
-            ),
-            $range,
-        )
-        .model_path(stringify!($($path)+))
-    };
-}
-
 /// Ports first (the names users wire), then diagnostics.
 const PORTS: &[Variable<FlexureStageFmu>] = &[
     Variable::real_input(
@@ -266,28 +247,32 @@ const PORTS: &[Variable<FlexureStageFmu>] = &[
 ];
 
 const AMPLIFIER: &[Variable<FlexureStageFmu>] = &[
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.gain",
         "Amplifier voltage gain, > 0 (Guo et al. §2: 10)",
         "",
         AmplifierParams::GAIN,
         amplifier.gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.bandwidth",
         "Amplifier first-order bandwidth, > 0",
         "Hz",
         AmplifierParams::BANDWIDTH_HZ,
         amplifier.bandwidth_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.v_min",
         "Lowest amplifier output voltage (PI E-505: -30 V)",
         "V",
         Range::FINITE,
         amplifier.v_min
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.v_max",
         "Highest amplifier output voltage (PI E-505: 130 V)",
         "V",
@@ -296,22 +281,17 @@ const AMPLIFIER: &[Variable<FlexureStageFmu>] = &[
     ),
 ];
 
-const PZT1_HYSTERESIS: &[Variable<FlexureStageFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    FlexureStageFmu,
-    "pzt[1]",
-    "PZT1 hysteresis",
-    actuators[0].hysteresis
-);
-
 const PZT1_CREEP: &[Variable<FlexureStageFmu>] = &[
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[1].creep_gain",
         "PZT1 creep: steady drift per volt",
         "um/V",
         ActuatorParams::CREEP_GAIN,
         actuators[0].creep_gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[1].creep_time",
         "PZT1 creep time constant, > 0 and more than 10 amplifier time constants",
         "s",
@@ -320,22 +300,17 @@ const PZT1_CREEP: &[Variable<FlexureStageFmu>] = &[
     ),
 ];
 
-const PZT2_HYSTERESIS: &[Variable<FlexureStageFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    FlexureStageFmu,
-    "pzt[2]",
-    "PZT2 hysteresis",
-    actuators[1].hysteresis
-);
-
 const PZT2_CREEP: &[Variable<FlexureStageFmu>] = &[
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[2].creep_gain",
         "PZT2 creep: steady drift per volt",
         "um/V",
         ActuatorParams::CREEP_GAIN,
         actuators[1].creep_gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[2].creep_time",
         "PZT2 creep time constant, > 0 and more than 10 amplifier time constants",
         "s",
@@ -344,22 +319,17 @@ const PZT2_CREEP: &[Variable<FlexureStageFmu>] = &[
     ),
 ];
 
-const PZT3_HYSTERESIS: &[Variable<FlexureStageFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    FlexureStageFmu,
-    "pzt[3]",
-    "PZT3 hysteresis",
-    actuators[2].hysteresis
-);
-
 const PZT3_CREEP: &[Variable<FlexureStageFmu>] = &[
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[3].creep_gain",
         "PZT3 creep: steady drift per volt",
         "um/V",
         ActuatorParams::CREEP_GAIN,
         actuators[2].creep_gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[3].creep_time",
         "PZT3 creep time constant, > 0 and more than 10 amplifier time constants",
         "s",
@@ -368,78 +338,70 @@ const PZT3_CREEP: &[Variable<FlexureStageFmu>] = &[
     ),
 ];
 
-const COUPLING_X_FROM_PZT1_HYSTERESIS: &[Variable<FlexureStageFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    FlexureStageFmu,
-    "coupling.x_from_pzt1",
-    "Coupling PZT1 voltage -> x",
-    coupling.x_from_pzt1
-);
-
-const COUPLING_ROT_FROM_PZT1_HYSTERESIS: &[Variable<FlexureStageFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    FlexureStageFmu,
-    "coupling.rot_from_pzt1",
-    "Coupling PZT1 voltage -> s2 − s3 (rotation)",
-    coupling.rot_from_pzt1
-);
-
-const COUPLING_Y_FROM_PZT2_HYSTERESIS: &[Variable<FlexureStageFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    FlexureStageFmu,
-    "coupling.y_from_pzt2",
-    "Coupling PZT2 voltage -> y",
-    coupling.y_from_pzt2
-);
-
-const COUPLING_Y_FROM_PZT3_HYSTERESIS: &[Variable<FlexureStageFmu>] = &piezo_fmu_tables::bouc_wen_variables!(
-    FlexureStageFmu,
-    "coupling.y_from_pzt3",
-    "Coupling PZT3 voltage -> y",
-    coupling.y_from_pzt3
-);
+// The actuators' hysteresis and the coupled hysteresis (seed 001 eq. 3-4,
+// 7-8); their value references follow BLOCKS' order, not this one.
+piezo_fmu_tables::bouc_wen_blocks! {
+    FlexureStageFmu;
+    PZT1_HYSTERESIS = ("pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
+    PZT2_HYSTERESIS = ("pzt[2]", "PZT2 hysteresis", actuators[1].hysteresis);
+    PZT3_HYSTERESIS = ("pzt[3]", "PZT3 hysteresis", actuators[2].hysteresis);
+    COUPLING_X_FROM_PZT1_HYSTERESIS = ("coupling.x_from_pzt1", "Coupling PZT1 voltage -> x", coupling.x_from_pzt1);
+    COUPLING_ROT_FROM_PZT1_HYSTERESIS = ("coupling.rot_from_pzt1", "Coupling PZT1 voltage -> s2 − s3 (rotation)", coupling.rot_from_pzt1);
+    COUPLING_Y_FROM_PZT2_HYSTERESIS = ("coupling.y_from_pzt2", "Coupling PZT2 voltage -> y", coupling.y_from_pzt2);
+    COUPLING_Y_FROM_PZT3_HYSTERESIS = ("coupling.y_from_pzt3", "Coupling PZT3 voltage -> y", coupling.y_from_pzt3);
+}
 
 const STRUCTURE_SENSORS_SOLVER: &[Variable<FlexureStageFmu>] = &[
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.x.frequency",
         "Natural frequency of the x mode, > 0",
         "Hz",
         ModeParams::FREQUENCY_HZ,
         modes.x.frequency_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.x.damping",
         "Damping ratio of the x mode, 0 < zeta < 1",
         "",
         ModeParams::DAMPING_RATIO,
         modes.x.damping_ratio
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.y.frequency",
         "Natural frequency of the y mode, > 0",
         "Hz",
         ModeParams::FREQUENCY_HZ,
         modes.y.frequency_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.y.damping",
         "Damping ratio of the y mode, 0 < zeta < 1",
         "",
         ModeParams::DAMPING_RATIO,
         modes.y.damping_ratio
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.theta.frequency",
         "Natural frequency of the theta_z mode, the first mode, > 0 (Guo et al. §2: 790 Hz)",
         "Hz",
         ModeParams::FREQUENCY_HZ,
         modes.theta.frequency_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.theta.damping",
         "Damping ratio of the theta_z mode, 0 < zeta < 1",
         "",
         ModeParams::DAMPING_RATIO,
         modes.theta.damping_ratio
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "L",
         "Distance between the x sensors s2 and s3: theta_z = (s2 − s3)/L, > 0",
         "mm",
@@ -454,7 +416,8 @@ const STRUCTURE_SENSORS_SOLVER: &[Variable<FlexureStageFmu>] = &[
         |m, v| m.params.noise.enabled = v,
     )
     .model_path("noise.enabled"),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "noise.rms",
         "Sensor noise RMS per reading (Keyence LK-H050: repeatability 0.025 um as a 99 % band)",
         "um",
@@ -470,7 +433,8 @@ const STRUCTURE_SENSORS_SOLVER: &[Variable<FlexureStageFmu>] = &[
     )
     .integer_range(Some(0), None)
     .model_path("noise.seed"),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "solver.max_voltage_step",
         "Largest amplifier-voltage change per integration piece (bounds the hysteresis chord error)",
         "V",
@@ -483,21 +447,24 @@ const STRUCTURE_SENSORS_SOLVER: &[Variable<FlexureStageFmu>] = &[
 /// first release: appended so that the value references of everything above
 /// stay as they were.
 const APPENDED: &[Variable<FlexureStageFmu>] = &[
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.input_min",
         "Lowest control input the amplifier follows (PI E-505: -3 V)",
         "V",
         Range::FINITE,
         amplifier.input_min
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.input_max",
         "Highest control input the amplifier follows (PI E-505: 13 V)",
         "V",
         Range::FINITE,
         amplifier.input_max
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "rest_cycle_voltage",
         "Working loop of the stacks that sets the rest the stage starts from: each hysteresis \
          model starts at the 0 V end of its loop to this voltage, readings zeroed there (0: virgin \

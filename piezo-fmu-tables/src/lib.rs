@@ -87,12 +87,33 @@ pub const fn total_len<M>(blocks: &[&[Variable<M>]]) -> usize {
     total
 }
 
+/// A fixed Real parameter of `$model` whose value lives at
+/// `model.params.<path>`, in the range piezo-models declares for it (an
+/// open end is stated in the description), with `<path>` as its model path.
+#[macro_export]
+macro_rules! fixed_parameter {
+    ($model:ty, $name:expr, $description:expr, $unit:expr, $range:expr, $($path:tt)+) => {
+        $crate::with_range(
+            ::fmi2_cosim::Variable::real_parameter(
+                $name,
+                $description,
+                $unit,
+                ::fmi2_cosim::Variability::Fixed,
+                |m: &$model| m.params.$($path)+,
+                |m: &mut $model, v: f64| m.params.$($path)+ = v,
+            ),
+            $range,
+        )
+        .model_path(stringify!($($path)+))
+    };
+}
+
 /// The seven fixed Real parameters `<prefix>.<symbol>` of the asymmetric
 /// Bouc-Wen model at `model.params.<path>`, as an array of table entries in
 /// [`BoucWenParams::PARAMETERS`] order, each described as
 /// `<who>: <declared description>`:
 ///
-/// ```ignore
+/// ```text
 /// const PZT1: [Variable<FlexureStageFmu>; 7] =
 ///     bouc_wen_variables!(FlexureStageFmu, "pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
 /// ```
@@ -136,6 +157,19 @@ macro_rules! bouc_wen_variables {
             ".",
             $crate::BoucWenParams::PARAMETERS[$i].field
         ))
+    };
+}
+
+/// One `const NAME: &[Variable<$model>]` block of [`bouc_wen_variables!`]
+/// per line `NAME = (prefix, who, path);`, so that a table lists its
+/// Bouc-Wen models one line each.
+#[macro_export]
+macro_rules! bouc_wen_blocks {
+    ($model:ty; $($name:ident = ($prefix:literal, $who:literal, $($path:tt)+);)+) => {
+        $(
+            const $name: &[::fmi2_cosim::Variable<$model>] =
+                &$crate::bouc_wen_variables!($model, $prefix, $who, $($path)+);
+        )+
     };
 }
 
