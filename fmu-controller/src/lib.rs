@@ -696,8 +696,7 @@ impl CoSimModel for PiezoControllerFmu {
             })?;
         // The controller starts with empty integrators and de-energized
         // backlash memories (seed 000 eq. 1: zero initial state).
-        self.controller = PiezoController::new(self.params.clone())
-            .map_err(|e| piezo_fmu_tables::refused_parameter(&VARIABLES, &e))?;
+        self.controller = PiezoController::new(self.params.clone()).map_err(refused_parameter)?;
         self.saturation_reported = [false; 3];
         ctx.event(format_args!(
             "controller built from the parameters: feedforward {} ({:?}), decoupling {} ({:?}), feedback x/y/theta {}/{}/{}",
@@ -741,6 +740,11 @@ impl CoSimModel for PiezoControllerFmu {
         }
         Ok(Status::Ok)
     }
+}
+
+/// A parameter piezo-models refuses, named as the importer knows it.
+fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
+    piezo_fmu_tables::refused_parameter(&VARIABLES, &e)
 }
 
 impl PiezoControllerFmu {

@@ -789,8 +789,7 @@ impl CoSimModel for FlexureStageFmu {
         }
         // The stage starts de-energized and at rest, whatever the inputs: the
         // actuators have no history before t0.
-        self.stage = FlexureStage::new(self.params.clone())
-            .map_err(|e| piezo_fmu_tables::refused_parameter(&VARIABLES, &e))?;
+        self.stage = FlexureStage::new(self.params.clone()).map_err(refused_parameter)?;
         self.clip_reported = [false; 3];
         ctx.event(format_args!("stage built from the parameters, at rest"));
         Ok(())
@@ -819,6 +818,11 @@ impl CoSimModel for FlexureStageFmu {
         }
         Ok(self.report_clipping(ctx, current_time, report.clipped))
     }
+}
+
+/// A parameter piezo-models refuses, named as the importer knows it.
+fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
+    piezo_fmu_tables::refused_parameter(&VARIABLES, &e)
 }
 
 impl FlexureStageFmu {
