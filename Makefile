@@ -82,7 +82,7 @@ fmus: system-deps
 	@# Parameter sets by FMI name, to load a preset into an FMU before
 	@# initialization (fmpy start_values, a Simulink mask, an SSP .ssv).
 	mkdir -p $(DIST)/presets
-	$(RELEASE)/flexure-stage-parameters seed000 $(DIST)/presets/FlexureStage.seed000.json
+	$(RELEASE)/flexure-stage-parameters 3dof $(DIST)/presets/FlexureStage.3dof.json
 	$(RELEASE)/flexure-stage-parameters xy200s $(DIST)/presets/FlexureStage.xy200s.json
 	$(RELEASE)/piezo-controller-parameters stage $(DIST)/presets/PiezoController.stage.json
 	$(RELEASE)/piezo-controller-parameters paper $(DIST)/presets/PiezoController.paper.json

@@ -18,7 +18,8 @@ use fmi2_cosim::{
     StepOutcome, UnitDefinition, Variability, Variable, units,
 };
 use piezo_models::{
-    ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel, PiezoController,
+    BoucWenModels, ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel,
+    InversePiParams, PiGains, PiezoController, Range,
 };
 use serde::{Deserialize, Serialize};
 
@@ -137,31 +138,9 @@ const UNITS: &[UnitDefinition] = &[
         base: volt_per(3, 0, 1e18),
         display_units: &[],
     },
-    // Seed 001's Bouc-Wen models in command volts: p and A in µm/V, δ in µm/V².
-    UnitDefinition {
-        name: "um/V",
-        base: BaseUnit {
-            kg: -1,
-            m: -1,
-            s: 3,
-            a: 1,
-            factor: 1e-6,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
-    UnitDefinition {
-        name: "um/V2",
-        base: BaseUnit {
-            kg: -2,
-            m: -3,
-            s: 6,
-            a: 2,
-            factor: 1e-6,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
+    // The Bouc-Wen models in command volts: p and A in µm/V, δ in µm/V².
+    piezo_fmu_tables::MICROMETRE_PER_VOLT,
+    piezo_fmu_tables::MICROMETRE_PER_VOLT_SQUARED,
     // Δk4 turns a rotation demand in millidegrees into micrometres (the unit
     // seed 000 writes its rotation demands in, eq. 16).
     UnitDefinition {
@@ -185,31 +164,22 @@ macro_rules! output {
     };
 }
 
-/// A Real parameter whose value lives at `params.<path>`; tunable ones also
-/// reach the running controller.
-macro_rules! parameter {
-    (fixed $name:expr, $description:expr, $unit:expr, [$min:expr, $max:expr], $($path:tt)+) => {
-        Variable::real_parameter(
-            $name,
-            $description,
-            $unit,
-            Variability::Fixed,
-            |m: &PiezoControllerFmu| m.params.$($path)+,
-            |m: &mut PiezoControllerFmu, v: f64| m.params.$($path)+ = v,
+/// A tunable Real parameter whose value lives at `params.<path>`, in the
+/// range piezo-models declares for it (an open end is stated in the
+/// description); a new value also reaches the running controller.
+macro_rules! tunable_parameter {
+    ($name:expr, $description:expr, $unit:expr, $range:expr, $($path:tt)+) => {
+        piezo_fmu_tables::with_range(
+            Variable::real_parameter(
+                $name,
+                $description,
+                $unit,
+                Variability::Tunable,
+                |m: &PiezoControllerFmu| m.params.$($path)+,
+                |m: &mut PiezoControllerFmu, v: f64| m.tune(|p| p.$($path)+ = v),
+            ),
+            $range,
         )
-        .range($min, $max)
-        .model_path(stringify!($($path)+))
-    };
-    (tunable $name:expr, $description:expr, $unit:expr, [$min:expr, $max:expr], $($path:tt)+) => {
-        Variable::real_parameter(
-            $name,
-            $description,
-            $unit,
-            Variability::Tunable,
-            |m: &PiezoControllerFmu| m.params.$($path)+,
-            |m: &mut PiezoControllerFmu, v: f64| m.tune(|p| p.$($path)+ = v),
-        )
-        .range($min, $max)
         .model_path(stringify!($($path)+))
     };
 }
@@ -248,126 +218,77 @@ macro_rules! indexed {
     };
 }
 
-/// The 32 parameters of one modified inverse P-I model (seed 000 eq. 3-5).
+/// The parameters of one modified inverse P-I model (seed 000 eq. 3-5).
 macro_rules! inverse_pi_parameters {
     ($prefix:literal, $who:literal, $model:ident) => {{
-        const K: [Variable<PiezoControllerFmu>; 10] = indexed!($prefix, k,
-            concat!($who, ": slope k_i of backlash weight i with the demanded rate, w_h = k·dy/dt + b (seed 000 eq. 4)"),
+        const K: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, k,
+            concat!($who, ": slope k_i of backlash weight i with the demanded rate, w_h = k·dy/dt + b (Guo et al. eq. 4)"),
             "V.s/um2", $model;
             1 => 0, 2 => 1, 3 => 2, 4 => 3, 5 => 4, 6 => 5, 7 => 6, 8 => 7, 9 => 8, 10 => 9);
-        const B: [Variable<PiezoControllerFmu>; 10] = indexed!($prefix, b,
-            concat!($who, ": intercept b_i of backlash weight i (seed 000 eq. 4)"),
+        const B: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, b,
+            concat!($who, ": intercept b_i of backlash weight i (Guo et al. eq. 4)"),
             "V/um", $model;
             1 => 0, 2 => 1, 3 => 2, 4 => 3, 5 => 4, 6 => 5, 7 => 6, 8 => 7, 9 => 8, 10 => 9);
-        const WS: [Variable<PiezoControllerFmu>; 6] = indexed!($prefix, ws,
-            concat!($who, ": weight w_s,j of dead-zone operator j (seed 000 eq. 3)"),
+        const WS: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, ws,
+            concat!($who, ": weight w_s,j of dead-zone operator j (Guo et al. eq. 3)"),
             "", $model;
             1 => 0, 2 => 1, 3 => 2, 4 => 3, 5 => 4, 6 => 5);
-        const A1: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
-            concat!($who, ": a1 of the cubic G(y) = a1·y³ + a2·y² + a3·y + a4 (seed 000 eq. 3, 8-9)"),
+        const A1: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, a,
+            concat!($who, ": a1 of the cubic G(y) = a1·y³ + a2·y² + a3·y + a4 (Guo et al. eq. 3, 8-9)"),
             "V/um3", $model; 1 => 0);
-        const A2: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
+        const A2: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, a,
             concat!($who, ": a2 of the cubic G(y)"), "V/um2", $model; 2 => 1);
-        const A3: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
+        const A3: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, a,
             concat!($who, ": a3 of the cubic G(y)"), "V/um", $model; 3 => 2);
-        const A4: [Variable<PiezoControllerFmu>; 1] = indexed!($prefix, a,
+        const A4: &[Variable<PiezoControllerFmu>] = &indexed!($prefix, a,
             concat!($who, ": a4 of the cubic G(y)"), "V", $model; 4 => 3);
-        const THRESHOLDS: [Variable<PiezoControllerFmu>; 2] = [
-            parameter!(fixed concat!($prefix, ".c"),
-                concat!($who, ": scale c of the dead-zone thresholds d = c·[0,1,3,5,7,9] (seed 000 eq. 5)"),
-                "um", [Some(0.0), None], $model.c),
-            parameter!(fixed concat!($prefix, ".u1max"),
-                concat!($who, ": u1max, scale of the backlash thresholds r = [0,…,6.5]·u1max/10 (seed 000 eq. 5)"),
-                "um", [Some(0.0), None], $model.u1max),
+        const THRESHOLDS: &[Variable<PiezoControllerFmu>] = &[
+            piezo_fmu_tables::fixed_parameter!(PiezoControllerFmu, concat!($prefix, ".c"),
+                concat!($who, ": scale c of the dead-zone thresholds d = c·[0,1,3,5,7,9], > 0 (Guo et al. eq. 5)"),
+                "um", InversePiParams::THRESHOLD_SCALE, $model.c),
+            piezo_fmu_tables::fixed_parameter!(PiezoControllerFmu, concat!($prefix, ".u1max"),
+                concat!($who, ": u1max, scale of the backlash thresholds r = [0,…,6.5]·u1max/10, > 0 (Guo et al. eq. 5)"),
+                "um", InversePiParams::THRESHOLD_SCALE, $model.u1max),
         ];
-        fmi2_cosim::variables::concat::<PiezoControllerFmu, 32>(
-            &[&K, &B, &WS, &THRESHOLDS, &A1, &A2, &A3, &A4],
-        )
+        const BLOCKS: &[&[Variable<PiezoControllerFmu>]] = &[K, B, WS, THRESHOLDS, A1, A2, A3, A4];
+        fmi2_cosim::variables::concat::<PiezoControllerFmu, { piezo_fmu_tables::total_len(BLOCKS) }>(BLOCKS)
     }};
 }
 
-/// One fixed parameter `<prefix>.<name>` at `params.bouc_wen.<model>.<field>`.
-macro_rules! bouc_wen_parameter {
-    ($prefix:literal, $model:ident, $name:literal, $field:ident, $description:expr, $unit:literal, [$min:expr, $max:expr]) => {
-        Variable::real_parameter(
-            concat!($prefix, ".", $name),
-            $description,
-            $unit,
-            Variability::Fixed,
-            |m: &PiezoControllerFmu| m.params.bouc_wen.$model.$field,
-            |m: &mut PiezoControllerFmu, v: f64| m.params.bouc_wen.$model.$field = v,
-        )
-        .range($min, $max)
-        .model_path(concat!(
-            "bouc_wen.",
-            stringify!($model),
-            ".",
-            stringify!($field)
-        ))
-    };
-}
+/// Which feedforward model and which decoupling law the controller runs.
+const MODEL_SELECTORS: &[Variable<PiezoControllerFmu>] = &[
+    Variable::<PiezoControllerFmu>::integer_parameter(
+        "hysteresis_model",
+        "Feedforward model: 1 = modified inverse Prandtl-Ishlinskii (Guo et al. eq. 3-5), 2 = inverse asymmetric Bouc-Wen (ABW-XY eq. 6)",
+        Variability::Fixed,
+        |m| m.selector_codes[0],
+        |m, v| m.selector_codes[0] = v,
+    )
+    .integer_range(Some(1), Some(2))
+    .model_path("hysteresis_model"),
+    Variable::<PiezoControllerFmu>::integer_parameter(
+        "decoupling_model",
+        "Decoupling law applied when decoupling is on: 1 = piecewise-linear compensations D1..D4 (Guo et al. eq. 11-12), 2 = model-based, from the coupling models H_XY, H_YX (ABW-XY eq. 7-16)",
+        Variability::Fixed,
+        |m| m.selector_codes[1],
+        |m, v| m.selector_codes[1] = v,
+    )
+    .integer_range(Some(1), Some(2))
+    .model_path("decoupling_model"),
+];
 
-/// The seven parameters of one of seed 001's asymmetric Bouc-Wen models
-/// (eq. 3-4; u the channel command [V], y and h [µm]).
-macro_rules! bouc_wen_parameters {
-    ($prefix:literal, $model:ident, $who:literal) => {
-        [
-            bouc_wen_parameter!($prefix, $model, "p", p,
-                concat!($who, ": p, linear gain of the command in the output y = p·u + q·h (seed 001 eq. 4)"),
-                "um/V", [None, None]),
-            bouc_wen_parameter!($prefix, $model, "q", q,
-                concat!($who, ": q, weight of the hysteretic state h in the output (seed 001 eq. 4)"),
-                "", [None, None]),
-            bouc_wen_parameter!($prefix, $model, "A", a,
-                concat!($who, ": A, input gain of the hysteretic state (seed 001 eq. 3)"),
-                "um/V", [None, None]),
-            bouc_wen_parameter!($prefix, $model, "beta", beta,
-                concat!($who, ": beta, direction-dependent shape coefficient [um^(1-n)/V] (seed 001 eq. 3)"),
-                "", [None, None]),
-            bouc_wen_parameter!($prefix, $model, "gamma", gamma,
-                concat!($who, ": gamma, direction-independent shape coefficient [um^(1-n)/V] (seed 001 eq. 3)"),
-                "", [None, None]),
-            bouc_wen_parameter!($prefix, $model, "n", n,
-                concat!($who, ": n, sharpness of the branch transitions, n >= 1 (seed 001 eq. 3)"),
-                "", [Some(1.0), None]),
-            bouc_wen_parameter!($prefix, $model, "delta", delta,
-                concat!($who, ": delta, asymmetry coefficient, read rate-independently as delta·u·du/dt (seed 001 eq. 3)"),
-                "um/V2", [None, None]),
-        ]
-    };
+// The four Bouc-Wen models of the inverse Bouc-Wen feedforward and the
+// model-based decoupling (seed 001 eq. 3-16).
+piezo_fmu_tables::bouc_wen_blocks! {
+    PiezoControllerFmu;
+    BOUC_WEN_X = ("bouc_wen.x", "H_XX, Bouc-Wen model of each x-pair channel (PZT2, PZT3) to x", bouc_wen.x);
+    BOUC_WEN_Y = ("bouc_wen.y", "H_YY, Bouc-Wen model of PZT1's channel to y", bouc_wen.y);
+    BOUC_WEN_X_FROM_Y = ("bouc_wen.x_from_y", "H_XY, coupling of PZT1's channel into x", bouc_wen.x_from_y);
+    BOUC_WEN_Y_FROM_X = ("bouc_wen.y_from_x", "H_YX, coupling of the x pair's mean command into y", bouc_wen.y_from_x);
 }
-
-/// Seed 001's feedforward and decoupling: the two selectors and the four
-/// Bouc-Wen models.
-const SEED_001: [Variable<PiezoControllerFmu>; 30] = fmi2_cosim::variables::concat(&[
-    &[
-        Variable::<PiezoControllerFmu>::integer_parameter(
-            "hysteresis_model",
-            "Feedforward model: 1 = seed 000's modified inverse P-I (eq. 3-5), 2 = seed 001's inverse Bouc-Wen (eq. 6)",
-            Variability::Fixed,
-            |m| m.selector_codes[0],
-            |m, v| m.selector_codes[0] = v,
-        )
-        .integer_range(Some(1), Some(2))
-        .model_path("hysteresis_model"),
-        Variable::<PiezoControllerFmu>::integer_parameter(
-            "decoupling_model",
-            "Decoupling law applied when decoupling is on: 1 = seed 000's piecewise-linear D1..D4 (eq. 11-12), 2 = seed 001's model-based H_XY, H_YX (eq. 7-16)",
-            Variability::Fixed,
-            |m| m.selector_codes[1],
-            |m, v| m.selector_codes[1] = v,
-        )
-        .integer_range(Some(1), Some(2))
-        .model_path("decoupling_model"),
-    ],
-    &bouc_wen_parameters!("bouc_wen.x", x, "H_XX, Bouc-Wen model of each x-pair channel (PZT2, PZT3) to x"),
-    &bouc_wen_parameters!("bouc_wen.y", y, "H_YY, Bouc-Wen model of PZT1's channel to y"),
-    &bouc_wen_parameters!("bouc_wen.x_from_y", x_from_y, "H_XY, coupling of PZT1's channel into x"),
-    &bouc_wen_parameters!("bouc_wen.y_from_x", y_from_x, "H_YX, coupling of the x pair's mean command into y"),
-]);
 
 /// Inputs and outputs: the names users wire.
-const PORTS: [Variable<PiezoControllerFmu>; 22] = [
+const PORTS: &[Variable<PiezoControllerFmu>] = &[
     Variable::real_input(
         "x_ref",
         "Demanded x of the platform",
@@ -431,7 +352,7 @@ const PORTS: [Variable<PiezoControllerFmu>; 22] = [
     ),
     output!(
         "u1_ff",
-        "Feedforward part of u1: the inverse hysteresis model of y (seed 000 eq. 3 or seed 001 eq. 6)",
+        "Feedforward part of u1: the inverse hysteresis model of y (Guo et al. eq. 3 or ABW-XY eq. 6)",
         "V",
         feedforward[0]
     ),
@@ -449,7 +370,7 @@ const PORTS: [Variable<PiezoControllerFmu>; 22] = [
     ),
     output!(
         "u1_fb",
-        "Feedback part of u1: the y PI law (seed 000 eq. 10)",
+        "Feedback part of u1: the y PI law (Guo et al. eq. 10)",
         "V",
         feedback[0]
     ),
@@ -476,32 +397,32 @@ const PORTS: [Variable<PiezoControllerFmu>; 22] = [
     .display_unit("deg"),
     output!(
         "x_r2",
-        "Input of PZT2's inverse model after decoupling, x_d2 + D1 (seed 000 eq. 11)",
+        "Input of PZT2's inverse model after decoupling, x_d2 + D1 (Guo et al. eq. 11)",
         "um",
         decoupled.x_r2
     ),
     output!(
         "x_r3",
-        "Input of PZT3's inverse model after decoupling, x_d3 + D2 (seed 000 eq. 11)",
+        "Input of PZT3's inverse model after decoupling, x_d3 + D2 (Guo et al. eq. 11)",
         "um",
         decoupled.x_r3
     ),
     output!(
         "y_rx",
-        "y reference compensated for x, y_d + D3 (seed 000 eq. 11)",
+        "y reference compensated for x, y_d + D3 (Guo et al. eq. 11)",
         "um",
         decoupled.y_rx
     ),
     output!(
         "y_rtheta",
-        "y reference compensated for rotation, y_d + D4 (seed 000 eq. 11)",
+        "y reference compensated for rotation, y_d + D4 (Guo et al. eq. 11)",
         "um",
         decoupled.y_rtheta
     ),
 ];
 
 /// Switches, gains, geometry and command range.
-const SETTINGS: [Variable<PiezoControllerFmu>; 12] = [
+const SETTINGS: &[Variable<PiezoControllerFmu>] = &[
     switch!(
         "feedforward",
         "Apply the inverse hysteresis feedforward (hysteresis_model selects it)",
@@ -514,88 +435,150 @@ const SETTINGS: [Variable<PiezoControllerFmu>; 12] = [
     ),
     switch!(
         "feedback_x",
-        "Close the x PI loop (seed 000 eq. 10)",
+        "Close the x PI loop (Guo et al. eq. 10)",
         feedback_x
     ),
     switch!(
         "feedback_y",
-        "Close the y PI loop (seed 000 eq. 10)",
+        "Close the y PI loop (Guo et al. eq. 10)",
         feedback_y
     ),
     switch!(
         "feedback_theta",
-        "Close the theta_z PI loop (seed 000 eq. 10)",
+        "Close the theta_z PI loop (Guo et al. eq. 10)",
         feedback_theta
     ),
-    parameter!(tunable "translation.kp",
-        "Proportional gain of the x and y PI laws (seed 000 §3.2: 0.05)",
-        "V/um", [Some(0.0), None], translation_gains.kp),
-    parameter!(tunable "translation.ki",
-        "Integral gain of the x and y PI laws (seed 000 §3.2: 50)",
-        "V/(um.s)", [Some(0.0), None], translation_gains.ki),
-    parameter!(tunable "rotation.kp",
-        "Proportional gain of the theta_z PI law, on the differential error e_theta·L/2 (seed 000 §3.2: 0.06)",
-        "V/um", [Some(0.0), None], rotation_gains.kp),
-    parameter!(tunable "rotation.ki",
-        "Integral gain of the theta_z PI law, on e_theta·L/2 (seed 000 §3.2: 70)",
-        "V/(um.s)", [Some(0.0), None], rotation_gains.ki),
-    parameter!(fixed "L",
-        "Distance between the x sensors s2 and s3 (and PZT2, PZT3): theta_z = (s2 − s3)/L",
-        "mm", [Some(0.0), None], sensor_spacing_mm),
-    parameter!(fixed "command_min",
+    tunable_parameter!(
+        "translation.kp",
+        "Proportional gain of the x and y PI laws (Guo et al. §3.2: 0.05)",
+        "V/um",
+        PiGains::GAIN,
+        translation_gains.kp
+    ),
+    tunable_parameter!(
+        "translation.ki",
+        "Integral gain of the x and y PI laws (Guo et al. §3.2: 50)",
+        "V/(um.s)",
+        PiGains::GAIN,
+        translation_gains.ki
+    ),
+    tunable_parameter!(
+        "rotation.kp",
+        "Proportional gain of the theta_z PI law, on the differential error e_theta·L/2 (Guo et al. §3.2: 0.06)",
+        "V/um",
+        PiGains::GAIN,
+        rotation_gains.kp
+    ),
+    tunable_parameter!(
+        "rotation.ki",
+        "Integral gain of the theta_z PI law, on e_theta·L/2 (Guo et al. §3.2: 70)",
+        "V/(um.s)",
+        PiGains::GAIN,
+        rotation_gains.ki
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "L",
+        "Distance between the x sensors s2 and s3 (and PZT2, PZT3): theta_z = (s2 − s3)/L, > 0",
+        "mm",
+        ControllerParams::SENSOR_SPACING_MM,
+        sensor_spacing_mm
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "command_min",
         "Lowest command of every channel (PI's recommended E-505 input: -2 V, -20 V at the stack)",
-        "V", [None, None], command_min),
-    parameter!(fixed "command_max",
+        "V",
+        Range::FINITE,
+        command_min
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "command_max",
         "Highest command of every channel (PI's recommended E-505 input: 12 V, 120 V at the stack)",
-        "V", [None, None], command_max),
+        "V",
+        Range::FINITE,
+        command_max
+    ),
 ];
 
-const X_MODEL: [Variable<PiezoControllerFmu>; 32] =
-    inverse_pi_parameters!("x", "Inverse P-I model of the x pair (PZT2, PZT3)", x_model);
+const X_MODEL: &[Variable<PiezoControllerFmu>] =
+    &inverse_pi_parameters!("x", "Inverse P-I model of the x pair (PZT2, PZT3)", x_model);
 
-const Y_MODEL: [Variable<PiezoControllerFmu>; 32] =
-    inverse_pi_parameters!("y", "Inverse P-I model of y (PZT1)", y_model);
+const Y_MODEL: &[Variable<PiezoControllerFmu>] =
+    &inverse_pi_parameters!("y", "Inverse P-I model of y (PZT1)", y_model);
 
-/// Δk, Δb, p, q of the four compensations D_i (seed 000 eq. 11, Table 2).
-const DECOUPLING: [Variable<PiezoControllerFmu>; 16] = fmi2_cosim::variables::concat(&[
-    &indexed!("decoupling", dk,
-        "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um], D4 on theta_zd [um/mdeg] (seed 000 eq. 11)",
-        "", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
-    &indexed!("decoupling", db,
-        "Offset Δb_i of compensation D_i (seed 000 eq. 11)",
-        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
-    &indexed!("decoupling", p,
-        "Upper cutoff p_i of compensation D_i (seed 000 eq. 11)",
-        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
-    &indexed!("decoupling", q,
-        "Lower cutoff q_i of compensation D_i (seed 000 eq. 11)",
-        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3),
-]);
+// Δk, Δb, p, q of the four compensations D_i (seed 000 eq. 11, Table 2).
+const DECOUPLING_DK: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling", dk,
+        "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um], D4 on theta_zd [um/mdeg] (Guo et al. eq. 11)",
+        "", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
+const DECOUPLING_DB: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling", db,
+        "Offset Δb_i of compensation D_i (Guo et al. eq. 11)",
+        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
+const DECOUPLING_P: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling", p,
+        "Upper cutoff p_i of compensation D_i (Guo et al. eq. 11)",
+        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
+const DECOUPLING_Q: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling", q,
+        "Lower cutoff q_i of compensation D_i (Guo et al. eq. 11)",
+        "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
 
 /// The rest the models start from, added after the first release: appended
 /// so that the value references of everything above stay as they were.
-const RESTS: [Variable<PiezoControllerFmu>; 3] = [
-    parameter!(fixed "x.rest_cycle",
+const RESTS: &[Variable<PiezoControllerFmu>] = &[
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "x.rest_cycle",
         "Inverse P-I model of the x pair: its memories start where a demand 0 → rest_cycle → 0 leaves them, the loop an operated actuator rests on (0: eq. 1's zero memories)",
-        "um", [Some(0.0), None], x_model.rest_cycle),
-    parameter!(fixed "y.rest_cycle",
+        "um",
+        InversePiParams::REST_CYCLE,
+        x_model.rest_cycle
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "y.rest_cycle",
         "Inverse P-I model of y: its memories start where a demand 0 → rest_cycle → 0 leaves them (0: eq. 1's zero memories)",
-        "um", [Some(0.0), None], y_model.rest_cycle),
-    parameter!(fixed "bouc_wen.rest_cycle",
-        "Seed 001's Bouc-Wen models start at the 0 V end of their loop between 0 and this command, where an operated actuator rests (0: h = 0)",
-        "V", [Some(0.0), None], bouc_wen.rest_cycle),
+        "um",
+        InversePiParams::REST_CYCLE,
+        y_model.rest_cycle
+    ),
+    piezo_fmu_tables::fixed_parameter!(
+        PiezoControllerFmu,
+        "bouc_wen.rest_cycle",
+        "The Bouc-Wen models (ABW-XY) start at the 0 V end of their loop between 0 and this command, where an operated actuator rests (0: h = 0)",
+        "V",
+        BoucWenModels::REST_CYCLE,
+        bouc_wen.rest_cycle
+    ),
+];
+
+/// The blocks of the table, in value-reference order.
+///
+/// APPEND ONLY. A variable's value reference is its position in this table,
+/// and importers keep value references (saved models, SSP parameter sets,
+/// compiled wiring): a new variable goes at the end (a new block after the
+/// last), never between existing ones, and no variable is removed or moved.
+/// `valueReferences.txt` beside this crate records every name's reference
+/// and a test fails when an existing one changes.
+const BLOCKS: &[&[Variable<PiezoControllerFmu>]] = &[
+    PORTS,
+    SETTINGS,
+    X_MODEL,
+    Y_MODEL,
+    DECOUPLING_DK,
+    DECOUPLING_DB,
+    DECOUPLING_P,
+    DECOUPLING_Q,
+    MODEL_SELECTORS,
+    BOUC_WEN_X,
+    BOUC_WEN_Y,
+    BOUC_WEN_X_FROM_Y,
+    BOUC_WEN_Y_FROM_X,
+    RESTS,
 ];
 
 /// Every variable, in value-reference order.
-static VARIABLES: [Variable<PiezoControllerFmu>; 147] = fmi2_cosim::variables::concat(&[
-    &PORTS,
-    &SETTINGS,
-    &X_MODEL,
-    &Y_MODEL,
-    &DECOUPLING,
-    &SEED_001,
-    &RESTS,
-]);
+static VARIABLES: [Variable<PiezoControllerFmu>; piezo_fmu_tables::total_len(BLOCKS)] =
+    fmi2_cosim::variables::concat(BLOCKS);
 
 /// Whether every value is finite: x·0 is ±0 for a finite x and NaN for an
 /// infinite or NaN one, and a sum with a NaN in it is NaN. Summed in two
@@ -655,23 +638,16 @@ impl PiezoControllerFmu {
     }
 }
 
-/// The FMI name of the parameter the model calls `path` (its serde path).
-fn fmi_name(path: &str) -> Option<&'static str> {
-    VARIABLES
-        .iter()
-        .find(|v| v.model_path.is_some_and(|p| p.replace(' ', "") == path))
-        .map(|v| v.name)
-}
-
 impl CoSimModel for PiezoControllerFmu {
     const INFO: ModelInfo = ModelInfo {
         model_identifier: "PiezoController",
         model_name: "PiezoController",
         description: "Controller of the 3-DOF piezo flexure stage: modified inverse \
-                      Prandtl-Ishlinskii (seed 000) or inverse Bouc-Wen (seed 001) \
-                      feedforward, PI feedback, piecewise-linear (seed 000) or model-based \
-                      (seed 001) decoupling; Co-Simulation only: a sampled controller has no \
-                      continuous states for an importer's integrator",
+                      Prandtl-Ishlinskii (Guo et al.) or inverse asymmetric Bouc-Wen (ABW-XY) \
+                      feedforward, PI feedback, piecewise-linear (Guo et al.) or model-based \
+                      (ABW-XY) decoupling; Co-Simulation only: a sampled controller has no \
+                      continuous states for an importer's integrator; references in \
+                      documentation/index.html",
         author: "piezo-fmu project",
         version: env!("CARGO_PKG_VERSION"),
         license: "MIT OR Apache-2.0",
@@ -776,11 +752,7 @@ impl CoSimModel for PiezoControllerFmu {
 
 /// A parameter piezo-models refuses, named as the importer knows it.
 fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
-    let name = fmi_name(&e.parameter).unwrap_or("a parameter");
-    ModelError(format!(
-        "parameter {name} ({}) = {} is not allowed: {}",
-        e.parameter, e.value, e.allowed
-    ))
+    piezo_fmu_tables::refused_parameter(&VARIABLES, &e)
 }
 
 impl PiezoControllerFmu {

@@ -14,7 +14,10 @@ use fmi2_cosim::{
     Variable, units,
 };
 use piezo_models::flexure_stage::ode::{self, NUMBER_OF_STATES};
-use piezo_models::{FlexureStage, FlexureStageParams};
+use piezo_models::{
+    ActuatorParams, AmplifierParams, FlexureStage, FlexureStageParams, ModeParams, Range,
+    SensorNoiseParams, SolverParams,
+};
 use serde::{Deserialize, Serialize};
 
 /// The FMU's model: the parameters the importer sets, the held input
@@ -110,19 +113,7 @@ const UNITS: &[UnitDefinition] = &[
     units::RADIAN,
     units::HERTZ,
     units::SECOND,
-    // µm per volt: m / (kg m² s⁻³ A⁻¹)
-    UnitDefinition {
-        name: "um/V",
-        base: BaseUnit {
-            kg: -1,
-            m: -1,
-            s: 3,
-            a: 1,
-            factor: 1e-6,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
+    piezo_fmu_tables::MICROMETRE_PER_VOLT,
     // Rates of the continuous states (Model Exchange).
     UnitDefinition {
         name: "V/s",
@@ -173,69 +164,11 @@ const UNITS: &[UnitDefinition] = &[
         },
         display_units: &[],
     },
-    UnitDefinition {
-        name: "um/V2",
-        base: BaseUnit {
-            kg: -2,
-            m: -3,
-            s: 6,
-            a: 2,
-            factor: 1e-6,
-            ..BaseUnit::NONE
-        },
-        display_units: &[],
-    },
+    piezo_fmu_tables::MICROMETRE_PER_VOLT_SQUARED,
 ];
 
-/// A fixed Real parameter whose value lives at `params.<path>`.
-macro_rules! parameter {
-    ($name:expr, $description:expr, $unit:literal, [$min:expr, $max:expr], $($path:tt)+) => {
-        Variable::real_parameter(
-            $name,
-            $description,
-            $unit,
-            Variability::Fixed,
-            |m: &FlexureStageFmu| m.params.$($path)+,
-            |m: &mut FlexureStageFmu, v: f64| m.params.$($path)+ = v,
-        )
-        .range($min, $max)
-        .model_path(stringify!($($path)+))
-    };
-}
-
-/// The seven parameters of one asymmetric Bouc-Wen model (seed 001 eq. (3)-(4)),
-/// `y = p·u + q·h`, `dh/du = A − β·sgn(u̇)·|h|^(n−1)·h − γ·|h|^n + δ·u`, as
-/// an array of table entries.
-macro_rules! bouc_wen_parameters {
-    ($prefix:literal, $who:literal, $($path:tt)+) => {
-        [
-            parameter!(concat!($prefix, ".p"),
-                concat!($who, ": gain p of the input in y = p·u + q·h (seed 001 eq. 4)"),
-                "um/V", [None, None], $($path)+ .p),
-            parameter!(concat!($prefix, ".q"),
-                concat!($who, ": gain q of the hysteretic state h in y = p·u + q·h (seed 001 eq. 4)"),
-                "", [None, None], $($path)+ .q),
-            parameter!(concat!($prefix, ".A"),
-                concat!($who, ": A, growth of h per volt (seed 001 eq. 3)"),
-                "um/V", [None, None], $($path)+ .a),
-            parameter!(concat!($prefix, ".beta"),
-                concat!($who, ": beta, dissipative term (seed 001 eq. 3) [um^(1-n)/V]"),
-                "", [None, None], $($path)+ .beta),
-            parameter!(concat!($prefix, ".gamma"),
-                concat!($who, ": gamma, shape term (seed 001 eq. 3) [um^(1-n)/V]"),
-                "", [None, None], $($path)+ .gamma),
-            parameter!(concat!($prefix, ".n"),
-                concat!($who, ": exponent n (seed 001 eq. 3)"),
-                "", [Some(1.0), None], $($path)+ .n),
-            parameter!(concat!($prefix, ".delta"),
-                concat!($who, ": asymmetry delta, read as delta·u·du/dt (seed 001 eq. 3)"),
-                "um/V2", [None, None], $($path)+ .delta),
-        ]
-    };
-}
-
 /// Ports first (the names users wire), then diagnostics.
-const PORTS: [Variable<FlexureStageFmu>; 12] = [
+const PORTS: &[Variable<FlexureStageFmu>] = &[
     Variable::real_input(
         "u1",
         "Command voltage of the PZT1 amplifier channel (drives y), 0..10 V for 0..100 V (-3..13 V accepted)",
@@ -313,169 +246,166 @@ const PORTS: [Variable<FlexureStageFmu>; 12] = [
     ),
 ];
 
-const AMPLIFIER: [Variable<FlexureStageFmu>; 4] = [
-    parameter!(
+const AMPLIFIER: &[Variable<FlexureStageFmu>] = &[
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.gain",
-        "Amplifier voltage gain (seed 000 §2: 10)",
+        "Amplifier voltage gain, > 0 (Guo et al. §2: 10)",
         "",
-        [Some(0.0), None],
+        AmplifierParams::GAIN,
         amplifier.gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.bandwidth",
-        "Amplifier first-order bandwidth",
+        "Amplifier first-order bandwidth, > 0",
         "Hz",
-        [Some(0.0), None],
+        AmplifierParams::BANDWIDTH_HZ,
         amplifier.bandwidth_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.v_min",
         "Lowest amplifier output voltage (PI E-505: -30 V)",
         "V",
-        [None, None],
+        Range::FINITE,
         amplifier.v_min
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.v_max",
         "Highest amplifier output voltage (PI E-505: 130 V)",
         "V",
-        [None, None],
+        Range::FINITE,
         amplifier.v_max
     ),
 ];
 
-const PZT1_HYSTERESIS: [Variable<FlexureStageFmu>; 7] =
-    bouc_wen_parameters!("pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
-
-const PZT1_CREEP: [Variable<FlexureStageFmu>; 2] = [
-    parameter!(
+const PZT1_CREEP: &[Variable<FlexureStageFmu>] = &[
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[1].creep_gain",
         "PZT1 creep: steady drift per volt",
         "um/V",
-        [Some(0.0), None],
+        ActuatorParams::CREEP_GAIN,
         actuators[0].creep_gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[1].creep_time",
-        "PZT1 creep time constant",
+        "PZT1 creep time constant, > 0 and more than 10 amplifier time constants",
         "s",
-        [Some(0.0), None],
+        ActuatorParams::CREEP_TIME,
         actuators[0].creep_time
     ),
 ];
 
-const PZT2_HYSTERESIS: [Variable<FlexureStageFmu>; 7] =
-    bouc_wen_parameters!("pzt[2]", "PZT2 hysteresis", actuators[1].hysteresis);
-
-const PZT2_CREEP: [Variable<FlexureStageFmu>; 2] = [
-    parameter!(
+const PZT2_CREEP: &[Variable<FlexureStageFmu>] = &[
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[2].creep_gain",
         "PZT2 creep: steady drift per volt",
         "um/V",
-        [Some(0.0), None],
+        ActuatorParams::CREEP_GAIN,
         actuators[1].creep_gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[2].creep_time",
-        "PZT2 creep time constant",
+        "PZT2 creep time constant, > 0 and more than 10 amplifier time constants",
         "s",
-        [Some(0.0), None],
+        ActuatorParams::CREEP_TIME,
         actuators[1].creep_time
     ),
 ];
 
-const PZT3_HYSTERESIS: [Variable<FlexureStageFmu>; 7] =
-    bouc_wen_parameters!("pzt[3]", "PZT3 hysteresis", actuators[2].hysteresis);
-
-const PZT3_CREEP: [Variable<FlexureStageFmu>; 2] = [
-    parameter!(
+const PZT3_CREEP: &[Variable<FlexureStageFmu>] = &[
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[3].creep_gain",
         "PZT3 creep: steady drift per volt",
         "um/V",
-        [Some(0.0), None],
+        ActuatorParams::CREEP_GAIN,
         actuators[2].creep_gain
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "pzt[3].creep_time",
-        "PZT3 creep time constant",
+        "PZT3 creep time constant, > 0 and more than 10 amplifier time constants",
         "s",
-        [Some(0.0), None],
+        ActuatorParams::CREEP_TIME,
         actuators[2].creep_time
     ),
 ];
 
-const COUPLING_X_FROM_PZT1_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
-    "coupling.x_from_pzt1",
-    "Coupling PZT1 voltage -> x",
-    coupling.x_from_pzt1
-);
+// The actuators' hysteresis and the coupled hysteresis (seed 001 eq. 3-4,
+// 7-8); their value references follow BLOCKS' order, not this one.
+piezo_fmu_tables::bouc_wen_blocks! {
+    FlexureStageFmu;
+    PZT1_HYSTERESIS = ("pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
+    PZT2_HYSTERESIS = ("pzt[2]", "PZT2 hysteresis", actuators[1].hysteresis);
+    PZT3_HYSTERESIS = ("pzt[3]", "PZT3 hysteresis", actuators[2].hysteresis);
+    COUPLING_X_FROM_PZT1_HYSTERESIS = ("coupling.x_from_pzt1", "Coupling PZT1 voltage -> x", coupling.x_from_pzt1);
+    COUPLING_ROT_FROM_PZT1_HYSTERESIS = ("coupling.rot_from_pzt1", "Coupling PZT1 voltage -> s2 − s3 (rotation)", coupling.rot_from_pzt1);
+    COUPLING_Y_FROM_PZT2_HYSTERESIS = ("coupling.y_from_pzt2", "Coupling PZT2 voltage -> y", coupling.y_from_pzt2);
+    COUPLING_Y_FROM_PZT3_HYSTERESIS = ("coupling.y_from_pzt3", "Coupling PZT3 voltage -> y", coupling.y_from_pzt3);
+}
 
-const COUPLING_ROT_FROM_PZT1_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
-    "coupling.rot_from_pzt1",
-    "Coupling PZT1 voltage -> s2 − s3 (rotation)",
-    coupling.rot_from_pzt1
-);
-
-const COUPLING_Y_FROM_PZT2_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
-    "coupling.y_from_pzt2",
-    "Coupling PZT2 voltage -> y",
-    coupling.y_from_pzt2
-);
-
-const COUPLING_Y_FROM_PZT3_HYSTERESIS: [Variable<FlexureStageFmu>; 7] = bouc_wen_parameters!(
-    "coupling.y_from_pzt3",
-    "Coupling PZT3 voltage -> y",
-    coupling.y_from_pzt3
-);
-
-const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
-    parameter!(
+const STRUCTURE_SENSORS_SOLVER: &[Variable<FlexureStageFmu>] = &[
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.x.frequency",
-        "Natural frequency of the x mode",
+        "Natural frequency of the x mode, > 0",
         "Hz",
-        [Some(0.0), None],
+        ModeParams::FREQUENCY_HZ,
         modes.x.frequency_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.x.damping",
-        "Damping ratio of the x mode",
+        "Damping ratio of the x mode, 0 < zeta < 1",
         "",
-        [Some(0.0), Some(1.0)],
+        ModeParams::DAMPING_RATIO,
         modes.x.damping_ratio
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.y.frequency",
-        "Natural frequency of the y mode",
+        "Natural frequency of the y mode, > 0",
         "Hz",
-        [Some(0.0), None],
+        ModeParams::FREQUENCY_HZ,
         modes.y.frequency_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.y.damping",
-        "Damping ratio of the y mode",
+        "Damping ratio of the y mode, 0 < zeta < 1",
         "",
-        [Some(0.0), Some(1.0)],
+        ModeParams::DAMPING_RATIO,
         modes.y.damping_ratio
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.theta.frequency",
-        "Natural frequency of the theta_z mode, the first mode (seed 000 §2: 790 Hz)",
+        "Natural frequency of the theta_z mode, the first mode, > 0 (Guo et al. §2: 790 Hz)",
         "Hz",
-        [Some(0.0), None],
+        ModeParams::FREQUENCY_HZ,
         modes.theta.frequency_hz
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "mode.theta.damping",
-        "Damping ratio of the theta_z mode",
+        "Damping ratio of the theta_z mode, 0 < zeta < 1",
         "",
-        [Some(0.0), Some(1.0)],
+        ModeParams::DAMPING_RATIO,
         modes.theta.damping_ratio
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "L",
-        "Distance between the x sensors s2 and s3: theta_z = (s2 − s3)/L",
+        "Distance between the x sensors s2 and s3: theta_z = (s2 − s3)/L, > 0",
         "mm",
-        [Some(0.0), None],
+        FlexureStageParams::SENSOR_SPACING_MM,
         sensor_spacing_mm
     ),
     Variable::<FlexureStageFmu>::boolean_parameter(
@@ -486,11 +416,12 @@ const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
         |m, v| m.params.noise.enabled = v,
     )
     .model_path("noise.enabled"),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "noise.rms",
         "Sensor noise RMS per reading (Keyence LK-H050: repeatability 0.025 um as a 99 % band)",
         "um",
-        [Some(0.0), None],
+        SensorNoiseParams::RMS_UM,
         noise.rms_um
     ),
     Variable::<FlexureStageFmu>::integer_parameter(
@@ -502,11 +433,12 @@ const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
     )
     .integer_range(Some(0), None)
     .model_path("noise.seed"),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "solver.max_voltage_step",
         "Largest amplifier-voltage change per integration piece (bounds the hysteresis chord error)",
         "V",
-        [Some(1e-4), Some(10.0)],
+        SolverParams::MAX_VOLTAGE_STEP,
         solver.max_voltage_step
     ),
 ];
@@ -514,50 +446,53 @@ const STRUCTURE_SENSORS_SOLVER: [Variable<FlexureStageFmu>; 11] = [
 /// The amplifier's input range and the actuators' rest, added after the
 /// first release: appended so that the value references of everything above
 /// stay as they were.
-const APPENDED: [Variable<FlexureStageFmu>; 3] = [
-    parameter!(
+const APPENDED: &[Variable<FlexureStageFmu>] = &[
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.input_min",
         "Lowest control input the amplifier follows (PI E-505: -3 V)",
         "V",
-        [None, None],
+        Range::FINITE,
         amplifier.input_min
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "amplifier.input_max",
         "Highest control input the amplifier follows (PI E-505: 13 V)",
         "V",
-        [None, None],
+        Range::FINITE,
         amplifier.input_max
     ),
-    parameter!(
+    piezo_fmu_tables::fixed_parameter!(
+        FlexureStageFmu,
         "rest_cycle_voltage",
         "Working loop of the stacks that sets the rest the stage starts from: each hysteresis \
          model starts at the 0 V end of its loop to this voltage, readings zeroed there (0: virgin \
          state)",
         "V",
-        [Some(0.0), None],
+        FlexureStageParams::REST_CYCLE_VOLTAGE,
         rest_cycle_voltage
     ),
 ];
 
 /// The continuous states that are not ports, amplifier voltages or velocities
 /// (Model Exchange integrates them; Co-Simulation shows them as diagnostics).
-const STATES: [Variable<FlexureStageFmu>; 10] = [
+const STATES: &[Variable<FlexureStageFmu>] = &[
     Variable::real_local(
         "pzt[1].h",
-        "PZT1 hysteretic state h (seed 001 eq. 3)",
+        "PZT1 hysteretic state h (ABW-XY eq. 3)",
         "um",
         |m| m.stage.continuous_states()[3],
     ),
     Variable::real_local(
         "pzt[2].h",
-        "PZT2 hysteretic state h (seed 001 eq. 3)",
+        "PZT2 hysteretic state h (ABW-XY eq. 3)",
         "um",
         |m| m.stage.continuous_states()[4],
     ),
     Variable::real_local(
         "pzt[3].h",
-        "PZT3 hysteretic state h (seed 001 eq. 3)",
+        "PZT3 hysteretic state h (ABW-XY eq. 3)",
         "um",
         |m| m.stage.continuous_states()[5],
     ),
@@ -616,7 +551,7 @@ macro_rules! derivative {
 /// are states and the derivatives of x, y, theta_z (which start at rest, as
 /// every state does). Dependencies: what each rate is computed from
 /// (MODEL.md §2), checked numerically by the ABI tests.
-const DERIVATIVES: [Variable<FlexureStageFmu>; 19] = [
+const DERIVATIVES: &[Variable<FlexureStageFmu>] = &[
     derivative!(
         "amplifier.voltage[1]",
         "V/s",
@@ -774,34 +709,36 @@ const DERIVATIVES: [Variable<FlexureStageFmu>; 19] = [
     ),
 ];
 
-/// Every variable, in value-reference order.
-static VARIABLES: [Variable<FlexureStageFmu>; 114] = fmi2_cosim::variables::concat(&[
-    &PORTS,
-    &AMPLIFIER,
-    &PZT1_HYSTERESIS,
-    &PZT1_CREEP,
-    &PZT2_HYSTERESIS,
-    &PZT2_CREEP,
-    &PZT3_HYSTERESIS,
-    &PZT3_CREEP,
-    &COUPLING_X_FROM_PZT1_HYSTERESIS,
-    &COUPLING_ROT_FROM_PZT1_HYSTERESIS,
-    &COUPLING_Y_FROM_PZT2_HYSTERESIS,
-    &COUPLING_Y_FROM_PZT3_HYSTERESIS,
-    &STRUCTURE_SENSORS_SOLVER,
-    &APPENDED,
-    &STATES,
-    &DERIVATIVES,
-]);
+/// The blocks of the table, in value-reference order.
+///
+/// APPEND ONLY. A variable's value reference is its position in this table,
+/// and importers keep value references (saved models, SSP parameter sets,
+/// compiled wiring): a new variable goes at the end (a new block after the
+/// last), never between existing ones, and no variable is removed or moved.
+/// `valueReferences.txt` beside this crate records every name's reference
+/// and a test fails when an existing one changes.
+const BLOCKS: &[&[Variable<FlexureStageFmu>]] = &[
+    PORTS,
+    AMPLIFIER,
+    PZT1_HYSTERESIS,
+    PZT1_CREEP,
+    PZT2_HYSTERESIS,
+    PZT2_CREEP,
+    PZT3_HYSTERESIS,
+    PZT3_CREEP,
+    COUPLING_X_FROM_PZT1_HYSTERESIS,
+    COUPLING_ROT_FROM_PZT1_HYSTERESIS,
+    COUPLING_Y_FROM_PZT2_HYSTERESIS,
+    COUPLING_Y_FROM_PZT3_HYSTERESIS,
+    STRUCTURE_SENSORS_SOLVER,
+    APPENDED,
+    STATES,
+    DERIVATIVES,
+];
 
-/// The FMI name of the parameter the model calls `path` (its serde path, as in
-/// the JSON preset), through the table's `model_path`.
-fn fmi_name(path: &str) -> Option<&'static str> {
-    VARIABLES
-        .iter()
-        .find(|v| v.model_path.is_some_and(|p| p.replace(' ', "") == path))
-        .map(|v| v.name)
-}
+/// Every variable, in value-reference order.
+static VARIABLES: [Variable<FlexureStageFmu>; piezo_fmu_tables::total_len(BLOCKS)] =
+    fmi2_cosim::variables::concat(BLOCKS);
 
 impl CoSimModel for FlexureStageFmu {
     const INFO: ModelInfo = ModelInfo {
@@ -898,11 +835,7 @@ impl CoSimModel for FlexureStageFmu {
 
 /// A parameter piezo-models refuses, named as the importer knows it.
 fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
-    let name = fmi_name(&e.parameter).unwrap_or("a parameter");
-    ModelError(format!(
-        "parameter {name} ({}) = {} is not allowed: {}",
-        e.parameter, e.value, e.allowed
-    ))
+    piezo_fmu_tables::refused_parameter(&VARIABLES, &e)
 }
 
 impl FlexureStageFmu {

@@ -12,6 +12,7 @@
 //! output from −30 to 130 V. The stacks can be driven below their 0 V rest,
 //! which seed 000's own numbers need (MODEL.md §4 gives the sources).
 
+use crate::parameter::Range;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -35,6 +36,9 @@ pub struct AmplifierParams {
 }
 
 impl AmplifierParams {
+    pub const GAIN: Range = Range::POSITIVE;
+    pub const BANDWIDTH_HZ: Range = Range::POSITIVE;
+
     /// τ = 1/(2π f_a) [s].
     pub fn time_constant(&self) -> f64 {
         1.0 / (TAU * self.bandwidth_hz)

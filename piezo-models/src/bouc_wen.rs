@@ -26,6 +26,7 @@
 //! Units in this project: u in volts (actuator voltage, 0..100 V), y and h in µm;
 //! p [µm/V], q [1], A [µm/V], β and γ [µm^(1−n)/V], δ [µm/V²].
 
+use crate::parameter::{ParamError, Range, RealParameter};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the asymmetric Bouc-Wen model (seed 001 eq. (3)-(4)).
@@ -48,7 +49,116 @@ pub struct BoucWenParams {
     pub delta: f64,
 }
 
+/// The citation key of seed 001 in shipped descriptions ("A modified
+/// asymmetric Bouc-Wen model-based decoupling control of an XY
+/// piezoactuated compliant platform with coupled hysteresis
+/// characteristics"); the FMUs' documentation lists it in full.
+macro_rules! cite {
+    ($equation:literal) => {
+        concat!("(ABW-XY eq. ", $equation, ")")
+    };
+}
+
 impl BoucWenParams {
+    /// The seven parameters of eq. (3)-(4), in the order the FMUs list them:
+    /// field, symbol, unit, range and meaning, read by [`Self::validate`] and
+    /// by the FMUs' variable tables.
+    pub const PARAMETERS: [RealParameter<BoucWenParams>; 7] = [
+        RealParameter {
+            field: "p",
+            symbol: "p",
+            unit: "um/V",
+            range: Range::FINITE,
+            description: concat!(
+                "p, gain of the input u in the output y = p·u + q·h ",
+                cite!("4")
+            ),
+            get: |m| m.p,
+            set: |m, v| m.p = v,
+        },
+        RealParameter {
+            field: "q",
+            symbol: "q",
+            unit: "",
+            range: Range::FINITE,
+            description: concat!(
+                "q, weight of the hysteretic state h in the output y = p·u + q·h ",
+                cite!("4")
+            ),
+            get: |m| m.q,
+            set: |m, v| m.q = v,
+        },
+        RealParameter {
+            field: "a",
+            symbol: "A",
+            unit: "um/V",
+            range: Range::FINITE,
+            description: concat!(
+                "A, input gain of the hysteretic state (growth of h per volt) ",
+                cite!("3")
+            ),
+            get: |m| m.a,
+            set: |m, v| m.a = v,
+        },
+        RealParameter {
+            field: "beta",
+            symbol: "beta",
+            unit: "",
+            range: Range::FINITE,
+            description: concat!(
+                "beta, direction-dependent (dissipative) shape coefficient [um^(1-n)/V] ",
+                cite!("3")
+            ),
+            get: |m| m.beta,
+            set: |m, v| m.beta = v,
+        },
+        RealParameter {
+            field: "gamma",
+            symbol: "gamma",
+            unit: "",
+            range: Range::FINITE,
+            description: concat!(
+                "gamma, direction-independent shape coefficient [um^(1-n)/V] ",
+                cite!("3")
+            ),
+            get: |m| m.gamma,
+            set: |m, v| m.gamma = v,
+        },
+        // |h|^(n−1) must stay finite at h = 0.
+        RealParameter {
+            field: "n",
+            symbol: "n",
+            unit: "",
+            range: Range::at_least(1.0),
+            description: concat!(
+                "n, sharpness of the branch transitions, n >= 1 ",
+                cite!("3")
+            ),
+            get: |m| m.n,
+            set: |m, v| m.n = v,
+        },
+        RealParameter {
+            field: "delta",
+            symbol: "delta",
+            unit: "um/V2",
+            range: Range::FINITE,
+            description: concat!(
+                "delta, asymmetry coefficient, read rate-independently as delta·u·du/dt ",
+                cite!("3")
+            ),
+            get: |m| m.delta,
+            set: |m, v| m.delta = v,
+        },
+    ];
+
+    /// Checks every parameter against [`Self::PARAMETERS`]; `prefix` is the
+    /// serde path of this model in the error.
+    pub fn validate(&self, prefix: &str) -> Result<(), ParamError> {
+        Self::PARAMETERS
+            .iter()
+            .try_for_each(|parameter| parameter.check(prefix, self))
+    }
+
     /// dh/du of eq. (3) (this module's reading) at input `u`, state `h`, for
     /// an input moving in the direction of `direction` (its sign).
     pub fn state_slope(&self, u: f64, h: f64, direction: f64) -> f64 {

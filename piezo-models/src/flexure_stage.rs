@@ -26,10 +26,11 @@
 use crate::amplifier::{Amplifier, AmplifierParams};
 use crate::bouc_wen::{AsymmetricBoucWen, BoucWenParams};
 use crate::creep::{Creep, CreepPath};
-use crate::oscillator::{ModeSet, Oscillator, exponential_particular};
+use crate::oscillator::{ModeParams, ModeSet, Oscillator, exponential_particular};
+pub use crate::parameter::ParamError;
+use crate::parameter::{Bound, Range};
 use crate::sensor_noise::{SensorNoise, SensorNoiseParams};
 use serde::{Deserialize, Serialize};
-use std::fmt;
 
 /// The same stage as a system of ordinary differential equations in time, for
 /// integrators other than [`FlexureStage::step`] (FMI Model Exchange).
@@ -119,40 +120,12 @@ impl Default for FlexureStageParams {
     }
 }
 
-/// Smallest and largest accepted `solver.max_voltage_step` [V]. Below the
-/// lower bound a full 100 V swing would take more than 10⁶ pieces; above the
-/// upper one the single RK4 step per piece and the chord stop being accurate.
-const MAX_VOLTAGE_STEP_RANGE: (f64, f64) = (1e-4, 10.0);
-
 /// Most integration pieces one step takes. An actuator range of 200 V at the
 /// finest solver step (1e-4 V) needs 2e6; more only comes from parameters no
 /// stage has (a range of 1e10 V), for which the pieces then grow past
 /// `max_voltage_step`: the step's time (about a second) stays bounded,
 /// not its accuracy.
 const MAX_PIECES: f64 = 2_097_152.0;
-
-/// A parameter outside its allowed range.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ParamError {
-    /// Serde path of the parameter, e.g. "actuators[1].hysteresis.n".
-    pub parameter: String,
-    /// The offending value.
-    pub value: f64,
-    /// What is allowed, e.g. "n >= 1".
-    pub allowed: String,
-}
-
-impl fmt::Display for ParamError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "parameter {} = {} is out of range (allowed: {})",
-            self.parameter, self.value, self.allowed
-        )
-    }
-}
-
-impl std::error::Error for ParamError {}
 
 fn ensure(ok: bool, parameter: &str, value: f64, allowed: &str) -> Result<(), ParamError> {
     if ok {
@@ -166,54 +139,47 @@ fn ensure(ok: bool, parameter: &str, value: f64, allowed: &str) -> Result<(), Pa
     }
 }
 
-fn ensure_finite(parameter: &str, value: f64) -> Result<(), ParamError> {
-    ensure(value.is_finite(), parameter, value, "finite")
-}
-
-fn validate_bouc_wen(prefix: &str, p: &BoucWenParams) -> Result<(), ParamError> {
-    for (name, value) in [
-        ("p", p.p),
-        ("q", p.q),
-        ("a", p.a),
-        ("beta", p.beta),
-        ("gamma", p.gamma),
-        ("delta", p.delta),
-    ] {
-        ensure_finite(&format!("{prefix}.{name}"), value)?;
-    }
-    // |h|^(n−1) must stay finite at h = 0.
-    ensure(
-        p.n.is_finite() && p.n >= 1.0,
-        &format!("{prefix}.n"),
-        p.n,
-        "n >= 1 (finite)",
-    )
+impl ActuatorParams {
+    /// κ >= 0: creep extends the stack in the direction of the voltage.
+    pub const CREEP_GAIN: Range = Range::NON_NEGATIVE;
+    /// T > 0; the stage also needs T > 10 amplifier time constants
+    /// (checked with the amplifier, in [`FlexureStageParams::validate`]).
+    pub const CREEP_TIME: Range = Range::POSITIVE;
 }
 
 impl FlexureStageParams {
-    /// Checks every parameter; the first one out of range is reported.
+    /// 0: the virgin state; a working loop's amplitude otherwise.
+    pub const REST_CYCLE_VOLTAGE: Range = Range::NON_NEGATIVE;
+    pub const SENSOR_SPACING_MM: Range = Range::POSITIVE;
+}
+
+impl SolverParams {
+    /// Smallest and largest accepted `max_voltage_step` [V]. Below the lower
+    /// bound a full 100 V swing would take more than 10⁶ pieces; above the
+    /// upper one the single RK4 step per piece and the chord stop being
+    /// accurate.
+    pub const MAX_VOLTAGE_STEP: Range = Range {
+        min: Bound::Closed(1e-4),
+        max: Bound::Closed(10.0),
+    };
+}
+
+impl FlexureStageParams {
+    /// Checks every parameter against its declared range (the ranges the
+    /// FMU's variable table states), then the conditions between parameters;
+    /// the first one out of range is reported.
     pub fn validate(&self) -> Result<(), ParamError> {
         let amp = &self.amplifier;
-        ensure(
-            amp.gain.is_finite() && amp.gain > 0.0,
-            "amplifier.gain",
-            amp.gain,
-            "gain > 0 (finite)",
-        )?;
-        ensure(
-            amp.bandwidth_hz.is_finite() && amp.bandwidth_hz > 0.0,
-            "amplifier.bandwidth_hz",
-            amp.bandwidth_hz,
-            "bandwidth_hz > 0 (finite)",
-        )?;
-        ensure_finite("amplifier.input_min", amp.input_min)?;
+        AmplifierParams::GAIN.check("amplifier.gain", amp.gain)?;
+        AmplifierParams::BANDWIDTH_HZ.check("amplifier.bandwidth_hz", amp.bandwidth_hz)?;
+        Range::FINITE.check("amplifier.input_min", amp.input_min)?;
         ensure(
             amp.input_max.is_finite() && amp.input_max > amp.input_min,
             "amplifier.input_max",
             amp.input_max,
             &format!("input_max > input_min = {} (finite)", amp.input_min),
         )?;
-        ensure_finite("amplifier.v_min", amp.v_min)?;
+        Range::FINITE.check("amplifier.v_min", amp.v_min)?;
         ensure(
             amp.v_max.is_finite() && amp.v_max > amp.v_min,
             "amplifier.v_max",
@@ -222,17 +188,16 @@ impl FlexureStageParams {
         )?;
         let tau = amp.time_constant();
         for (i, act) in self.actuators.iter().enumerate() {
-            validate_bouc_wen(&format!("actuators[{i}].hysteresis"), &act.hysteresis)?;
-            ensure(
-                act.creep_gain.is_finite() && act.creep_gain >= 0.0,
-                &format!("actuators[{i}].creep_gain"),
-                act.creep_gain,
-                "creep_gain >= 0 (finite)",
-            )?;
+            act.hysteresis
+                .validate(&format!("actuators[{i}].hysteresis"))?;
+            ActuatorParams::CREEP_GAIN
+                .check(&format!("actuators[{i}].creep_gain"), act.creep_gain)?;
+            ActuatorParams::CREEP_TIME
+                .check(&format!("actuators[{i}].creep_time"), act.creep_time)?;
             // The creep and amplifier exponentials must never coincide (the exact
             // creep solution divides by τ − T), and creep is the slow process.
             ensure(
-                act.creep_time.is_finite() && act.creep_time > 10.0 * tau,
+                act.creep_time > 10.0 * tau,
                 &format!("actuators[{i}].creep_time"),
                 act.creep_time,
                 &format!(
@@ -242,55 +207,26 @@ impl FlexureStageParams {
             )?;
         }
         let c = &self.coupling;
-        ensure(
-            self.rest_cycle_voltage.is_finite() && self.rest_cycle_voltage >= 0.0,
-            "rest_cycle_voltage",
-            self.rest_cycle_voltage,
-            "rest_cycle_voltage >= 0 (finite)",
-        )?;
-        validate_bouc_wen("coupling.x_from_pzt1", &c.x_from_pzt1)?;
-        validate_bouc_wen("coupling.rot_from_pzt1", &c.rot_from_pzt1)?;
-        validate_bouc_wen("coupling.y_from_pzt2", &c.y_from_pzt2)?;
-        validate_bouc_wen("coupling.y_from_pzt3", &c.y_from_pzt3)?;
+        FlexureStageParams::REST_CYCLE_VOLTAGE
+            .check("rest_cycle_voltage", self.rest_cycle_voltage)?;
+        c.x_from_pzt1.validate("coupling.x_from_pzt1")?;
+        c.rot_from_pzt1.validate("coupling.rot_from_pzt1")?;
+        c.y_from_pzt2.validate("coupling.y_from_pzt2")?;
+        c.y_from_pzt3.validate("coupling.y_from_pzt3")?;
         for (name, mode) in [
             ("x", &self.modes.x),
             ("y", &self.modes.y),
             ("theta", &self.modes.theta),
         ] {
-            ensure(
-                mode.frequency_hz.is_finite() && mode.frequency_hz > 0.0,
-                &format!("modes.{name}.frequency_hz"),
-                mode.frequency_hz,
-                "frequency_hz > 0 (finite)",
-            )?;
-            // Underdamped: the closed-form free response is the damped oscillation.
-            ensure(
-                mode.damping_ratio > 0.0 && mode.damping_ratio < 1.0,
-                &format!("modes.{name}.damping_ratio"),
-                mode.damping_ratio,
-                "0 < damping_ratio < 1",
-            )?;
+            ModeParams::FREQUENCY_HZ
+                .check(&format!("modes.{name}.frequency_hz"), mode.frequency_hz)?;
+            ModeParams::DAMPING_RATIO
+                .check(&format!("modes.{name}.damping_ratio"), mode.damping_ratio)?;
         }
-        ensure(
-            self.sensor_spacing_mm.is_finite() && self.sensor_spacing_mm > 0.0,
-            "sensor_spacing_mm",
-            self.sensor_spacing_mm,
-            "sensor_spacing_mm > 0 (finite)",
-        )?;
-        ensure(
-            self.noise.rms_um.is_finite() && self.noise.rms_um >= 0.0,
-            "noise.rms_um",
-            self.noise.rms_um,
-            "rms_um >= 0 (finite)",
-        )?;
-        let (lo, hi) = MAX_VOLTAGE_STEP_RANGE;
-        let dv = self.solver.max_voltage_step;
-        ensure(
-            dv >= lo && dv <= hi,
-            "solver.max_voltage_step",
-            dv,
-            &format!("{lo} <= max_voltage_step <= {hi} V"),
-        )
+        FlexureStageParams::SENSOR_SPACING_MM.check("sensor_spacing_mm", self.sensor_spacing_mm)?;
+        SensorNoiseParams::RMS_UM.check("noise.rms_um", self.noise.rms_um)?;
+        SolverParams::MAX_VOLTAGE_STEP
+            .check("solver.max_voltage_step", self.solver.max_voltage_step)
     }
 }
 

@@ -33,6 +33,7 @@
 //! is subtracted from both x_r2 and x_r3; the rotation coupling of PZT1 is
 //! not modelled by seed 001 and stays to the feedback.
 
+use crate::parameter::Range;
 use serde::{Deserialize, Serialize};
 
 use crate::bouc_wen::{AsymmetricBoucWen, BoucWenParams};
@@ -63,6 +64,11 @@ pub struct BoucWenModels {
     /// after being operated. 0: seed 001's virgin state h = 0.
     #[serde(default)]
     pub rest_cycle: f64,
+}
+
+impl BoucWenModels {
+    /// 0: the virgin state; a working loop's amplitude otherwise [V].
+    pub const REST_CYCLE: Range = Range::NON_NEGATIVE;
 }
 
 /// Eq. (6), solved exactly (module comment).

@@ -25,6 +25,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::flexure_stage::ParamError;
+use crate::parameter::Range;
 
 pub const BACKLASH_OPERATORS: usize = 10;
 pub const DEAD_ZONE_OPERATORS: usize = 6;
@@ -91,42 +92,28 @@ impl InversePiParams {
         ((a1 * y + a2) * y + a3) * y + a4
     }
 
-    /// Checks that every value is finite and the threshold scales positive;
-    /// `name` prefixes the parameter paths in the error.
+    /// 0: eq. 1's zero memories; a demand's amplitude otherwise [µm].
+    pub const REST_CYCLE: Range = Range::NON_NEGATIVE;
+    /// c and u1max: the thresholds of eq. 5 scale with them and must be
+    /// increasing.
+    pub const THRESHOLD_SCALE: Range = Range::POSITIVE;
+
+    /// Checks that every value is finite and in its declared range; `name`
+    /// prefixes the parameter paths in the error.
     pub fn validate(&self, name: &str) -> Result<(), ParamError> {
-        let finite = |field: &str, values: &[f64]| -> Result<(), ParamError> {
+        for (field, values) in [
+            ("k", &self.k[..]),
+            ("b", &self.b[..]),
+            ("ws", &self.ws[..]),
+            ("a", &self.a[..]),
+        ] {
             for (i, v) in values.iter().enumerate() {
-                if !v.is_finite() {
-                    return Err(ParamError {
-                        parameter: format!("{name}.{field}[{i}]"),
-                        value: *v,
-                        allowed: "finite".to_owned(),
-                    });
-                }
-            }
-            Ok(())
-        };
-        finite("k", &self.k)?;
-        finite("b", &self.b)?;
-        finite("ws", &self.ws)?;
-        finite("a", &self.a)?;
-        if !(self.rest_cycle.is_finite() && self.rest_cycle >= 0.0) {
-            return Err(ParamError {
-                parameter: format!("{name}.rest_cycle"),
-                value: self.rest_cycle,
-                allowed: "rest_cycle >= 0 (finite)".to_owned(),
-            });
-        }
-        for (field, value) in [("c", self.c), ("u1max", self.u1max)] {
-            if !(value.is_finite() && value > 0.0) {
-                return Err(ParamError {
-                    parameter: format!("{name}.{field}"),
-                    value,
-                    allowed: format!("{field} > 0 (finite)"),
-                });
+                Range::FINITE.check(&format!("{name}.{field}[{i}]"), *v)?;
             }
         }
-        Ok(())
+        Self::REST_CYCLE.check(&format!("{name}.rest_cycle"), self.rest_cycle)?;
+        Self::THRESHOLD_SCALE.check(&format!("{name}.c"), self.c)?;
+        Self::THRESHOLD_SCALE.check(&format!("{name}.u1max"), self.u1max)
     }
 }
 

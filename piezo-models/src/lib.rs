@@ -19,6 +19,7 @@ pub mod flexure_stage;
 pub mod inverse_bouc_wen;
 pub mod inverse_pi;
 pub mod oscillator;
+pub mod parameter;
 pub mod piezo_controller;
 pub mod sensor_noise;
 
@@ -35,6 +36,7 @@ pub use inverse_bouc_wen::{
 };
 pub use inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 pub use oscillator::{ModeParams, ModeSet, Oscillator};
+pub use parameter::{Bound, Range, RealParameter};
 pub use piezo_controller::{
     ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel, PiController, PiGains,
     PiezoController,

@@ -7,6 +7,7 @@
 //! remaining free response is an exact damped oscillation. Nothing is
 //! discretised, so the result does not depend on the interval length.
 
+use crate::parameter::{Bound, Range};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -18,6 +19,16 @@ pub struct ModeParams {
     pub frequency_hz: f64,
     /// Damping ratio ζ, 0 < ζ < 1 [1].
     pub damping_ratio: f64,
+}
+
+impl ModeParams {
+    pub const FREQUENCY_HZ: Range = Range::POSITIVE;
+    /// Underdamped, 0 < ζ < 1: the closed-form free response is the damped
+    /// oscillation (ζ = 0 never settles, ζ = 1 has no damped frequency).
+    pub const DAMPING_RATIO: Range = Range {
+        min: Bound::Open(0.0),
+        max: Bound::Open(1.0),
+    };
 }
 
 /// The three in-plane modes of the stage.

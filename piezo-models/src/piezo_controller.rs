@@ -24,11 +24,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::bouc_wen::BoucWenParams;
 use crate::decoupling::{DecoupledReferences, DecouplingParams, decouple};
 use crate::flexure_stage::{FlexureStageParams, ParamError};
 use crate::inverse_bouc_wen::{BoucWenFeedforward, BoucWenModels, CouplingEstimator};
 use crate::inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
+use crate::parameter::Range;
 
 /// Proportional and integral gains of one axis [V/µm, V/(µm·s)].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -36,6 +36,11 @@ use crate::inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 pub struct PiGains {
     pub kp: f64,
     pub ki: f64,
+}
+
+impl PiGains {
+    /// kp and ki: a negative gain turns the loop's feedback positive.
+    pub const GAIN: Range = Range::NON_NEGATIVE;
 }
 
 /// A PI law's running integral of the error (eq. 10).
@@ -160,38 +165,29 @@ impl ControllerParams {
         }
     }
 
-    /// Checks every value; the error names the parameter by its serde path.
+    /// L [mm].
+    pub const SENSOR_SPACING_MM: Range = Range::POSITIVE;
+
+    /// Checks every value against its declared range (the ranges the FMU's
+    /// variable table states), then the command range; the error names the
+    /// parameter by its serde path.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let error = |parameter: &str, value: f64, allowed: &str| ParamError {
-            parameter: parameter.to_owned(),
-            value,
-            allowed: allowed.to_owned(),
-        };
         for (name, gains) in [
             ("translation_gains", self.translation_gains),
             ("rotation_gains", self.rotation_gains),
         ] {
-            for (field, value) in [("kp", gains.kp), ("ki", gains.ki)] {
-                if !(value.is_finite() && value >= 0.0) {
-                    return Err(error(&format!("{name}.{field}"), value, ">= 0 (finite)"));
-                }
-            }
+            PiGains::GAIN.check(&format!("{name}.kp"), gains.kp)?;
+            PiGains::GAIN.check(&format!("{name}.ki"), gains.ki)?;
         }
-        if !(self.sensor_spacing_mm.is_finite() && self.sensor_spacing_mm > 0.0) {
-            return Err(error(
-                "sensor_spacing_mm",
-                self.sensor_spacing_mm,
-                "> 0 (finite)",
-            ));
-        }
+        Self::SENSOR_SPACING_MM.check("sensor_spacing_mm", self.sensor_spacing_mm)?;
         if !(self.command_min.is_finite() && self.command_max.is_finite())
             || self.command_max <= self.command_min
         {
-            return Err(error(
-                "command_max",
-                self.command_max,
-                "> command_min (finite)",
-            ));
+            return Err(ParamError {
+                parameter: "command_max".to_owned(),
+                value: self.command_max,
+                allowed: "> command_min (finite)".to_owned(),
+            });
         }
         for (name, model) in [
             ("bouc_wen.x", &self.bouc_wen.x),
@@ -199,54 +195,19 @@ impl ControllerParams {
             ("bouc_wen.x_from_y", &self.bouc_wen.x_from_y),
             ("bouc_wen.y_from_x", &self.bouc_wen.y_from_x),
         ] {
-            validate_bouc_wen(name, model)?;
+            model.validate(name)?;
         }
+        BoucWenModels::REST_CYCLE.check("bouc_wen.rest_cycle", self.bouc_wen.rest_cycle)?;
         self.x_model.validate("x_model")?;
         self.y_model.validate("y_model")?;
         let d = &self.decoupling_params;
         for (field, values) in [("dk", d.dk), ("db", d.db), ("p", d.p), ("q", d.q)] {
             for (i, v) in values.iter().enumerate() {
-                if !v.is_finite() {
-                    return Err(error(
-                        &format!("decoupling_params.{field}[{i}]"),
-                        *v,
-                        "finite",
-                    ));
-                }
+                Range::FINITE.check(&format!("decoupling_params.{field}[{i}]"), *v)?;
             }
         }
         Ok(())
     }
-}
-
-/// Finite parameters, n ≥ 1 (|h|^(n−1) at h = 0), and p ≠ 0 for the inverse
-/// of eq. (6) (checked for every model; the coupling models are only run
-/// forward, where p = 0 is fine, but p ≠ 0 costs nothing to ask).
-fn validate_bouc_wen(name: &str, model: &BoucWenParams) -> Result<(), ParamError> {
-    for (field, value) in [
-        ("p", model.p),
-        ("q", model.q),
-        ("a", model.a),
-        ("beta", model.beta),
-        ("gamma", model.gamma),
-        ("delta", model.delta),
-    ] {
-        if !value.is_finite() {
-            return Err(ParamError {
-                parameter: format!("{name}.{field}"),
-                value,
-                allowed: "finite".to_owned(),
-            });
-        }
-    }
-    if !(model.n.is_finite() && model.n >= 1.0) {
-        return Err(ParamError {
-            parameter: format!("{name}.n"),
-            value: model.n,
-            allowed: "n >= 1 (finite)".to_owned(),
-        });
-    }
-    Ok(())
 }
 
 /// The `stage` preset: seed 000's identification procedure run on the

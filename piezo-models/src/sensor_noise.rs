@@ -8,6 +8,7 @@
 //! Xoshiro256++ (serialisable, so a saved state continues the same sequence)
 //! feeding a standard normal.
 
+use crate::parameter::Range;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_xoshiro::Xoshiro256PlusPlus;
@@ -23,6 +24,10 @@ pub struct SensorNoiseParams {
     pub rms_um: f64,
     /// Seed of the generator (the same seed gives the same sequence).
     pub seed: u32,
+}
+
+impl SensorNoiseParams {
+    pub const RMS_UM: Range = Range::NON_NEGATIVE;
 }
 
 /// The noise source and the samples currently added to the three sensors.

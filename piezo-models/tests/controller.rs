@@ -222,7 +222,7 @@ fn the_stage_preset_is_an_identified_controller_and_the_default() {
 /// model-based law the references are the demands minus the coupling
 /// models' outputs at the commands applied so far.
 #[test]
-fn seed_001_feedforward_and_model_based_decoupling_follow_their_models() {
+fn inverse_bouc_wen_feedforward_and_model_based_decoupling_follow_their_models() {
     use piezo_models::{AsymmetricBoucWen, DecouplingModel, HysteresisModel};
     let mut p = ControllerParams::stage();
     p.feedback_x = false;

@@ -1,58 +1,12 @@
 //! `FlexureStage::step` and `PiezoController::step` allocate nothing (they run
 //! inside an FMU's doStep).
 //!
-//! A counting global allocator counts the allocations of the test thread only
-//! while counting is switched on, so the harness's own threads do not disturb
-//! the count.
+//! The workspace's counting allocator counts the allocations of the test
+//! thread only, so the harness's own threads do not disturb the count.
 
+use counting_allocator::{CountingAllocator, allocations_of};
 use piezo_models::{ControllerParams, FlexureStage, FlexureStageParams, PiezoController};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::f64::consts::TAU;
-
-struct CountingAllocator;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note_allocation() {
-    // try_with: the thread-locals may be gone while a thread shuts down.
-    let _ = COUNTING.try_with(|counting| {
-        if counting.get() {
-            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-        }
-    });
-}
-
-// SAFETY: every call is passed on unchanged to `System`, which upholds
-// GlobalAlloc's contract; the counting touches no memory it hands out.
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        // SAFETY: the caller's `layout`, under GlobalAlloc's contract.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        // SAFETY: the caller's `layout`, under GlobalAlloc's contract.
-        unsafe { System.alloc_zeroed(layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note_allocation();
-        // SAFETY: `ptr` was allocated by `System` with `layout` (every
-        // allocation goes through this allocator); the caller's `new_size`.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: `ptr` was allocated by `System` with `layout` (as above).
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -66,22 +20,21 @@ fn step_allocates_nothing() {
     let mut stage = FlexureStage::new(params).unwrap();
     let mut finite = true;
 
-    COUNTING.with(|c| c.set(true));
-    for k in 1..=10_000 {
-        let t = k as f64 * 1e-4;
-        let u = 5.0 * (1.0 - (TAU * t).cos());
-        let h = if k % 1000 == 0 { 2.5e-3 } else { 1e-4 };
-        let commands = if k % 777 == 0 {
-            [12.0, -1.0, u]
-        } else {
-            [u, 10.0 - u, u]
-        };
-        finite &= stage.step(commands, h).fault.is_none();
-        std::hint::black_box(stage.sensors());
-    }
-    COUNTING.with(|c| c.set(false));
+    let allocations = allocations_of(|| {
+        for k in 1..=10_000 {
+            let t = k as f64 * 1e-4;
+            let u = 5.0 * (1.0 - (TAU * t).cos());
+            let h = if k % 1000 == 0 { 2.5e-3 } else { 1e-4 };
+            let commands = if k % 777 == 0 {
+                [12.0, -1.0, u]
+            } else {
+                [u, 10.0 - u, u]
+            };
+            finite &= stage.step(commands, h).fault.is_none();
+            std::hint::black_box(stage.sensors());
+        }
+    });
 
-    let allocations = ALLOCATIONS.with(Cell::get);
     assert!(finite);
     assert_eq!(allocations, 0, "step allocated {allocations} times");
 }
@@ -98,22 +51,21 @@ fn controller_step_allocates_nothing() {
     let mut controller = PiezoController::new(params).unwrap();
     let mut total = 0.0;
 
-    COUNTING.with(|c| c.set(true));
-    for k in 1..=10_000 {
-        let t = k as f64 * 1e-4;
-        let dt = if k % 1000 == 0 { 2.5e-4 } else { 1e-4 };
-        let y_ref = 6.0 + 5.0 * (TAU * t).sin();
-        let sensors = if k % 777 == 0 {
-            [30.0, -5.0, 40.0]
-        } else {
-            [y_ref - 0.1, 6.0, 6.1]
-        };
-        let out = controller.step(6.0, y_ref, 1e-5 * (TAU * t).cos(), sensors, dt);
-        total += out.u[0] + out.u[1] + out.u[2];
-    }
-    COUNTING.with(|c| c.set(false));
+    let allocations = allocations_of(|| {
+        for k in 1..=10_000 {
+            let t = k as f64 * 1e-4;
+            let dt = if k % 1000 == 0 { 2.5e-4 } else { 1e-4 };
+            let y_ref = 6.0 + 5.0 * (TAU * t).sin();
+            let sensors = if k % 777 == 0 {
+                [30.0, -5.0, 40.0]
+            } else {
+                [y_ref - 0.1, 6.0, 6.1]
+            };
+            let out = controller.step(6.0, y_ref, 1e-5 * (TAU * t).cos(), sensors, dt);
+            total += out.u[0] + out.u[1] + out.u[2];
+        }
+    });
 
-    let allocations = ALLOCATIONS.with(Cell::get);
     assert!(total.is_finite());
     assert_eq!(
         allocations, 0,

@@ -110,7 +110,7 @@ fn boundary_values_inside_the_ranges_are_accepted() {
 /// 0.5 %. Driving x (u2 = u3) leaves the platform unrotated and the y sweep
 /// moves x only through the coupling model.
 #[test]
-fn xy200s_preset_reaches_seed_001_strokes() {
+fn xy200s_preset_reaches_its_published_strokes() {
     use piezo_models::fingerprint::{Axis, Rig, stroke};
     let preset = FlexureStageParams::xy200s();
     preset.validate().unwrap();

@@ -1,16 +1,17 @@
 //! Writes FlexureStage's parameter values for a preset by FMI name (JSON), as
-//! an importer sets them before initialization: `seed000` (the start values),
-//! `xy200s` (seed 001's XY200S stage), or a FlexureStageParams JSON file.
+//! an importer sets them before initialization: `3dof` (seed 000's 3-DOF stage,
+//! the start values), `xy200s` (seed 001's XY200S stage), or a
+//! FlexureStageParams JSON file.
 
 use fmu_plant::FlexureStageFmu;
 use piezo_models::FlexureStageParams;
 
 fn main() -> std::process::ExitCode {
     fmi2_cosim::parameter_set::main::<FlexureStageFmu>(
-        "seed000, xy200s or a FlexureStageParams JSON file",
+        "3dof, xy200s or a FlexureStageParams JSON file",
         |preset| {
             let params = match preset {
-                "seed000" => FlexureStageParams::default(),
+                "3dof" => FlexureStageParams::default(),
                 "xy200s" => FlexureStageParams::xy200s(),
                 path => {
                     let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;

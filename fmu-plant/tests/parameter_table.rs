@@ -1,0 +1,25 @@
+//! The variable table against what it must keep: the released value
+//! references (append-only, `valueReferences.txt`) and the parameter ranges
+//! piezo-models declares (the model refuses what the table says is out of
+//! range, and an open end is stated in the description).
+
+use fmi2_cosim::CoSimModel;
+use fmu_plant::FlexureStageFmu;
+use piezo_models::FlexureStageParams;
+
+#[test]
+fn value_references_are_append_only() {
+    piezo_fmu_tables::check_value_references_append_only(
+        FlexureStageFmu::variables(),
+        include_str!("../valueReferences.txt"),
+    );
+}
+
+#[test]
+fn declared_ranges_agree_with_the_model() {
+    piezo_fmu_tables::check_declared_ranges(
+        FlexureStageFmu::variables(),
+        || FlexureStageFmu::with_params(FlexureStageParams::default()).unwrap(),
+        |m| m.params().validate(),
+    );
+}

@@ -1,0 +1,348 @@
+//! What both piezo FMUs build alike from `piezo-models`' parameter
+//! declarations: the variable-table entries of an asymmetric Bouc-Wen model
+//! ([`bouc_wen_variables!`]), a declared [`Range`] as FMI min/max
+//! ([`with_range`]), the units those need, and the test that the FMU
+//! tables' ranges agree with the models' validation
+//! ([`check_declared_ranges`]).
+//!
+//! The layering stays as the guide draws it: `piezo-models` declares field,
+//! unit, range and meaning as plain data and knows nothing of FMI;
+//! `fmi2-cosim` knows nothing of piezos; this crate and the FMU crates are
+//! the join.
+
+use fmi2_cosim::variables::Value;
+use fmi2_cosim::{BaseUnit, Causality, ModelError, UnitDefinition, Variable};
+use piezo_models::{ParamError, Range};
+
+#[doc(hidden)]
+pub use const_format;
+#[doc(hidden)]
+pub use piezo_models::BoucWenParams;
+
+/// µm per volt (Bouc-Wen p and A): m / (kg m² s⁻³ A⁻¹).
+pub const MICROMETRE_PER_VOLT: UnitDefinition = UnitDefinition {
+    name: "um/V",
+    base: BaseUnit {
+        kg: -1,
+        m: -1,
+        s: 3,
+        a: 1,
+        factor: 1e-6,
+        ..BaseUnit::NONE
+    },
+    display_units: &[],
+};
+
+/// µm per volt squared (Bouc-Wen delta).
+pub const MICROMETRE_PER_VOLT_SQUARED: UnitDefinition = UnitDefinition {
+    name: "um/V2",
+    base: BaseUnit {
+        kg: -2,
+        m: -3,
+        s: 6,
+        a: 2,
+        factor: 1e-6,
+        ..BaseUnit::NONE
+    },
+    display_units: &[],
+};
+
+/// `variable` with the declared `range` as its FMI min and max. FMI's bounds
+/// are inclusive: an open end is stated as its value, enforced by the
+/// model's validation (which reads the same declaration) and said in the
+/// variable's description ([`check_declared_ranges`] tests both).
+pub const fn with_range<M>(variable: Variable<M>, range: Range) -> Variable<M> {
+    variable.range(range.min_value(), range.max_value())
+}
+
+/// The FMI name of the parameter the model calls `path` (its serde path, as
+/// in the JSON presets), through the table's `model_path`.
+pub fn fmi_name<M>(variables: &[Variable<M>], path: &str) -> Option<&'static str> {
+    variables
+        .iter()
+        .find(|v| v.model_path.is_some_and(|p| p.replace(' ', "") == path))
+        .map(|v| v.name)
+}
+
+/// The error an FMU returns for a parameter its model refuses, naming the
+/// parameter by its FMI name and its serde path.
+pub fn refused_parameter<M>(variables: &[Variable<M>], error: &ParamError) -> ModelError {
+    let name = fmi_name(variables, &error.parameter).unwrap_or("a parameter");
+    ModelError(format!(
+        "parameter {name} ({}) = {} is not allowed: {}",
+        error.parameter, error.value, error.allowed
+    ))
+}
+
+/// How many variables `blocks` hold together: the length of the table
+/// `fmi2_cosim::variables::concat(blocks)` builds, so that no table length
+/// is counted by hand.
+pub const fn total_len<M>(blocks: &[&[Variable<M>]]) -> usize {
+    let mut total = 0;
+    let mut b = 0;
+    while b < blocks.len() {
+        total += blocks[b].len();
+        b += 1;
+    }
+    total
+}
+
+/// A fixed Real parameter of `$model` whose value lives at
+/// `model.params.<path>`, in the range piezo-models declares for it (an
+/// open end is stated in the description), with `<path>` as its model path.
+#[macro_export]
+macro_rules! fixed_parameter {
+    ($model:ty, $name:expr, $description:expr, $unit:expr, $range:expr, $($path:tt)+) => {
+        $crate::with_range(
+            ::fmi2_cosim::Variable::real_parameter(
+                $name,
+                $description,
+                $unit,
+                ::fmi2_cosim::Variability::Fixed,
+                |m: &$model| m.params.$($path)+,
+                |m: &mut $model, v: f64| m.params.$($path)+ = v,
+            ),
+            $range,
+        )
+        .model_path(stringify!($($path)+))
+    };
+}
+
+/// The seven fixed Real parameters `<prefix>.<symbol>` of the asymmetric
+/// Bouc-Wen model at `model.params.<path>`, as an array of table entries in
+/// [`BoucWenParams::PARAMETERS`] order, each described as
+/// `<who>: <declared description>`:
+///
+/// ```text
+/// const PZT1: [Variable<FlexureStageFmu>; 7] =
+///     bouc_wen_variables!(FlexureStageFmu, "pzt[1]", "PZT1 hysteresis", actuators[0].hysteresis);
+/// ```
+#[macro_export]
+macro_rules! bouc_wen_variables {
+    ($model:ty, $prefix:literal, $who:literal, $($path:tt)+) => {
+        [
+            $crate::bouc_wen_variables!(@one $model, 0, $prefix, $who, $($path)+),
+            $crate::bouc_wen_variables!(@one $model, 1, $prefix, $who, $($path)+),
+            $crate::bouc_wen_variables!(@one $model, 2, $prefix, $who, $($path)+),
+            $crate::bouc_wen_variables!(@one $model, 3, $prefix, $who, $($path)+),
+            $crate::bouc_wen_variables!(@one $model, 4, $prefix, $who, $($path)+),
+            $crate::bouc_wen_variables!(@one $model, 5, $prefix, $who, $($path)+),
+            $crate::bouc_wen_variables!(@one $model, 6, $prefix, $who, $($path)+),
+        ]
+    };
+    (@one $model:ty, $i:literal, $prefix:literal, $who:literal, $($path:tt)+) => {
+        $crate::with_range(
+            ::fmi2_cosim::Variable::real_parameter(
+                $crate::const_format::concatcp!(
+                    $prefix,
+                    ".",
+                    $crate::BoucWenParams::PARAMETERS[$i].symbol
+                ),
+                $crate::const_format::concatcp!(
+                    $who,
+                    ": ",
+                    $crate::BoucWenParams::PARAMETERS[$i].description
+                ),
+                $crate::BoucWenParams::PARAMETERS[$i].unit,
+                ::fmi2_cosim::Variability::Fixed,
+                |m: &$model| ($crate::BoucWenParams::PARAMETERS[$i].get)(&m.params.$($path)+),
+                |m: &mut $model, v: f64| {
+                    ($crate::BoucWenParams::PARAMETERS[$i].set)(&mut m.params.$($path)+, v)
+                },
+            ),
+            $crate::BoucWenParams::PARAMETERS[$i].range,
+        )
+        .model_path($crate::const_format::concatcp!(
+            stringify!($($path)+),
+            ".",
+            $crate::BoucWenParams::PARAMETERS[$i].field
+        ))
+    };
+}
+
+/// One `const NAME: &[Variable<$model>]` block of [`bouc_wen_variables!`]
+/// per line `NAME = (prefix, who, path);`, so that a table lists its
+/// Bouc-Wen models one line each.
+#[macro_export]
+macro_rules! bouc_wen_blocks {
+    ($model:ty; $($name:ident = ($prefix:literal, $who:literal, $($path:tt)+);)+) => {
+        $(
+            const $name: &[::fmi2_cosim::Variable<$model>] =
+                &$crate::bouc_wen_variables!($model, $prefix, $who, $($path)+);
+        )+
+    };
+}
+
+/// Checks, for every Real parameter of `variables` that declares a min or a
+/// max, that the model's validation agrees with the table: a value just
+/// beyond the bound is refused by name (its `model_path`), and a value at the
+/// bound is either accepted (a closed end) or refused with the strict bound
+/// stated in the description (`> 0`, `0 <`, `< 1`), since FMI's min and max
+/// can only say inclusive. `fresh` gives a model with valid parameters,
+/// `validate` runs the model's validation on a model's parameters.
+pub fn check_declared_ranges<M>(
+    variables: &[Variable<M>],
+    fresh: impl Fn() -> M,
+    validate: impl Fn(&M) -> Result<(), ParamError>,
+) {
+    let refused_by_name = |model: &M, path: &str| match validate(model) {
+        Ok(()) => false,
+        Err(e) => e.parameter == path.replace(' ', ""),
+    };
+    let mut checked = 0;
+    for variable in variables {
+        let Value::Real(real) = &variable.value else {
+            continue;
+        };
+        let Some(set) = real.set else { continue };
+        if variable.causality != Causality::Parameter {
+            continue;
+        }
+        let path = variable
+            .model_path
+            .unwrap_or_else(|| panic!("{} has no model path", variable.name));
+        for (bound, outward, strict) in [
+            (
+                real.min,
+                -1.0,
+                [
+                    format!("> {}", fmt(real.min)),
+                    format!("{} <", fmt(real.min)),
+                ],
+            ),
+            (
+                real.max,
+                1.0,
+                [
+                    format!("< {}", fmt(real.max)),
+                    format!("{} >", fmt(real.max)),
+                ],
+            ),
+        ] {
+            let Some(bound) = bound else { continue };
+            checked += 1;
+            let beyond = bound + outward * (bound.abs() * 1e-6).max(1e-9);
+            let mut model = fresh();
+            set(&mut model, beyond);
+            assert!(
+                refused_by_name(&model, path),
+                "{} = {beyond} is beyond its declared bound {bound}, but the model's \
+                 validation does not refuse it by name",
+                variable.name
+            );
+            let mut model = fresh();
+            set(&mut model, bound);
+            if refused_by_name(&model, path) {
+                assert!(
+                    strict
+                        .iter()
+                        .any(|s| variable.description.contains(s.as_str())),
+                    "{}: the model refuses the bound {bound} (an open end), so the \
+                     description must say so ({:?}): {:?}",
+                    variable.name,
+                    strict,
+                    variable.description
+                );
+            }
+        }
+    }
+    assert!(checked > 0, "no Real parameter declares a range");
+}
+
+fn fmt(value: Option<f64>) -> String {
+    value.map_or_else(String::new, |v| v.to_string())
+}
+
+/// Checks a variable table against its committed record of value references
+/// (`record`: lines `<value reference> <name>`, `#` comments): every
+/// recorded name still has its recorded reference, and every variable of the
+/// table is recorded. Value references are append-only: a renamed, moved or
+/// removed variable fails here, and a new variable fails until its line is
+/// appended to the record (the message gives the lines).
+pub fn check_value_references_append_only<M>(variables: &[Variable<M>], record: &str) {
+    let mut recorded = 0;
+    let mut changed = Vec::new();
+    for (number, line) in record.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let (vr, name) = line
+            .split_once(' ')
+            .and_then(|(vr, name)| Some((vr.parse::<usize>().ok()?, name)))
+            .unwrap_or_else(|| {
+                panic!(
+                    "record line {}: {line:?} is not `<value reference> <name>`",
+                    number + 1
+                )
+            });
+        assert_eq!(
+            vr,
+            recorded,
+            "record line {}: references must run 0, 1, 2, ... in order",
+            number + 1
+        );
+        recorded += 1;
+        match variables.iter().position(|v| v.name == name) {
+            Some(now) if now == vr => {}
+            Some(now) => changed.push(format!("{name}: {vr} in the record, {now} now")),
+            None => changed.push(format!("{name} ({vr}) is no longer in the table")),
+        }
+    }
+    assert!(
+        changed.is_empty(),
+        "value references are append-only (importers keep them), but:\n{}",
+        changed.join("\n")
+    );
+    let unrecorded: Vec<String> = variables
+        .iter()
+        .enumerate()
+        .skip(recorded)
+        .map(|(vr, v)| format!("{vr} {}", v.name))
+        .collect();
+    assert!(
+        unrecorded.is_empty(),
+        "new variables: append their lines to the value-reference record:\n{}",
+        unrecorded.join("\n")
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Model(f64);
+
+    const fn real(name: &'static str) -> Variable<Model> {
+        Variable::real_local(name, "", "", |m: &Model| m.0)
+    }
+
+    const TABLE: [Variable<Model>; 3] = [real("a"), real("b"), real("c")];
+    const RECORD: &str = "# a comment\n0 a\n1 b\n2 c\n";
+
+    #[test]
+    fn the_unchanged_table_passes() {
+        check_value_references_append_only(&TABLE, RECORD);
+        assert_eq!(total_len(&[&TABLE, &TABLE[..1]]), 4);
+    }
+
+    #[test]
+    #[should_panic(expected = "b: 1 in the record, 2 now")]
+    fn an_insertion_fails() {
+        check_value_references_append_only(&[real("a"), real("new"), real("b"), real("c")], RECORD);
+    }
+
+    #[test]
+    #[should_panic(expected = "c (2) is no longer in the table")]
+    fn a_rename_fails() {
+        check_value_references_append_only(&[real("a"), real("b"), real("c2")], RECORD);
+    }
+
+    #[test]
+    #[should_panic(expected = "append their lines to the value-reference record:\n3 d")]
+    fn an_unrecorded_appended_variable_fails_until_recorded() {
+        let table = [real("a"), real("b"), real("c"), real("d")];
+        check_value_references_append_only(&table, &format!("{RECORD}3 d\n"));
+        check_value_references_append_only(&table, RECORD);
+    }
+}
