@@ -599,7 +599,8 @@ impl<M: CoSimModel> Instance<M> {
             return self.error(
                 function,
                 format_args!(
-                    "the model stopped the step from {current_time} to {end} at                      {last_successful_time}, outside the step"
+                    "the model stopped the step from {current_time} to {end} at \
+                     {last_successful_time}, outside the step"
                 ),
             );
         }
@@ -611,7 +612,8 @@ impl<M: CoSimModel> Instance<M> {
             Status::Discard,
             LogCategory::StatusDiscard,
             format_args!(
-                "the step from {current_time} to {end} stopped at {last_successful_time}{};                  fmi2LastSuccessfulTime is {last_successful_time}",
+                "the step from {current_time} to {end} stopped at {last_successful_time}{}; \
+                 fmi2LastSuccessfulTime is {last_successful_time}",
                 if terminate {
                     ": the model asks to end the simulation (fmi2Terminated)"
                 } else {
