@@ -51,7 +51,8 @@ def anchors(path) -> set[str]:
     return found
 
 
-@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.relative_to(REPO_ROOT).as_posix())
+@pytest.mark.parametrize("document", [*DOCUMENTS, REPO_ROOT / "ARCHITECTURE.md"],
+                         ids=lambda p: p.relative_to(REPO_ROOT).as_posix())
 def test_every_link_resolves(document):
     broken = []
     for number, line in enumerate(document.read_text(encoding="utf-8").splitlines(), 1):

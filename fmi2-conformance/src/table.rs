@@ -10,7 +10,9 @@
 use fmi_schema::fmi2::{Causality, Fmi2ModelDescription, ScalarVariableElement};
 use fmi_schema::traits::FmiModelDescription;
 use fmi2_cosim::CoSimModel;
-use fmi2_cosim::model_description::{guid, model_description};
+use fmi2_cosim::model_description::{
+    description_without_guid, guid, guid_of_description, model_description,
+};
 use fmi2_cosim::variables::{Causality as TableCausality, Value};
 
 fn generated<M: CoSimModel>() -> String {
@@ -29,12 +31,26 @@ pub fn committed_description_is_current<M: CoSimModel>(committed_path: &str) {
     );
 }
 
-/// The GUID is a pure function of the interface and appears in the XML.
+/// The GUID appears in the XML and tracks the interface: it is the hash of
+/// the description, and the same description with one value reference moved
+/// hashes to another GUID. (That it is the same across builds and machines is
+/// `committed_description_is_current`: the committed XML carries it.)
 pub fn guid_is_deterministic<M: CoSimModel>() {
     let first = guid::<M>().unwrap();
-    assert_eq!(first, guid::<M>().unwrap());
     assert_eq!(first.len(), 38, "{{8-4-4-4-12}} with braces");
     assert!(generated::<M>().contains(&format!("guid=\"{first}\"")));
+    let description = description_without_guid::<M>().unwrap();
+    assert_eq!(guid_of_description(&description), first);
+    let moved = description.replacen("valueReference=\"0\"", "valueReference=\"4294967295\"", 1);
+    assert_ne!(
+        moved, description,
+        "the description has a value reference 0"
+    );
+    assert_ne!(
+        guid_of_description(&moved),
+        first,
+        "a moved value reference must change the GUID"
+    );
 }
 
 /// fmi-schema parses the XML, and every variable agrees with the table: name,
@@ -127,20 +143,84 @@ pub fn ports_have_flat_names<M: CoSimModel>() {
     }
 }
 
-/// Every parameter records where the model keeps it, so that the model's own
-/// validation messages (which name serde paths) map to FMI names.
+/// Every parameter records where the model keeps it (a serde path, as in
+/// the JSON presets and the model's validation messages), and the path leads
+/// there: the value at that path of the serialized model equals the
+/// variable's start value.
 pub fn every_parameter_has_a_model_path<M: CoSimModel>() {
-    for var in M::variables() {
-        if var.causality == TableCausality::Parameter {
-            let path = var
-                .model_path
-                .unwrap_or_else(|| panic!("{} has no model path", var.name));
-            assert!(
-                !path.contains(' '),
-                "{}: model path {path:?} has spaces",
-                var.name
-            );
+    let model = M::new();
+    let serialized = serde_json::to_value(&model).expect("the model serializes to JSON");
+    // A path is relative to the model or to one of its fields (the FMUs keep
+    // their parameters in a `params` struct, whose paths the presets use).
+    let fields: Vec<&serde_json::Value> = match &serialized {
+        serde_json::Value::Object(map) => {
+            std::iter::once(&serialized).chain(map.values()).collect()
         }
+        other => vec![other],
+    };
+    for var in M::variables() {
+        if var.causality != TableCausality::Parameter {
+            continue;
+        }
+        let path = var
+            .model_path
+            .unwrap_or_else(|| panic!("{} has no model path", var.name));
+        assert!(
+            !path.contains(' '),
+            "{}: model path {path:?} has spaces",
+            var.name
+        );
+        let start = match &var.value {
+            Value::Real(r) => serde_json::json!((r.get)(&model)),
+            Value::Integer(i) => serde_json::json!((i.get)(&model)),
+            Value::Boolean(b) => serde_json::json!((b.get)(&model)),
+        };
+        let found: Vec<&serde_json::Value> = fields
+            .iter()
+            .filter_map(|field| at_path(field, path))
+            .collect();
+        assert!(
+            !found.is_empty(),
+            "{}: model path {path:?} leads nowhere in the serialized model",
+            var.name
+        );
+        // An Integer parameter may select an enum, which serde writes by
+        // its variant's name: the path leads there, the code is the FMU's.
+        let selects_an_enum = matches!(var.value, Value::Integer(_));
+        assert!(
+            found
+                .iter()
+                .any(|v| same_value(v, &start) || (selects_an_enum && v.is_string())),
+            "{}: model path {path:?} holds {found:?}, the variable starts at {start}",
+            var.name
+        );
+    }
+}
+
+/// The value at a serde path such as `modes.damping` or `w_s[3]`.
+fn at_path<'a>(value: &'a serde_json::Value, path: &str) -> Option<&'a serde_json::Value> {
+    let mut here = value;
+    for part in path.split('.') {
+        let (key, indices) = match part.find('[') {
+            Some(at) => (&part[..at], &part[at..]),
+            None => (part, ""),
+        };
+        if !key.is_empty() {
+            here = here.get(key)?;
+        }
+        for index in indices.split('[').filter(|s| !s.is_empty()) {
+            here = here.get(index.trim_end_matches(']').parse::<usize>().ok()?)?;
+        }
+    }
+    Some(here)
+}
+
+/// Numbers compared as numbers (an enum code may serialize as an integer),
+/// anything else exactly.
+fn same_value(a: &serde_json::Value, b: &serde_json::Value) -> bool {
+    match (a.as_f64(), b.as_f64()) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
     }
 }
 

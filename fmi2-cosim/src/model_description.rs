@@ -396,9 +396,20 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
 
 /// The GUID of model `M`: `{` + a UUID v5 of its description + `}`.
 pub fn guid<M: CoSimModel>() -> Result<String, String> {
-    let placeholder_description = render::<M>(GUID_PLACEHOLDER)?;
-    let uuid = uuid::Uuid::new_v5(&GUID_NAMESPACE, placeholder_description.as_bytes());
-    Ok(format!("{{{}}}", uuid.hyphenated()))
+    Ok(guid_of_description(&description_without_guid::<M>()?))
+}
+
+/// Model `M`'s description with a placeholder where the GUID goes: what the
+/// GUID is a hash of.
+pub fn description_without_guid<M: CoSimModel>() -> Result<String, String> {
+    render::<M>(GUID_PLACEHOLDER)
+}
+
+/// `{` + a UUID v5 of `description` + `}`: any change of the description
+/// (a name, a value reference, a unit, a start value) changes the GUID.
+pub fn guid_of_description(description: &str) -> String {
+    let uuid = uuid::Uuid::new_v5(&GUID_NAMESPACE, description.as_bytes());
+    format!("{{{}}}", uuid.hyphenated())
 }
 
 /// Length of a GUID as [`guid`] spells it: braces around 36 characters.
