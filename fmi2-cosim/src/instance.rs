@@ -736,7 +736,7 @@ impl<M: CoSimModel> Instance<M> {
         }
         // Tunable parameters are not among them: fmi2SetReal accepts any
         // finite value for one while simulating, as it does for an input.
-        if ranges_hold_in(data.state)
+        if data.state.initialized()
             && let Some(reason) = M::variables()
                 .iter()
                 .filter(|var| var.variability == Variability::Fixed)
@@ -814,18 +814,6 @@ fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
         StepComplete | StepFailed => interface == Interface::CoSimulation,
         EventMode | ContinuousTimeMode => interface == Interface::ModelExchange,
         Fatal => false,
-    }
-}
-
-/// Whether the declared ranges of the parameters hold in `state`: they are
-/// checked by `fmi2ExitInitializationMode`, so they hold in every state after
-/// it; before it the importer may still be setting them, and an error state
-/// may come from a refused initialization.
-fn ranges_hold_in(state: FmiState) -> bool {
-    use FmiState::*;
-    match state {
-        StepComplete | StepFailed | Terminated | EventMode | ContinuousTimeMode => true,
-        Instantiated | InitializationMode | Error | Fatal => false,
     }
 }
 

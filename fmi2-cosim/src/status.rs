@@ -93,6 +93,21 @@ pub enum FmiState {
 }
 
 impl FmiState {
+    /// Whether an instance in this state went through
+    /// `fmi2ExitInitializationMode`, which checks the parameters' declared
+    /// ranges and builds the model: so its parameters hold their ranges and
+    /// the model is built from them. Before it the importer may still be
+    /// setting them, and an error state may come from a refused
+    /// initialization. What a restored FMU state is checked against
+    /// ([`CoSimModel::validate_restored`](crate::CoSimModel::validate_restored)).
+    pub const fn initialized(self) -> bool {
+        use FmiState::*;
+        match self {
+            StepComplete | StepFailed | Terminated | EventMode | ContinuousTimeMode => true,
+            Instantiated | InitializationMode | Error | Fatal => false,
+        }
+    }
+
     /// Every state, in declaration order.
     pub const ALL: [FmiState; 9] = [
         FmiState::Instantiated,

@@ -763,10 +763,7 @@ impl PiezoControllerFmu {
     /// finite. Before it, `exit_initialization_mode` checks and rebuilds
     /// everything.
     fn check_restored(&self, state: FmiState) -> Result<(), ModelError> {
-        if matches!(
-            state,
-            FmiState::Instantiated | FmiState::InitializationMode | FmiState::Error
-        ) {
+        if !state.initialized() {
             return Ok(());
         }
         // The PI gains are tunable: fmi2SetReal takes any finite value for

@@ -845,10 +845,7 @@ impl FlexureStageFmu {
     /// state is in the physical domain. Before it, `exit_initialization_mode`
     /// checks and rebuilds everything.
     fn check_restored(&self, state: FmiState) -> Result<(), ModelError> {
-        if matches!(
-            state,
-            FmiState::Instantiated | FmiState::InitializationMode | FmiState::Error
-        ) {
+        if !state.initialized() {
             return Ok(());
         }
         self.params.validate().map_err(refused_parameter)?;
