@@ -155,8 +155,10 @@ def test_an_interrupted_sweep_continues_where_it_stopped(tmp_path):
     """Ctrl-C (SIGINT) to `python -m demo.sweep` once the first rows are in;
     the same command again runs only what is missing."""
     spec_path = tmp_path / "longer.toml"
-    spec_path.write_text(SPEC.replace("samples = 2", "samples = 12"))
-    runs = 12 * 4
+    # Long enough (a few seconds at about 50 ms a run) that the interrupt
+    # lands while runs are still going on a fast machine too.
+    spec_path.write_text(SPEC.replace("samples = 2", "samples = 40"))
+    runs = 40 * 4
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     command = [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(out),

@@ -398,16 +398,47 @@ impl FlexureStage {
         ];
         let gains = [0, 1, 2].map(|m| rates.map(|rate| modes[m].exponential_gain(rate)));
         let c = &params.coupling;
+        let actuators = params
+            .actuators
+            .map(|a| AsymmetricBoucWen::at_exercised_rest(a.hysteresis, params.rest_cycle_voltage));
+        let couplings = [c.x_from_pzt1, c.rot_from_pzt1, c.y_from_pzt2, c.y_from_pzt3]
+            .map(|h| AsymmetricBoucWen::at_exercised_rest(h, params.rest_cycle_voltage));
+        // Parameters each inside its range can still make a Bouc-Wen model
+        // diverge on the exercised rest cycle (the fuzzer's restored states
+        // found such sets): a stage built on a non-finite rest would hand
+        // NaN to every state and output, so it is refused here.
+        const NAMES: [&str; 7] = [
+            "actuators[0].hysteresis",
+            "actuators[1].hysteresis",
+            "actuators[2].hysteresis",
+            "coupling.x_from_pzt1",
+            "coupling.rot_from_pzt1",
+            "coupling.y_from_pzt2",
+            "coupling.y_from_pzt3",
+        ];
+        if let Some(name) = actuators
+            .iter()
+            .chain(&couplings)
+            .zip(NAMES)
+            .find_map(|(model, name)| (!model.hysteretic_state().is_finite()).then_some(name))
+        {
+            return Err(ParamError {
+                parameter: "rest_cycle_voltage".to_owned(),
+                value: params.rest_cycle_voltage,
+                allowed: format!(
+                    "a rest cycle that {name} settles on: with its Bouc-Wen parameters the \
+                     hysteretic state diverges to a non-finite value (use 0 for a virgin rest, \
+                     or check {name})"
+                ),
+            });
+        }
         Ok(Self {
             amplifier: Amplifier::new(params.amplifier),
-            actuators: params.actuators.map(|a| {
-                AsymmetricBoucWen::at_exercised_rest(a.hysteresis, params.rest_cycle_voltage)
-            }),
+            actuators,
             creep: params
                 .actuators
                 .map(|a| Creep::new(a.creep_gain, a.creep_time)),
-            couplings: [c.x_from_pzt1, c.rot_from_pzt1, c.y_from_pzt2, c.y_from_pzt3]
-                .map(|h| AsymmetricBoucWen::at_exercised_rest(h, params.rest_cycle_voltage)),
+            couplings,
             modes,
             noise: SensorNoise::new(params.noise),
             tau,
