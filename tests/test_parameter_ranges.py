@@ -229,10 +229,11 @@ def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
     slave.free()
 
 
-def test_diverging_hysteresis_at_the_exercised_rest_is_reported(envs):
+def test_diverging_hysteresis_at_the_exercised_rest_is_refused(envs):
     """The same parameters with the default rest: the 0-100-0 V cycle the
-    stacks rest after (`rest_cycle_voltage`) already escapes. The instance
-    must say so, naming the state, and refuse to step, not return NaN."""
+    stacks rest after (`rest_cycle_voltage`) already escapes. Initialization
+    is refused, naming the rest cycle and the model that diverges on it, and
+    the instance does not step (no NaN reaches an output)."""
     slave = envs["FlexureStage"].instantiate("diverging-rest")
     status = fmi2.fmi2OK
     try:
@@ -244,8 +245,9 @@ def test_diverging_hysteresis_at_the_exercised_rest_is_reported(envs):
     except FMICallException as failed:
         status = failed.status
     assert status == fmi2.fmi2Error, slave.log.dump()
-    message = " ".join(r.text for r in slave.log.matching("diverged", status=fmi2.fmi2Error))
-    assert "coupling x from PZT1" in message, slave.log.dump()
+    message = " ".join(r.text for r in slave.log.matching("diverges", status=fmi2.fmi2Error))
+    assert "rest_cycle_voltage" in message and "coupling.x_from_pzt1" in message, slave.log.dump()
+    assert step_status(slave, 1e-4) == fmi2.fmi2Error
     print(message)
     slave.free()
 

@@ -745,6 +745,9 @@ mod tests {
         let mut params = FlexureStageParams::default();
         params.coupling.y_from_pzt3.beta = -0.55;
         params.coupling.y_from_pzt3.gamma = -0.13;
+        // From a virgin rest: the exercised rest cycle itself diverges with
+        // these parameters (the next test).
+        params.rest_cycle_voltage = 0.0;
         let mut stage = FlexureStage::new(params).unwrap();
         let mut fault = None;
         for k in 1..=20_000 {
@@ -759,6 +762,22 @@ mod tests {
             "hysteretic state h of the coupling y from PZT3 (coupling.y_from_pzt3)"
         );
         assert!(fault.value.is_nan() || fault.value.abs() > DIVERGED_DISPLACEMENT_UM);
+    }
+
+    /// Parameters each inside its range whose Bouc-Wen model diverges on the
+    /// exercised rest cycle are refused at construction, naming the model.
+    #[test]
+    fn a_rest_cycle_that_diverges_is_refused() {
+        let mut params = FlexureStageParams::default();
+        params.coupling.y_from_pzt3.beta = -0.55;
+        params.coupling.y_from_pzt3.gamma = -0.13;
+        let error = FlexureStage::new(params).expect_err("the rest cycle diverges");
+        assert_eq!(error.parameter, "rest_cycle_voltage");
+        assert!(
+            error.allowed.contains("coupling.y_from_pzt3"),
+            "{}",
+            error.allowed
+        );
     }
 
     /// Parameters that validate but ask for 2e14 pieces of 1e-4 V per step
