@@ -171,7 +171,9 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
     /// Called when an FMU state replaces the instance's values
     /// (`fmi2SetFMUstate`, and `fmi2DeSerializeFMUstate` for bytes from
     /// outside), on the candidate model value, after the layer checked that
-    /// every Real of the variable table is finite and, in `state`s past
+    /// every Real of the variable table is finite (state derivatives aside:
+    /// they are not evaluated before this hook rebuilt what they are
+    /// computed from) and, in `state`s past
     /// initialization, that every fixed parameter is in its declared range
     /// (tunable ones, like inputs, take any finite value while running). The
     /// model checks the rest of its invariants (what its own constructor

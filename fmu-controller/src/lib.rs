@@ -580,48 +580,6 @@ const BLOCKS: &[&[Variable<PiezoControllerFmu>]] = &[
 static VARIABLES: [Variable<PiezoControllerFmu>; piezo_fmu_tables::total_len(BLOCKS)] =
     fmi2_cosim::variables::concat(BLOCKS);
 
-/// Whether every value is finite: x·0 is ±0 for a finite x and NaN for an
-/// infinite or NaN one, and a sum with a NaN in it is NaN. Summed in two
-/// lanes, which the compiler keeps in one vector register: one multiplication
-/// and one addition per pair of values, no compare or branch per value (this
-/// runs at every step).
-#[inline]
-fn all_finite<const N: usize>(values: [f64; N]) -> bool {
-    let mut lanes = [0.0f64; 2];
-    let pairs = values.chunks_exact(2);
-    let odd = pairs.remainder().first().map_or(0.0, |v| v * 0.0);
-    for pair in pairs {
-        lanes[0] += pair[0] * 0.0;
-        lanes[1] += pair[1] * 0.0;
-    }
-    lanes[0] + lanes[1] + odd == 0.0
-}
-
-/// Whether every output of a controller sample is finite (the fast check of
-/// each step; [`PiezoControllerFmu::non_finite_output`] names the culprit).
-#[inline]
-fn sample_is_finite(out: &ControllerOutput) -> bool {
-    let d = &out.decoupled;
-    all_finite([
-        out.u[0],
-        out.u[1],
-        out.u[2],
-        out.feedforward[0],
-        out.feedforward[1],
-        out.feedforward[2],
-        out.feedback[0],
-        out.feedback[1],
-        out.feedback[2],
-        out.e_x,
-        out.e_y,
-        out.e_theta,
-        d.x_r2,
-        d.x_r3,
-        d.y_rx,
-        d.y_rtheta,
-    ])
-}
-
 impl PiezoControllerFmu {
     /// The first Real output that is not finite, by its FMI name.
     fn non_finite_output(&self) -> Option<(&'static str, f64)> {
@@ -728,7 +686,7 @@ impl CoSimModel for PiezoControllerFmu {
         // Finite inputs do not make every step computable: a huge step
         // overflows the PI integrators. Such a step fails instead of handing
         // NaN or infinite commands to the stage.
-        if !sample_is_finite(&out) {
+        if !out.is_finite() {
             return Err(self.non_finite_step(current_time, step_size));
         }
         // Limiting is part of normal operation (a demand of 0 µm asks for a
@@ -741,42 +699,30 @@ impl CoSimModel for PiezoControllerFmu {
         Ok(StepOutcome::Completed)
     }
 
+    /// Past initialization the controller was built from the FMU's
+    /// parameters: the selector codes must be the selectors and the
+    /// controller must hold the same parameters, and it is rebuilt from them
+    /// and its dynamic state (`PiezoController::rebuilt` validates both).
+    /// Before it, `exit_initialization_mode` validates and builds everything.
     fn validate_restored(
         &mut self,
         _ctx: &mut Context<'_>,
         state: FmiState,
     ) -> Result<(), ModelError> {
-        self.check_restored(state)
-    }
-}
-
-/// A parameter piezo-models refuses, named as the importer knows it.
-fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
-    piezo_fmu_tables::refused_parameter(&VARIABLES, &e)
-}
-
-impl PiezoControllerFmu {
-    /// The restored-state check of [`CoSimModel::validate_restored`]: past
-    /// initialization the controller was built from the parameters (so they
-    /// pass piezo-models' validation, the selector codes are the selectors,
-    /// and the controller holds the same parameters) and its last sample is
-    /// finite. Before it, `exit_initialization_mode` checks and rebuilds
-    /// everything.
-    fn check_restored(&self, state: FmiState) -> Result<(), ModelError> {
+        // Whatever the machine state, the controller the instance holds was
+        // built from valid parameters (its constructor refuses others), so it
+        // can be rebuilt; its dynamic state may be non-finite only in the
+        // error state, which a step that overflowed leaves.
+        self.controller = self.controller.rebuilt().map_err(refused_parameter)?;
+        if state != FmiState::Error
+            && let Some(unreachable) = self.controller.unreachable_state()
+        {
+            return Err(ModelError(unreachable.to_string()));
+        }
+        // Past initialization it was built from the FMU's parameters.
         if !state.initialized() {
             return Ok(());
         }
-        // The PI gains are tunable: fmi2SetReal takes any finite value for
-        // them while running (as the layer does for every tunable), so a
-        // state may hold gains that validate() would refuse; the rest is
-        // checked as at initialization.
-        let defaults = ControllerParams::default();
-        let fixed_part = ControllerParams {
-            translation_gains: defaults.translation_gains,
-            rotation_gains: defaults.rotation_gains,
-            ..self.params.clone()
-        };
-        fixed_part.validate().map_err(refused_parameter)?;
         let selectors = (
             selected(&HysteresisModel::CODES, self.selector_codes[0]),
             selected(&DecouplingModel::CODES, self.selector_codes[1]),
@@ -794,14 +740,16 @@ impl PiezoControllerFmu {
                     .to_owned(),
             ));
         }
-        if !sample_is_finite(self.controller.output()) {
-            return Err(ModelError(
-                "the controller's last sample is not finite".to_owned(),
-            ));
-        }
         Ok(())
     }
+}
 
+/// A parameter piezo-models refuses, named as the importer knows it.
+fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
+    piezo_fmu_tables::refused_parameter(&VARIABLES, &e)
+}
+
+impl PiezoControllerFmu {
     #[cold]
     #[inline(never)]
     fn non_finite_step(&self, current_time: f64, step_size: f64) -> ModelError {

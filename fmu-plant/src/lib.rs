@@ -824,12 +824,37 @@ impl CoSimModel for FlexureStageFmu {
         )
     }
 
+    /// Past initialization the stage was built from the FMU's parameters:
+    /// it must hold the same ones, and is rebuilt from them and its dynamic
+    /// state (`FlexureStage::rebuilt` validates both). Before it,
+    /// `exit_initialization_mode` validates and builds everything.
     fn validate_restored(
         &mut self,
         _ctx: &mut Context<'_>,
         state: FmiState,
     ) -> Result<(), ModelError> {
-        self.check_restored(state)
+        // Whatever the machine state, the stage the instance holds was built
+        // from valid parameters (its constructor refuses others), so it can
+        // be rebuilt; its dynamic state may be non-finite only in the error
+        // state, which a diverged step leaves.
+        self.stage = self.stage.rebuilt().map_err(refused_parameter)?;
+        if state != FmiState::Error
+            && let Some(unreachable) = self.stage.unreachable_state()
+        {
+            return Err(ModelError(unreachable.to_string()));
+        }
+        // Past initialization it was built from the FMU's parameters.
+        if !state.initialized() {
+            return Ok(());
+        }
+        if self.stage.params() != &self.params {
+            return Err(ModelError(
+                "the stage's parameters differ from the FMU's: the state was not taken from \
+                 an instance of this FMU"
+                    .to_owned(),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -839,35 +864,6 @@ fn refused_parameter(e: piezo_models::ParamError) -> ModelError {
 }
 
 impl FlexureStageFmu {
-    /// The restored-state check of [`CoSimModel::validate_restored`]: past
-    /// initialization the stage was built from the parameters (so they pass
-    /// piezo-models' validation, and the stage holds the same ones) and its
-    /// state is in the physical domain. Before it, `exit_initialization_mode`
-    /// checks and rebuilds everything.
-    fn check_restored(&self, state: FmiState) -> Result<(), ModelError> {
-        if !state.initialized() {
-            return Ok(());
-        }
-        self.params.validate().map_err(refused_parameter)?;
-        if self.stage.params() != &self.params {
-            return Err(ModelError(
-                "the stage's parameters differ from the FMU's: the state was not taken from \
-                 an instance of this FMU"
-                    .to_owned(),
-            ));
-        }
-        if let Some(fault) = self.stage.check_state() {
-            return Err(ModelError(format!(
-                "the stage's {} = {} is non-finite or beyond {} um / {} rad",
-                fault.variable,
-                fault.value,
-                piezo_models::flexure_stage::DIVERGED_DISPLACEMENT_UM,
-                piezo_models::flexure_stage::DIVERGED_ROTATION_RAD
-            )));
-        }
-        Ok(())
-    }
-
     #[cold]
     #[inline(never)]
     fn diverged(

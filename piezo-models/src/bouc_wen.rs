@@ -349,6 +349,13 @@ impl AsymmetricBoucWen {
         self.params.state_slope(self.u, self.h, u_rate) * u_rate
     }
 
+    /// Takes `from`'s point (input and hysteretic state), keeping this
+    /// model's parameters and rest ([`crate::restore`]).
+    pub(crate) fn carry_point(&mut self, from: &Self) {
+        self.u = from.u;
+        self.h = from.h;
+    }
+
     /// Back to rest: h = h_rest (0 for a virgin model), u = 0.
     pub fn reset(&mut self) {
         self.h = self.rest.h;

@@ -29,6 +29,7 @@ use crate::creep::{Creep, CreepPath};
 use crate::oscillator::{ModeParams, ModeSet, Oscillator, exponential_particular};
 pub use crate::parameter::ParamError;
 use crate::parameter::{Bound, Range};
+use crate::restore::UnreachableState;
 use crate::sensor_noise::{SensorNoise, SensorNoiseParams};
 use serde::{Deserialize, Serialize};
 
@@ -279,6 +280,22 @@ const COUPLING_STATES: [&str; 4] = [
     "hysteretic state h of the coupling y from PZT2 (coupling.y_from_pzt2)",
     "hysteretic state h of the coupling y from PZT3 (coupling.y_from_pzt3)",
 ];
+const ACTUATOR_INPUTS: [&str; 3] = [
+    "input voltage of the hysteresis of PZT1",
+    "input voltage of the hysteresis of PZT2",
+    "input voltage of the hysteresis of PZT3",
+];
+const COUPLING_INPUTS: [&str; 4] = [
+    "input voltage of the coupling x from PZT1",
+    "input voltage of the coupling s2 - s3 from PZT1",
+    "input voltage of the coupling y from PZT2",
+    "input voltage of the coupling y from PZT3",
+];
+const NOISE_SAMPLES: [&str; 3] = [
+    "noise sample of sensor s1",
+    "noise sample of sensor s2",
+    "noise sample of sensor s3",
+];
 const CREEP_STATES: [&str; 3] = [
     "creep displacement of PZT1",
     "creep displacement of PZT2",
@@ -337,6 +354,9 @@ impl ExponentialSum {
         self
     }
 }
+
+/// [`PieceDecays::dt`] before any piece.
+const NO_PIECE_DT: f64 = -1.0;
 
 /// Exponential factors for one piece length (cached: at a fixed communication
 /// step every step is one piece of the same length).
@@ -447,7 +467,7 @@ impl FlexureStage {
             gains,
             max_du: params.solver.max_voltage_step * (1.0 + 1e-9),
             piece: PieceDecays {
-                dt: -1.0,
+                dt: NO_PIECE_DT,
                 decays: [1.0; RATES],
                 amplifier_travel: 0.0,
             },
@@ -457,6 +477,56 @@ impl FlexureStage {
 
     pub fn params(&self) -> &FlexureStageParams {
         &self.params
+    }
+
+    /// This stage rebuilt from its parameters and its dynamic state alone
+    /// (see [`crate::restore`]): for a stage that comes from outside, such as
+    /// a deserialized FMU state. The parameters are validated and everything
+    /// derived from them is built as [`FlexureStage::new`] builds it (the
+    /// components' copies of the parameters, the rates and gains, the
+    /// exercised rests, the caches); the dynamic state (amplifier voltages,
+    /// every Bouc-Wen model's input and hysteretic state, creep, modes, the
+    /// noise generator and its current samples) is carried over as it is
+    /// ([`FlexureStage::unreachable_state`] checks it). The rebuilt stage
+    /// steps exactly as the original would have.
+    pub fn rebuilt(&self) -> Result<FlexureStage, ParamError> {
+        let mut stage = FlexureStage::new(self.params.clone())?;
+        stage.amplifier.set_voltages(self.amplifier.voltages());
+        for i in 0..3 {
+            stage.actuators[i].carry_point(&self.actuators[i]);
+            stage.creep[i].set_value(self.creep[i].value());
+            stage.modes[i].carry_state(&self.modes[i]);
+        }
+        for (rebuilt, own) in stage.couplings.iter_mut().zip(&self.couplings) {
+            rebuilt.carry_point(own);
+        }
+        stage.noise.carry_state(&self.noise);
+        // The piece cache for the length the original cached: the rebuilt
+        // stage is then the same value the original would be with these
+        // parameters (a state taken from it serializes to the same bytes).
+        if self.piece.dt != NO_PIECE_DT {
+            stage.piece_decays(self.piece.dt);
+        }
+        Ok(stage)
+    }
+
+    /// The first dynamic state variable that is not finite. Any finite state
+    /// is one a run can hold: a Model Exchange importer's integrator sets
+    /// the continuous states to whatever it computes, and a co-simulation
+    /// step checks its divergence bounds itself.
+    pub fn unreachable_state(&self) -> Option<UnreachableState> {
+        let inputs = self.actuators.iter().zip(ACTUATOR_INPUTS);
+        let coupling_inputs = self.couplings.iter().zip(COUPLING_INPUTS);
+        ode::STATES
+            .into_iter()
+            .zip(self.continuous_states())
+            .chain(
+                inputs
+                    .chain(coupling_inputs)
+                    .map(|(m, name)| (name, m.input())),
+            )
+            .chain(NOISE_SAMPLES.into_iter().zip(self.noise.current()))
+            .find_map(|(variable, value)| UnreachableState::unless_finite(variable, value))
     }
 
     /// Advances the stage by `h` seconds with the three commands (PZT1, PZT2,

@@ -93,6 +93,12 @@ impl InverseBoucWen {
         self.model.params()
     }
 
+    /// Takes `from`'s point, keeping this model's parameters, rest and
+    /// substep ([`crate::restore`]).
+    fn carry_point(&mut self, from: &Self) {
+        self.model.carry_point(&from.model);
+    }
+
     /// The model's output at its current state [µm].
     pub fn output(&self) -> f64 {
         self.model.output()
@@ -185,6 +191,17 @@ impl CouplingEstimator {
         }
     }
 
+    /// Takes `from`'s model points ([`crate::restore`]).
+    pub(crate) fn carry_points(&mut self, from: &Self) {
+        self.x_from_y.carry_point(&from.x_from_y);
+        self.y_from_x.carry_point(&from.y_from_x);
+    }
+
+    /// The models x from y and y from x.
+    pub(crate) fn models(&self) -> [&AsymmetricBoucWen; 2] {
+        [&self.x_from_y, &self.y_from_x]
+    }
+
     pub fn estimate(&self) -> CouplingEstimate {
         CouplingEstimate {
             x_from_y: self.x_from_y.output(),
@@ -219,6 +236,18 @@ impl BoucWenFeedforward {
             inverses: [models.y, models.x, models.x]
                 .map(|p| InverseBoucWen::new(p, models.rest_cycle, max_du)),
         }
+    }
+
+    /// Takes `from`'s model points ([`crate::restore`]).
+    pub(crate) fn carry_points(&mut self, from: &Self) {
+        for (inverse, own) in self.inverses.iter_mut().zip(&from.inverses) {
+            inverse.carry_point(own);
+        }
+    }
+
+    /// The forward models of PZT1, PZT2, PZT3 the inverses solve.
+    pub(crate) fn models(&self) -> [&AsymmetricBoucWen; 3] {
+        self.inverses.each_ref().map(|inverse| &inverse.model)
     }
 
     /// Commands [V] for the channel references [y_r, x_r2, x_r3] [µm].

@@ -230,6 +230,17 @@ impl ModifiedInversePi {
         &self.params
     }
 
+    /// Takes `from`'s backlash memories, keeping this model's parameters and
+    /// thresholds ([`crate::restore`]).
+    pub(crate) fn carry_memories(&mut self, from: &Self) {
+        self.memories = from.memories;
+    }
+
+    /// The backlash memories (the model's dynamic state).
+    pub(crate) fn memories(&self) -> [f64; BACKLASH_OPERATORS] {
+        self.memories.0
+    }
+
     /// Back to the rest the model started from.
     pub fn reset(&mut self) {
         self.memories = BacklashMemories::after_cycle(

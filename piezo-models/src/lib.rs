@@ -21,6 +21,7 @@ pub mod inverse_pi;
 pub mod oscillator;
 pub mod parameter;
 pub mod piezo_controller;
+pub mod restore;
 pub mod sensor_noise;
 
 pub use amplifier::{Amplifier, AmplifierParams};
@@ -41,4 +42,5 @@ pub use piezo_controller::{
     ControllerOutput, ControllerParams, DecouplingModel, HysteresisModel, PiController, PiGains,
     PiezoController,
 };
+pub use restore::UnreachableState;
 pub use sensor_noise::{SensorNoise, SensorNoiseParams};

@@ -47,6 +47,9 @@ pub struct ModalPoint {
     pub velocity: f64,
 }
 
+/// [`Oscillator`]'s cached interval length before any interval.
+const NO_CACHED_DT: f64 = -1.0;
+
 /// A damped second-order mode with its state and a cache of the free-response
 /// transition for the last interval length.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -74,7 +77,7 @@ impl Oscillator {
             zeta,
             omega_d: omega * (1.0 - zeta * zeta).sqrt(),
             state: ModalPoint::default(),
-            cached_dt: -1.0,
+            cached_dt: NO_CACHED_DT,
             transition: [1.0, 0.0, 0.0, 1.0],
         }
     }
@@ -100,6 +103,18 @@ impl Oscillator {
     /// Sets position and velocity (a continuous-state integrator owns them).
     pub fn set_state(&mut self, state: ModalPoint) {
         self.state = state;
+    }
+
+    /// Takes `from`'s state, keeping this mode's parameters; its cache is
+    /// recomputed for the interval length `from` cached, so that the mode is
+    /// the same value as `from` would be with this mode's parameters
+    /// ([`crate::restore`]).
+    pub(crate) fn carry_state(&mut self, from: &Self) {
+        self.state = from.state;
+        if from.cached_dt != NO_CACHED_DT {
+            self.transition = self.free_transition(from.cached_dt);
+            self.cached_dt = from.cached_dt;
+        }
     }
 
     /// (q̇, q̈) of q̈ + 2ζω q̇ + ω² q = ω² f at the current state for the

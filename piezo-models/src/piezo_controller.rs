@@ -29,6 +29,7 @@ use crate::flexure_stage::{FlexureStageParams, ParamError};
 use crate::inverse_bouc_wen::{BoucWenFeedforward, BoucWenModels, CouplingEstimator};
 use crate::inverse_pi::{InversePiModels, InversePiParams, ModifiedInversePi};
 use crate::parameter::Range;
+use crate::restore::UnreachableState;
 
 /// Proportional and integral gains of one axis [V/µm, V/(µm·s)].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -250,6 +251,68 @@ pub struct ControllerOutput {
     pub decoupled: DecoupledReferences,
 }
 
+impl ControllerOutput {
+    /// What each of [`ControllerOutput::values`] is, for the user.
+    pub const NAMES: [&'static str; 16] = [
+        "last command u1",
+        "last command u2",
+        "last command u3",
+        "last feedforward of PZT1",
+        "last feedforward of PZT2",
+        "last feedforward of PZT3",
+        "last feedback of PZT1",
+        "last feedback of PZT2",
+        "last feedback of PZT3",
+        "last error e_x",
+        "last error e_y",
+        "last error e_theta",
+        "last decoupled reference x_r2",
+        "last decoupled reference x_r3",
+        "last decoupled reference y_rx",
+        "last decoupled reference y_rtheta",
+    ];
+
+    /// Every value of the sample, in [`ControllerOutput::NAMES`] order.
+    #[inline]
+    pub fn values(&self) -> [f64; 16] {
+        let d = &self.decoupled;
+        [
+            self.u[0],
+            self.u[1],
+            self.u[2],
+            self.feedforward[0],
+            self.feedforward[1],
+            self.feedforward[2],
+            self.feedback[0],
+            self.feedback[1],
+            self.feedback[2],
+            self.e_x,
+            self.e_y,
+            self.e_theta,
+            d.x_r2,
+            d.x_r3,
+            d.y_rx,
+            d.y_rtheta,
+        ]
+    }
+
+    /// Whether every value of the sample is finite: a step that overflowed
+    /// (a huge step size over the integrators) is not. This runs at every
+    /// sample, so without a compare or branch per value: x·0 is ±0 for a
+    /// finite x and NaN for an infinite or NaN one, and a sum with a NaN in
+    /// it is NaN. Summed in two lanes, which the compiler keeps in one vector
+    /// register: one multiplication and one addition per pair of values.
+    #[inline]
+    pub fn is_finite(&self) -> bool {
+        let mut lanes = [0.0f64; 2];
+        for pair in self.values().chunks_exact(2) {
+            lanes[0] += pair[0] * 0.0;
+            lanes[1] += pair[1] * 0.0;
+        }
+        lanes[0] + lanes[1] == 0.0
+    }
+}
+
 /// The sampled controller.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PiezoController {
@@ -316,6 +379,120 @@ impl PiezoController {
 
     pub fn params(&self) -> &ControllerParams {
         &self.params
+    }
+
+    /// This controller rebuilt from its parameters and its dynamic state
+    /// alone (see [`crate::restore`]): for a controller that comes from
+    /// outside, such as a deserialized FMU state. The parameters are
+    /// validated as [`PiezoController::new`] validates them, except the PI
+    /// gains, which [`PiezoController::set_tuning`] changes while running
+    /// and which are carried over as they are; everything derived from the
+    /// parameters is built again (the inverse models' thresholds and
+    /// exercised rests). The dynamic state (backlash memories, every
+    /// Bouc-Wen model's point, the previous references, the integrators, the
+    /// limit flags and the last sample) is carried over as it is
+    /// ([`PiezoController::unreachable_state`] checks it). The rebuilt
+    /// controller steps exactly as the original would have.
+    pub fn rebuilt(&self) -> Result<PiezoController, ParamError> {
+        let defaults = ControllerParams::default();
+        let mut controller = PiezoController::new(ControllerParams {
+            translation_gains: defaults.translation_gains,
+            rotation_gains: defaults.rotation_gains,
+            ..self.params.clone()
+        })?;
+        controller.params = self.params.clone();
+        for (model, own) in controller.models.iter_mut().zip(&self.models) {
+            model.carry_memories(own);
+        }
+        controller.bouc_wen.carry_points(&self.bouc_wen);
+        controller.coupling.carry_points(&self.coupling);
+        controller.previous_references = self.previous_references;
+        controller.pi_x = self.pi_x;
+        controller.pi_y = self.pi_y;
+        controller.pi_theta = self.pi_theta;
+        controller.limited = self.limited;
+        controller.output = self.output;
+        Ok(controller)
+    }
+
+    /// The first dynamic state variable that holds what no run of the
+    /// controller does: a value that is not finite, or a limit flag other
+    /// than -1, 0 or 1.
+    pub fn unreachable_state(&self) -> Option<UnreachableState> {
+        const MEMORIES: [&str; 3] = [
+            "backlash memory of the inverse P-I model of PZT1",
+            "backlash memory of the inverse P-I model of PZT2",
+            "backlash memory of the inverse P-I model of PZT3",
+        ];
+        const BOUC_WEN: [[&str; 2]; 5] = [
+            [
+                "input of the inverse Bouc-Wen model of PZT1",
+                "hysteretic state of the inverse Bouc-Wen model of PZT1",
+            ],
+            [
+                "input of the inverse Bouc-Wen model of PZT2",
+                "hysteretic state of the inverse Bouc-Wen model of PZT2",
+            ],
+            [
+                "input of the inverse Bouc-Wen model of PZT3",
+                "hysteretic state of the inverse Bouc-Wen model of PZT3",
+            ],
+            [
+                "input of the coupling model x from y",
+                "hysteretic state of the coupling model x from y",
+            ],
+            [
+                "input of the coupling model y from x",
+                "hysteretic state of the coupling model y from x",
+            ],
+        ];
+        let memories = self.models.iter().zip(MEMORIES).flat_map(|(model, name)| {
+            model
+                .memories()
+                .into_iter()
+                .map(move |memory| (name, memory))
+        });
+        let bouc_wen = self
+            .bouc_wen
+            .models()
+            .into_iter()
+            .chain(self.coupling.models())
+            .zip(BOUC_WEN)
+            .flat_map(|(model, [input, state])| {
+                [(input, model.input()), (state, model.hysteretic_state())]
+            });
+        let references = self
+            .previous_references
+            .unwrap_or_default()
+            .map(|reference| ("previous reference", reference));
+        let integrals = [
+            ("integral of the x PI controller", self.pi_x.integral),
+            ("integral of the y PI controller", self.pi_y.integral),
+            (
+                "integral of the theta_z PI controller",
+                self.pi_theta.integral,
+            ),
+        ];
+        let output = ControllerOutput::NAMES
+            .into_iter()
+            .zip(self.output.values());
+        memories
+            .chain(bouc_wen)
+            .chain(references)
+            .chain(integrals)
+            .chain(output)
+            .find_map(|(variable, value)| UnreachableState::unless_finite(variable, value))
+            .or_else(|| {
+                let flag = self
+                    .limited
+                    .into_iter()
+                    .find(|flag| !(-1..=1).contains(flag))?;
+                Some(UnreachableState {
+                    variable: "limit flag of a channel",
+                    value: f64::from(flag),
+                    allowed: "-1 (at command_min), 0 or 1 (at command_max)",
+                })
+            })
     }
 
     /// The parameters that may change while running: switches and gains.

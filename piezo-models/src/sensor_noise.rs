@@ -60,6 +60,13 @@ impl SensorNoise {
         }
     }
 
+    /// Takes `from`'s generator state and current samples, keeping this
+    /// source's parameters ([`crate::restore`]).
+    pub(crate) fn carry_state(&mut self, from: &Self) {
+        self.rng = from.rng.clone();
+        self.current = from.current;
+    }
+
     /// The samples added to s1, s2, s3 [µm].
     pub fn current(&self) -> [f64; 3] {
         self.current
