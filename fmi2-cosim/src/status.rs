@@ -12,6 +12,8 @@
 
 use fmi_sys::fmi2 as sys;
 
+use crate::functions;
+
 /// Status returned by an FMI function, ordered by severity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Status {
@@ -212,6 +214,44 @@ const ME_READABLE: StateMask = StateMask::of(&[
     Error,
 ]);
 
+/// How many functions of [`functions::ALL`] take an instance: the length of
+/// the state table.
+const STATE_TABLE_LEN: usize = {
+    let mut count = 0;
+    let mut i = 0;
+    while i < functions::ALL.len() {
+        if functions::ALL[i].state_checked.is_some() {
+            count += 1;
+        }
+        i += 1;
+    }
+    count
+};
+
+/// [`FmiFunction::ALL`] and [`FmiFunction::ENTRY`], built from
+/// [`functions::ALL`]. Compilation fails unless the k-th function there that
+/// takes an instance is the variant declared k-th: each variant is then
+/// listed exactly once, and its name and interface are read from the list.
+const fn state_table() -> ([FmiFunction; STATE_TABLE_LEN], [usize; STATE_TABLE_LEN]) {
+    let mut functions = [FmiFunction::SetDebugLogging; STATE_TABLE_LEN];
+    let mut entries = [0; STATE_TABLE_LEN];
+    let mut k = 0;
+    let mut i = 0;
+    while i < functions::ALL.len() {
+        if let Some(function) = functions::ALL[i].state_checked {
+            assert!(
+                function as usize == k,
+                "FmiFunction's variants must be declared in the order of functions::ALL"
+            );
+            functions[k] = function;
+            entries[k] = i;
+            k += 1;
+        }
+        i += 1;
+    }
+    (functions, entries)
+}
+
 /// The FMI 2.0 functions that take an instance, each with its allowed states.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FmiFunction {
@@ -259,128 +299,26 @@ pub enum FmiFunction {
 }
 
 impl FmiFunction {
-    /// Every function of the table, in declaration order.
-    pub const ALL: [FmiFunction; 41] = {
-        use FmiFunction::*;
-        [
-            SetDebugLogging,
-            FreeInstance,
-            SetupExperiment,
-            EnterInitializationMode,
-            ExitInitializationMode,
-            Terminate,
-            Reset,
-            GetReal,
-            GetInteger,
-            GetBoolean,
-            GetString,
-            SetReal,
-            SetInteger,
-            SetBoolean,
-            SetString,
-            GetFmuState,
-            SetFmuState,
-            FreeFmuState,
-            SerializedFmuStateSize,
-            SerializeFmuState,
-            DeSerializeFmuState,
-            GetDirectionalDerivative,
-            SetRealInputDerivatives,
-            GetRealOutputDerivatives,
-            DoStep,
-            CancelStep,
-            GetStatus,
-            GetRealStatus,
-            GetIntegerStatus,
-            GetBooleanStatus,
-            GetStringStatus,
-            EnterEventMode,
-            NewDiscreteStates,
-            EnterContinuousTimeMode,
-            CompletedIntegratorStep,
-            SetTime,
-            SetContinuousStates,
-            GetDerivatives,
-            GetEventIndicators,
-            GetContinuousStates,
-            GetNominalsOfContinuousStates,
-        ]
-    };
+    /// Every function of the table: those of [`functions::ALL`] that take an
+    /// instance, in its order, which is also the variants' declaration order
+    /// (checked at compile time, so the list of functions is written once,
+    /// there).
+    pub const ALL: [FmiFunction; STATE_TABLE_LEN] = state_table().0;
 
-    pub fn name(self) -> &'static str {
-        use FmiFunction::*;
-        match self {
-            SetDebugLogging => "fmi2SetDebugLogging",
-            FreeInstance => "fmi2FreeInstance",
-            SetupExperiment => "fmi2SetupExperiment",
-            EnterInitializationMode => "fmi2EnterInitializationMode",
-            ExitInitializationMode => "fmi2ExitInitializationMode",
-            Terminate => "fmi2Terminate",
-            Reset => "fmi2Reset",
-            GetReal => "fmi2GetReal",
-            GetInteger => "fmi2GetInteger",
-            GetBoolean => "fmi2GetBoolean",
-            GetString => "fmi2GetString",
-            SetReal => "fmi2SetReal",
-            SetInteger => "fmi2SetInteger",
-            SetBoolean => "fmi2SetBoolean",
-            SetString => "fmi2SetString",
-            GetFmuState => "fmi2GetFMUstate",
-            SetFmuState => "fmi2SetFMUstate",
-            FreeFmuState => "fmi2FreeFMUstate",
-            SerializedFmuStateSize => "fmi2SerializedFMUstateSize",
-            SerializeFmuState => "fmi2SerializeFMUstate",
-            DeSerializeFmuState => "fmi2DeSerializeFMUstate",
-            GetDirectionalDerivative => "fmi2GetDirectionalDerivative",
-            SetRealInputDerivatives => "fmi2SetRealInputDerivatives",
-            GetRealOutputDerivatives => "fmi2GetRealOutputDerivatives",
-            DoStep => "fmi2DoStep",
-            CancelStep => "fmi2CancelStep",
-            GetStatus => "fmi2GetStatus",
-            GetRealStatus => "fmi2GetRealStatus",
-            GetIntegerStatus => "fmi2GetIntegerStatus",
-            GetBooleanStatus => "fmi2GetBooleanStatus",
-            GetStringStatus => "fmi2GetStringStatus",
-            EnterEventMode => "fmi2EnterEventMode",
-            NewDiscreteStates => "fmi2NewDiscreteStates",
-            EnterContinuousTimeMode => "fmi2EnterContinuousTimeMode",
-            CompletedIntegratorStep => "fmi2CompletedIntegratorStep",
-            SetTime => "fmi2SetTime",
-            SetContinuousStates => "fmi2SetContinuousStates",
-            GetDerivatives => "fmi2GetDerivatives",
-            GetEventIndicators => "fmi2GetEventIndicators",
-            GetContinuousStates => "fmi2GetContinuousStates",
-            GetNominalsOfContinuousStates => "fmi2GetNominalsOfContinuousStates",
-        }
+    /// Each variant's position in [`functions::ALL`], by discriminant.
+    const ENTRY: [usize; STATE_TABLE_LEN] = state_table().1;
+
+    /// The C name (`fmi2DoStep`), from [`functions::ALL`].
+    pub const fn name(self) -> &'static str {
+        functions::ALL[Self::ENTRY[self as usize]].name
     }
 
-    /// The interface the function belongs to; `None` for the functions common
-    /// to both.
+    /// The interface the function belongs to; `None` for the functions
+    /// common to both. From [`functions::ALL`]; inlined into every entry
+    /// point, where the function is a constant and this folds away.
     #[inline(always)]
     pub const fn interface(self) -> Option<Interface> {
-        use FmiFunction::*;
-        match self {
-            SetRealInputDerivatives
-            | GetRealOutputDerivatives
-            | DoStep
-            | CancelStep
-            | GetStatus
-            | GetRealStatus
-            | GetIntegerStatus
-            | GetBooleanStatus
-            | GetStringStatus => Some(Interface::CoSimulation),
-            EnterEventMode
-            | NewDiscreteStates
-            | EnterContinuousTimeMode
-            | CompletedIntegratorStep
-            | SetTime
-            | SetContinuousStates
-            | GetDerivatives
-            | GetEventIndicators
-            | GetContinuousStates
-            | GetNominalsOfContinuousStates => Some(Interface::ModelExchange),
-            _ => None,
-        }
+        functions::ALL[Self::ENTRY[self as usize]].interfaces.only()
     }
 
     /// Whether the function may be called on an instance of `interface` in
@@ -490,56 +428,10 @@ mod tests {
         assert!(!DoStep.allowed(Interface::ModelExchange, EventMode));
     }
 
-    /// `ALL` lists every variant once (the match forgets none: adding a
-    /// variant without listing it fails to compile here).
+    /// `FmiState::ALL` lists every state once (the match forgets none:
+    /// adding a state without listing it fails to compile here).
     #[test]
-    fn all_lists_every_function_and_state_once() {
-        for (i, f) in FmiFunction::ALL.iter().enumerate() {
-            assert_eq!(*f as usize, i, "{f:?}");
-            match f {
-                FmiFunction::SetDebugLogging
-                | FmiFunction::FreeInstance
-                | FmiFunction::SetupExperiment
-                | FmiFunction::EnterInitializationMode
-                | FmiFunction::ExitInitializationMode
-                | FmiFunction::Terminate
-                | FmiFunction::Reset
-                | FmiFunction::GetReal
-                | FmiFunction::GetInteger
-                | FmiFunction::GetBoolean
-                | FmiFunction::GetString
-                | FmiFunction::SetReal
-                | FmiFunction::SetInteger
-                | FmiFunction::SetBoolean
-                | FmiFunction::SetString
-                | FmiFunction::GetFmuState
-                | FmiFunction::SetFmuState
-                | FmiFunction::FreeFmuState
-                | FmiFunction::SerializedFmuStateSize
-                | FmiFunction::SerializeFmuState
-                | FmiFunction::DeSerializeFmuState
-                | FmiFunction::GetDirectionalDerivative
-                | FmiFunction::SetRealInputDerivatives
-                | FmiFunction::GetRealOutputDerivatives
-                | FmiFunction::DoStep
-                | FmiFunction::CancelStep
-                | FmiFunction::GetStatus
-                | FmiFunction::GetRealStatus
-                | FmiFunction::GetIntegerStatus
-                | FmiFunction::GetBooleanStatus
-                | FmiFunction::GetStringStatus
-                | FmiFunction::EnterEventMode
-                | FmiFunction::NewDiscreteStates
-                | FmiFunction::EnterContinuousTimeMode
-                | FmiFunction::CompletedIntegratorStep
-                | FmiFunction::SetTime
-                | FmiFunction::SetContinuousStates
-                | FmiFunction::GetDerivatives
-                | FmiFunction::GetEventIndicators
-                | FmiFunction::GetContinuousStates
-                | FmiFunction::GetNominalsOfContinuousStates => {}
-            }
-        }
+    fn all_lists_every_state_once() {
         for (i, s) in FmiState::ALL.iter().enumerate() {
             assert_eq!(*s as usize, i, "{s:?}");
             match s {

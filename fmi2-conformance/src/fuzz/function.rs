@@ -97,51 +97,58 @@ pub(super) enum Function {
 }
 
 impl Function {
-    /// The C name, as the standard and the FMU's log spell it.
+    /// The C name, as the standard and the FMU's log spell it (from the
+    /// layer's one list of functions).
     pub(super) fn name(self) -> &'static str {
+        self.layer_function().name()
+    }
+
+    /// The layer's state-table entry of this function.
+    pub(super) fn layer_function(self) -> fmi2_cosim::status::FmiFunction {
         use Function as F;
+        use fmi2_cosim::status::FmiFunction as L;
         match self {
-            F::SetDebugLogging => "fmi2SetDebugLogging",
-            F::SetupExperiment => "fmi2SetupExperiment",
-            F::ExitInitializationMode => "fmi2ExitInitializationMode",
-            F::Simple(Simple::EnterInitializationMode) => "fmi2EnterInitializationMode",
-            F::Simple(Simple::Terminate) => "fmi2Terminate",
-            F::Simple(Simple::Reset) => "fmi2Reset",
-            F::Simple(Simple::CancelStep) => "fmi2CancelStep",
-            F::Get(ValueType::Real) => "fmi2GetReal",
-            F::Get(ValueType::Integer) => "fmi2GetInteger",
-            F::Get(ValueType::Boolean) => "fmi2GetBoolean",
-            F::Get(ValueType::String) => "fmi2GetString",
-            F::Set(ValueType::Real) => "fmi2SetReal",
-            F::Set(ValueType::Integer) => "fmi2SetInteger",
-            F::Set(ValueType::Boolean) => "fmi2SetBoolean",
-            F::Set(ValueType::String) => "fmi2SetString",
-            F::GetFmuState => "fmi2GetFMUstate",
-            F::SetFmuState => "fmi2SetFMUstate",
-            F::FreeFmuState => "fmi2FreeFMUstate",
-            F::SerializedFmuStateSize => "fmi2SerializedFMUstateSize",
-            F::SerializeFmuState => "fmi2SerializeFMUstate",
-            F::DeSerializeFmuState => "fmi2DeSerializeFMUstate",
-            F::NotOffered(NotOffered::GetDirectionalDerivative) => "fmi2GetDirectionalDerivative",
-            F::NotOffered(NotOffered::SetRealInputDerivatives) => "fmi2SetRealInputDerivatives",
-            F::NotOffered(NotOffered::GetRealOutputDerivatives) => "fmi2GetRealOutputDerivatives",
-            F::DoStep => "fmi2DoStep",
-            F::StatusQuery(StatusQuery::Status) => "fmi2GetStatus",
-            F::StatusQuery(StatusQuery::Real) => "fmi2GetRealStatus",
-            F::StatusQuery(StatusQuery::Integer) => "fmi2GetIntegerStatus",
-            F::StatusQuery(StatusQuery::Boolean) => "fmi2GetBooleanStatus",
-            F::StatusQuery(StatusQuery::String) => "fmi2GetStringStatus",
-            F::FreeInstance => "fmi2FreeInstance",
-            F::ModeChange(ModeChange::EnterEventMode) => "fmi2EnterEventMode",
-            F::ModeChange(ModeChange::EnterContinuousTimeMode) => "fmi2EnterContinuousTimeMode",
-            F::NewDiscreteStates => "fmi2NewDiscreteStates",
-            F::CompletedIntegratorStep => "fmi2CompletedIntegratorStep",
-            F::SetTime => "fmi2SetTime",
-            F::SetContinuousStates => "fmi2SetContinuousStates",
-            F::GetVector(VectorGetter::Derivatives) => "fmi2GetDerivatives",
-            F::GetVector(VectorGetter::EventIndicators) => "fmi2GetEventIndicators",
-            F::GetVector(VectorGetter::ContinuousStates) => "fmi2GetContinuousStates",
-            F::GetVector(VectorGetter::Nominals) => "fmi2GetNominalsOfContinuousStates",
+            F::SetDebugLogging => L::SetDebugLogging,
+            F::SetupExperiment => L::SetupExperiment,
+            F::ExitInitializationMode => L::ExitInitializationMode,
+            F::Simple(Simple::EnterInitializationMode) => L::EnterInitializationMode,
+            F::Simple(Simple::Terminate) => L::Terminate,
+            F::Simple(Simple::Reset) => L::Reset,
+            F::Simple(Simple::CancelStep) => L::CancelStep,
+            F::Get(ValueType::Real) => L::GetReal,
+            F::Get(ValueType::Integer) => L::GetInteger,
+            F::Get(ValueType::Boolean) => L::GetBoolean,
+            F::Get(ValueType::String) => L::GetString,
+            F::Set(ValueType::Real) => L::SetReal,
+            F::Set(ValueType::Integer) => L::SetInteger,
+            F::Set(ValueType::Boolean) => L::SetBoolean,
+            F::Set(ValueType::String) => L::SetString,
+            F::GetFmuState => L::GetFmuState,
+            F::SetFmuState => L::SetFmuState,
+            F::FreeFmuState => L::FreeFmuState,
+            F::SerializedFmuStateSize => L::SerializedFmuStateSize,
+            F::SerializeFmuState => L::SerializeFmuState,
+            F::DeSerializeFmuState => L::DeSerializeFmuState,
+            F::NotOffered(NotOffered::GetDirectionalDerivative) => L::GetDirectionalDerivative,
+            F::NotOffered(NotOffered::SetRealInputDerivatives) => L::SetRealInputDerivatives,
+            F::NotOffered(NotOffered::GetRealOutputDerivatives) => L::GetRealOutputDerivatives,
+            F::DoStep => L::DoStep,
+            F::StatusQuery(StatusQuery::Status) => L::GetStatus,
+            F::StatusQuery(StatusQuery::Real) => L::GetRealStatus,
+            F::StatusQuery(StatusQuery::Integer) => L::GetIntegerStatus,
+            F::StatusQuery(StatusQuery::Boolean) => L::GetBooleanStatus,
+            F::StatusQuery(StatusQuery::String) => L::GetStringStatus,
+            F::FreeInstance => L::FreeInstance,
+            F::ModeChange(ModeChange::EnterEventMode) => L::EnterEventMode,
+            F::ModeChange(ModeChange::EnterContinuousTimeMode) => L::EnterContinuousTimeMode,
+            F::NewDiscreteStates => L::NewDiscreteStates,
+            F::CompletedIntegratorStep => L::CompletedIntegratorStep,
+            F::SetTime => L::SetTime,
+            F::SetContinuousStates => L::SetContinuousStates,
+            F::GetVector(VectorGetter::Derivatives) => L::GetDerivatives,
+            F::GetVector(VectorGetter::EventIndicators) => L::GetEventIndicators,
+            F::GetVector(VectorGetter::ContinuousStates) => L::GetContinuousStates,
+            F::GetVector(VectorGetter::Nominals) => L::GetNominalsOfContinuousStates,
         }
     }
 }
@@ -240,34 +247,35 @@ pub(super) fn path_to_running(interface: Interface, state: State) -> &'static [F
 mod tests {
     use super::*;
 
-    /// The vocabulary spells every instance-taking function of the layer's
+    /// The vocabulary holds every instance-taking function of the layer's
     /// one list, each once, in the interface the list gives it: a function
-    /// added to the layer and not to the fuzzer (or misspelled here) fails.
+    /// added to the layer and not to the fuzzer fails.
     #[test]
     fn the_vocabulary_is_the_layers_function_list() {
-        use fmi2_cosim::functions::{ALL, Interfaces};
-        let listed = |interfaces: &[Interfaces]| -> Vec<&'static str> {
-            ALL.iter()
-                .filter(|f| f.state_checked.is_some() && interfaces.contains(&f.interfaces))
-                .map(|f| f.name)
+        use fmi2_cosim::Interface as Layer;
+        use fmi2_cosim::status::FmiFunction;
+        let vocabulary = |functions: &[(Function, u32)]| {
+            let mut listed: Vec<usize> = functions
+                .iter()
+                .map(|(f, _)| f.layer_function() as usize)
+                .collect();
+            listed.sort_unstable();
+            listed
+        };
+        let layer = |interfaces: &[Option<Layer>]| -> Vec<usize> {
+            FmiFunction::ALL
+                .into_iter()
+                .filter(|f| interfaces.contains(&f.interface()))
+                .map(|f| f as usize)
                 .collect()
         };
-        let mut co_simulation: Vec<_> = FUNCTIONS.iter().map(|(f, _)| f.name()).collect();
-        let mut model_exchange: Vec<_> = MODEL_EXCHANGE_FUNCTIONS
-            .iter()
-            .map(|(f, _)| f.name())
-            .collect();
-        let mut expected_co_simulation = listed(&[Interfaces::Both, Interfaces::CoSimulation]);
-        let mut expected_model_exchange = listed(&[Interfaces::ModelExchange]);
-        for list in [
-            &mut co_simulation,
-            &mut model_exchange,
-            &mut expected_co_simulation,
-            &mut expected_model_exchange,
-        ] {
-            list.sort_unstable();
-        }
-        assert_eq!(co_simulation, expected_co_simulation);
-        assert_eq!(model_exchange, expected_model_exchange);
+        assert_eq!(
+            vocabulary(FUNCTIONS),
+            layer(&[None, Some(Layer::CoSimulation)])
+        );
+        assert_eq!(
+            vocabulary(MODEL_EXCHANGE_FUNCTIONS),
+            layer(&[Some(Layer::ModelExchange)])
+        );
     }
 }
