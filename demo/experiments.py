@@ -94,9 +94,9 @@ INVERSE_BOUC_WEN_MODEL_BASED = {"hysteresis_model": 2, "decoupling_model": 2}
 METHODS = {"inverse_pi_piecewise": INVERSE_PI_PIECEWISE, "inverse_bouc_wen_model_based": INVERSE_BOUC_WEN_MODEL_BASED}
 # Seed 001 §5.2-5.3: 2 Hz sines, feedforward only; linearity at 1.25 um (x)
 # and 2 um (y) amplitude, coupling with a 2 um sine on one axis.
-S001_HZ = 2.0
-S001_LINEARITY_UM = {"x": 1.25, "y": 2.0}
-S001_COUPLING_UM = 2.0
+ABW_XY_HZ = 2.0
+ABW_XY_LINEARITY_UM = {"x": 1.25, "y": 2.0}
+ABW_XY_COUPLING_UM = 2.0
 NO_FEEDBACK = {"feedback_x": False, "feedback_y": False, "feedback_theta": False}
 
 
@@ -302,14 +302,14 @@ CONDITIONS = [
 #: packaged closed loop (demo.systems) parks the stage.
 MID_STROKE = (_HOMES["mid_stroke"]["x"], _HOMES["mid_stroke"]["y"], 0.0)
 #: Seed 001's single-axis homes on FlexureStage (its runs about a home).
-S001_HOME = (_HOMES["single_axis_flexure"]["x"], _HOMES["single_axis_flexure"]["y"], 0.0)
+ABW_XY_HOME = (_HOMES["single_axis_flexure"]["x"], _HOMES["single_axis_flexure"]["y"], 0.0)
 
 # The stages seed 001's experiments run on: FlexureStage as it starts, and
 # its XY200S parameter set with the controller identified on it (both sets
 # written by `make fmus` from the Rust tables). The XY200S home sits at the
 # same fraction of its strokes as seed 000's (piezo-identify's --home).
-S001_STAGES = {
-    "flexure": {"home": S001_HOME, "plant": None, "controller": None},
+ABW_XY_STAGES = {
+    "flexure": {"home": ABW_XY_HOME, "plant": None, "controller": None},
     "xy200s": {
         "home": (_HOMES["single_axis_xy200s"]["x"], _HOMES["single_axis_xy200s"]["y"], 0.0),
         "plant": "FlexureStage.xy200s.json",
@@ -328,8 +328,8 @@ def preset(name: str | None) -> dict:
     return json.loads(path.read_text())
 
 
-def s001_key(stage: str, method: str, rest: str) -> str:
-    prefix = "s001" if stage == "flexure" else f"s001_{stage}"
+def abw_xy_key(stage: str, method: str, rest: str) -> str:
+    prefix = "abw_xy" if stage == "flexure" else f"abw_xy_{stage}"
     return f"{prefix}_{method}_{rest}"
 
 
@@ -340,7 +340,7 @@ def feedforward_xy_experiments() -> list[Experiment]:
     0 V), for the coupling runs it is held at its home (where a coupling can
     be cancelled)."""
     runs = []
-    for stage, setup in S001_STAGES.items():
+    for stage, setup in ABW_XY_STAGES.items():
         home = setup["home"]
         plant = {**preset(setup["plant"]), **PLANT_PARAMETERS}
         base = preset(setup["controller"])
@@ -353,7 +353,7 @@ def feedforward_xy_experiments() -> list[Experiment]:
                 cols = [np.full(len(tau), home[0]), np.full(len(tau), home[1]),
                         np.zeros(len(tau))]
                 base = home[index[axis]] - amplitude
-                cols[index[axis]] = sine_from(base, 2 * amplitude, S001_HZ)(tau)
+                cols[index[axis]] = sine_from(base, 2 * amplitude, ABW_XY_HZ)(tau)
                 if other_at_zero:
                     cols[index[other]] = np.zeros(len(tau))
                 return np.column_stack(cols)
@@ -364,25 +364,25 @@ def feedforward_xy_experiments() -> list[Experiment]:
             def run(rest, title, figure, path, axis, decoupling, method=method,
                     selectors=selectors):
                 return Experiment(
-                    s001_key(stage, method, rest), f"{title} ({method}, {stage})", figure,
-                    path, *single_axis_timing(S001_HZ),
+                    abw_xy_key(stage, method, rest), f"{title} ({method}, {stage})", figure,
+                    path, *single_axis_timing(ABW_XY_HZ),
                     {**base, **NO_FEEDBACK, **selectors, "decoupling": decoupling}, axis,
                     plant=plant)
 
             for axis in ("x", "y"):
-                amplitude = S001_LINEARITY_UM[axis]
+                amplitude = ABW_XY_LINEARITY_UM[axis]
                 runs.append(run(
                     f"linearity_{axis}",
-                    f"{axis} {S001_HZ:g} Hz sine of {amplitude} um, feedforward only",
+                    f"{axis} {ABW_XY_HZ:g} Hz sine of {amplitude} um, feedforward only",
                     "seed 001 §5.2", path(axis, amplitude, True), axis, False))
             for axis in ("y", "x"):
                 for decoupling in (False, True):
                     tag = "decoupled" if decoupling else "coupled"
                     runs.append(run(
                         f"coupling_{axis}_{tag}",
-                        f"{axis} {S001_HZ:g} Hz sine of {S001_COUPLING_UM:g} um, other axis held, "
+                        f"{axis} {ABW_XY_HZ:g} Hz sine of {ABW_XY_COUPLING_UM:g} um, other axis held, "
                         f"feedforward only{' + decoupling' if decoupling else ''}",
-                        "seed 001 §5.3", path(axis, S001_COUPLING_UM, False), axis, decoupling))
+                        "seed 001 §5.3", path(axis, ABW_XY_COUPLING_UM, False), axis, decoupling))
     return runs
 
 

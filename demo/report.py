@@ -13,12 +13,12 @@ import numpy as np  # noqa: E402
 
 from . import paper  # noqa: E402
 from .experiments import (  # noqa: E402
-    S001_LINEARITY_UM,
-    S001_STAGES,
+    ABW_XY_LINEARITY_UM,
+    ABW_XY_STAGES,
     START,
     Experiment,
     errors,
-    s001_key,
+    abw_xy_key,
 )
 
 DEG = 180.0 / math.pi
@@ -111,15 +111,15 @@ STAGE_NAMES = {"flexure": "FlexureStage (seed 000's stage)", "xy200s": "XY200S (
 
 def _linearity(results: dict, stage: str, method: str, axis: str) -> tuple[float, float]:
     """Seed 001 eq. (17)-(18): max |d_e - d| and eta = that / the amplitude."""
-    m = results[s001_key(stage, method, f"linearity_{axis}")]
-    return m["tracking_max"], m["tracking_max"] / S001_LINEARITY_UM[axis]
+    m = results[abw_xy_key(stage, method, f"linearity_{axis}")]
+    return m["tracking_max"], m["tracking_max"] / ABW_XY_LINEARITY_UM[axis]
 
 
 def _coupling(results: dict, stage: str, method: str, driven: str) -> tuple[float, float, float]:
     """Coupled span without / with decoupling and the reduction in %."""
     key = "coupling_x_span" if driven == "y" else "coupling_y_span"
-    a = results[s001_key(stage, method, f"coupling_{driven}_coupled")][key]
-    b = results[s001_key(stage, method, f"coupling_{driven}_decoupled")][key]
+    a = results[abw_xy_key(stage, method, f"coupling_{driven}_coupled")][key]
+    b = results[abw_xy_key(stage, method, f"coupling_{driven}_decoupled")][key]
     return a, b, 100.0 * (1.0 - b / a)
 
 
@@ -146,11 +146,11 @@ def feedforward_xy_section(results: dict) -> list[str]:
         "| what | stage | seed 001 | simulated (seed 001's method) | target | verdict |",
         "|---|---|---|---|---|---|",
     ]
-    for stage in S001_STAGES:
+    for stage in ABW_XY_STAGES:
         for axis, paper in (("x", (0.10, 0.08)), ("y", (0.11, 0.055))):
             error, eta = _linearity(results, stage, "inverse_bouc_wen_model_based", axis)
             lines.append(
-                f"| {axis} feedforward linearity at {S001_LINEARITY_UM[axis]} um, eq. (17)-(18): "
+                f"| {axis} feedforward linearity at {ABW_XY_LINEARITY_UM[axis]} um, eq. (17)-(18): "
                 f"max error / eta | {STAGE_NAMES[stage]} | {paper[0]} um / {100 * paper[1]:.1f} % "
                 f"| {error:.4f} um / {100 * eta:.2f} % | eta < paper | {_verdict(eta < paper[1])} |")
         for name, driven, paper in (("x from a y sine", "y", (0.56, 0.15, 73.2)),
@@ -168,13 +168,13 @@ def feedforward_xy_section(results: dict) -> list[str]:
         "| metric | stage | seed 000's method | seed 001's method |",
         "|---|---|---|---|",
     ]
-    for stage in S001_STAGES:
+    for stage in ABW_XY_STAGES:
         for axis in ("x", "y"):
             cells = []
             for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
-                m = results[s001_key(stage, method, f"linearity_{axis}")]
+                m = results[abw_xy_key(stage, method, f"linearity_{axis}")]
                 cells.append(f"{m['tracking_max']:.4f} / {m['tracking_rms']:.4f} um")
-            lines.append(f"| {axis} 2 Hz sine of {S001_LINEARITY_UM[axis]} um: max / RMS error "
+            lines.append(f"| {axis} 2 Hz sine of {ABW_XY_LINEARITY_UM[axis]} um: max / RMS error "
                          f"| {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
         for name, driven in (("x from a y sine", "y"), ("y from an x sine", "x")):
             cells = []
@@ -260,7 +260,7 @@ def write_report(path: Path, results: dict, context: dict) -> None:
         switches = ", ".join(
             f"{k}={v}" if type(v) is int else f"{k}={'on' if v else 'off'}"
             for k, v in e.controller.items() if k in SWITCHES)
-        if e.key.startswith("s001_xy200s"):
+        if e.key.startswith("abw_xy_xy200s"):
             switches += " (XY200S plant and controller parameter sets)"
         lines.append(f"| {e.key} | {e.figure} | {e.title} | {switches} | {e.duration:g} s | "
                      f"[csv]({e.key}.csv) | [png]({e.key}.png) |")

@@ -81,7 +81,7 @@ def compare(series: dict, run) -> dict:
 # (seed 000's method, FlexureStage as it starts), and seed 001's coupling run
 # on the XY200S parameter set with seed 001's method (plant parameters from
 # the preset file, controller parameters by name).
-EXPERIMENTS = ("fig10_y_decoupled", "s001_xy200s_inverse_bouc_wen_model_based_coupling_x_decoupled")
+EXPERIMENTS = ("fig10_y_decoupled", "abw_xy_xy200s_inverse_bouc_wen_model_based_coupling_x_decoupled")
 
 
 @pytest.mark.parametrize("key", EXPERIMENTS)

@@ -66,7 +66,7 @@ def test_the_verdicts_follow_from_the_reported_numbers(measured):
         assert check["within"] == (abs(error) <= check["relative_tolerance"]), check
 
 
-def test_the_report_covers_seed_000s_stage(measured):
+def test_the_report_covers_the_printed_stage(measured):
     """Strokes and rotation range (§2), the 790 Hz mode, Table 3's four
     couplings, the Ziegler-Nichols gains of §3.2, and the loop shapes."""
     keys = {c["key"] for c in measured[0]["checks"]}

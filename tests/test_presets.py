@@ -73,7 +73,7 @@ def ramp_to_full_command(plant: Fmu, parameters: dict, channels: list[int]) -> n
         slave.free()
 
 
-def test_the_xy200s_set_gives_seed_001_strokes():
+def test_the_xy200s_set_gives_the_printed_strokes():
     parameters = load("FlexureStage.xy200s.json")
     with Fmu(DIST / "FlexureStage.fmu") as plant:
         y = ramp_to_full_command(plant, parameters, [0])[0]

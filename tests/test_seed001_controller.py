@@ -15,17 +15,17 @@ import numpy as np
 import pytest
 
 from demo.cosim import Fmu, simulate
-from demo.experiments import S001_HOME, S001_HZ, pose, trajectory
+from demo.experiments import ABW_XY_HOME, ABW_XY_HZ, pose, trajectory
 from tests.conftest import REPO_ROOT
 from tests.docs_figures import doc_rows, stale_rows, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
-HOME_X, HOME_Y, _ = S001_HOME
+HOME_X, HOME_Y, _ = ABW_XY_HOME
 
 #: Raised-cosine approach to the home, hold, then the 2 Hz, 2 um sine on y
 #: (the demo's approach and timing, demo/experiment_conditions.json).
-reference = trajectory(pose(x=HOME_X, y=lambda tau: HOME_Y + 2.0 * np.sin(2 * np.pi * S001_HZ * tau)))
+reference = trajectory(pose(x=HOME_X, y=lambda tau: HOME_Y + 2.0 * np.sin(2 * np.pi * ABW_XY_HZ * tau)))
 
 
 def inverse_bouc_wen_model_based_parameters(decoupling: bool) -> dict:
@@ -101,12 +101,12 @@ def feedforward_xy_results(fmus):
 def test_seed_001_feedforward_linearity_beats_the_papers(feedforward_xy_results):
     """Seed 001 eq. (17)-(18): eta = max |d_e - d| / amplitude; the paper:
     8 % for x at 1.25 um, 5.5 % for y at 2 um (measured: docs/seed001.md)."""
-    from demo.experiments import S001_LINEARITY_UM, S001_STAGES, s001_key
+    from demo.experiments import ABW_XY_LINEARITY_UM, ABW_XY_STAGES, abw_xy_key
 
-    for stage in S001_STAGES:
+    for stage in ABW_XY_STAGES:
         for axis, paper in (("x", 0.08), ("y", 0.055)):
-            m = feedforward_xy_results[s001_key(stage, "inverse_bouc_wen_model_based", f"linearity_{axis}")]
-            eta = m["tracking_max"] / S001_LINEARITY_UM[axis]
+            m = feedforward_xy_results[abw_xy_key(stage, "inverse_bouc_wen_model_based", f"linearity_{axis}")]
+            eta = m["tracking_max"] / ABW_XY_LINEARITY_UM[axis]
             print(f"{stage} {axis}: eta {100 * eta:.2f} % (seed 001: {100 * paper} %)")
             assert eta < paper
 
@@ -117,13 +117,13 @@ def test_seed_001_feedforward_linearity_beats_the_papers(feedforward_xy_results)
 ])
 def test_seed_001_decoupling_beats_the_papers_reduction_and_seed_000s(
         feedforward_xy_results, driven, key, paper):
-    from demo.experiments import S001_STAGES, s001_key
+    from demo.experiments import ABW_XY_STAGES, abw_xy_key
 
-    for stage in S001_STAGES:
+    for stage in ABW_XY_STAGES:
         reductions = {}
         for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
-            a = feedforward_xy_results[s001_key(stage, method, f"coupling_{driven}_coupled")][key]
-            b = feedforward_xy_results[s001_key(stage, method, f"coupling_{driven}_decoupled")][key]
+            a = feedforward_xy_results[abw_xy_key(stage, method, f"coupling_{driven}_coupled")][key]
+            b = feedforward_xy_results[abw_xy_key(stage, method, f"coupling_{driven}_decoupled")][key]
             reductions[method] = 100 * (1 - b / a)
         print(f"{stage} {key}: reduction by seed 000's method {reductions['inverse_pi_piecewise']:.1f} %, "
               f"by seed 001's {reductions['inverse_bouc_wen_model_based']:.1f} % (paper {paper} %)")

@@ -339,7 +339,7 @@ mod tests {
     }
 
     #[test]
-    fn parameter_counts_match_seed_000() {
+    fn parameter_counts_match_the_printed_model() {
         // §3.1: the 10 + 10 traditional model has as many parameters as the
         // proposed one.
         assert_eq!(PROPOSED.parameter_count(), 31);

@@ -246,13 +246,13 @@ impl StageConditions {
     /// 000's (cutoffs and amplitudes scaled; no rotation run when the stage
     /// does not rotate).
     pub fn scaled(scale: f64, rotation: bool) -> Self {
-        let seed000 = StageConditions::default();
+        let printed = StageConditions::default();
         StageConditions {
-            translation_span_um: seed000.translation_span_um * scale,
-            rotation_x_um: seed000.rotation_x_um * scale,
-            rotation_amplitude_deg: seed000.rotation_amplitude_deg.filter(|_| rotation),
-            no_cutoff_um: seed000.no_cutoff_um * scale,
-            ..seed000
+            translation_span_um: printed.translation_span_um * scale,
+            rotation_x_um: printed.rotation_x_um * scale,
+            rotation_amplitude_deg: printed.rotation_amplitude_deg.filter(|_| rotation),
+            no_cutoff_um: printed.no_cutoff_um * scale,
+            ..printed
         }
     }
 }
@@ -622,7 +622,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn conditions_file_parses_into_seed_000s_protocol() {
+    fn conditions_file_parses_into_the_printed_protocol() {
         let shared = conditions();
         // Seed 000 §5's single-axis runs: 10 µm from 0, ±9.2·10⁻³°, x at
         // half its 12.74 µm stroke while the platform rotates.
