@@ -4,7 +4,7 @@
 use std::ffi::{CStr, c_char};
 use std::ptr;
 
-use fmi_schema::fmi2::Causality;
+use fmi_schema::fmi2::{Causality, Variability};
 use fmi_sys::fmi2 as sys;
 
 use crate::model_exchange::MODEL_EXCHANGE_FUNCTIONS;
@@ -812,6 +812,50 @@ pub fn fixed_parameters_after_initialization(fmu: &Fmu) {
     assert_eq!(inst.reset(), OK, "fmi2Reset leaves the error state");
     inst.initialize();
     assert_eq!(inst.do_step(1e-4), OK);
+}
+
+/// Tunable parameters while running: a value inside the declared range is
+/// taken, one outside it is an error naming the parameter and changes
+/// nothing (nothing checks the value later, as initialization checks the
+/// others). Every tunable Real parameter with a declared bound is tried.
+pub fn tunable_parameters_hold_their_ranges(fmu: &Fmu) {
+    let tunables = fmu.variables.iter().filter(|v| {
+        v.causality == Causality::Parameter
+            && v.variability == Some(Variability::Tunable)
+            && v.kind == "Real"
+            && (v.min.is_some() || v.max.is_some())
+    });
+    for parameter in tunables {
+        let start = parameter.start.expect("parameters have start values");
+        let (inside, outside) = match (parameter.min, parameter.max) {
+            (_, Some(max)) => (max, max + 1.0 + max.abs()),
+            (Some(min), None) => (min, min - 1.0 - min.abs()),
+            (None, None) => unreachable!("filtered above"),
+        };
+        let mut inst = fmu.instantiate("tunable", false);
+        inst.initialize();
+        assert_eq!(inst.do_step(1e-4), OK);
+        assert_eq!(
+            inst.set_real(&[parameter.vr], &[inside]),
+            OK,
+            "{} = {inside} (its bound) refused: {:#?}",
+            parameter.name,
+            inst.take_log()
+        );
+        assert_eq!(inst.set_real(&[parameter.vr], &[start]), OK);
+        inst.take_log();
+        assert_eq!(
+            inst.set_real(&[parameter.vr], &[outside]),
+            ERROR,
+            "{} = {outside} accepted while running",
+            parameter.name
+        );
+        let log = inst.take_log();
+        assert_logged(&log, "fmi2SetReal", &parameter.name);
+        assert_logged(&log, "fmi2SetReal", "allowed range");
+        assert_eq!(inst.get_real_one(parameter.vr), start);
+        assert_eq!(inst.reset(), OK, "fmi2Reset leaves the error state");
+    }
 }
 
 /// Outputs and locals are never settable.

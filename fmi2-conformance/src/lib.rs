@@ -237,6 +237,7 @@ macro_rules! conformance_tests {
             null_arrays,
             non_finite_and_partial_sets_change_nothing,
             fixed_parameters_after_initialization,
+            tunable_parameters_hold_their_ranges,
             calculated_variables_are_not_settable,
             step_sizes_must_be_positive_and_finite,
             communication_points_must_continue,

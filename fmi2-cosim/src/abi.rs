@@ -709,7 +709,7 @@ pub unsafe fn get_boolean<M: CoSimModel>(
 
 /// A String value that no variable has: the models serve no String variables,
 /// so every value reference is refused with the variable's actual type.
-#[derive(Clone, Copy, PartialEq)]
+#[derive(Clone, Copy, PartialEq, PartialOrd)]
 struct NoString;
 
 impl std::fmt::Display for NoString {

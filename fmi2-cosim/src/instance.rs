@@ -88,13 +88,18 @@ enum SetAction {
 }
 
 /// A value type served by fmi2Get/SetXXX.
-pub(crate) trait FmiValue: Copy + PartialEq + fmt::Display {
+pub(crate) trait FmiValue: Copy + PartialOrd + fmt::Display {
     const TYPE_NAME: &'static str;
     fn getter<M>(value: &Value<M>) -> Option<fn(&M) -> Self>;
     fn setter<M>(value: &Value<M>) -> Option<fn(&mut M, Self)>;
     /// Why the value cannot be stored, if it cannot.
     fn invalid(self) -> Option<&'static str> {
         None
+    }
+    /// The declared `(min, max)` of a variable of this type.
+    fn range<M>(value: &Value<M>) -> (Option<Self>, Option<Self>) {
+        let _ = value;
+        (None, None)
     }
 }
 
@@ -110,6 +115,12 @@ impl FmiValue for f64 {
         match value {
             Value::Real(r) => r.set,
             _ => None,
+        }
+    }
+    fn range<M>(value: &Value<M>) -> (Option<f64>, Option<f64>) {
+        match value {
+            Value::Real(r) => (r.min, r.max),
+            _ => (None, None),
         }
     }
     fn invalid(self) -> Option<&'static str> {
@@ -135,6 +146,12 @@ impl FmiValue for i32 {
         match value {
             Value::Integer(i) => i.set,
             _ => None,
+        }
+    }
+    fn range<M>(value: &Value<M>) -> (Option<i32>, Option<i32>) {
+        match value {
+            Value::Integer(i) => (i.min, i.max),
+            _ => (None, None),
         }
     }
 }
@@ -460,8 +477,30 @@ impl<M: CoSimModel> Instance<M> {
             }
             FmiState::StepComplete | FmiState::EventMode => {
                 match (var.causality, var.variability) {
-                    (Causality::Input, _) | (Causality::Parameter, Variability::Tunable) => {
-                        Ok(SetAction::Apply)
+                    (Causality::Input, _) => Ok(SetAction::Apply),
+                    // Nothing checks a tunable parameter after this call
+                    // (initialization checked the others), so its declared
+                    // range is checked here.
+                    (Causality::Parameter, Variability::Tunable) => {
+                        let (min, max) = T::range(&var.value);
+                        if min.is_some_and(|min| value < min) || max.is_some_and(|max| value > max)
+                        {
+                            let bound = |b: Option<T>, inf: &str| {
+                                b.map_or_else(|| inf.to_owned(), |b| b.to_string())
+                            };
+                            Err(self.error(
+                                function,
+                                format_args!(
+                                    "tunable parameter {} = {value} is outside its allowed \
+                                     range [{}, {}]; the value is kept",
+                                    var.name,
+                                    bound(min, "-inf"),
+                                    bound(max, "inf")
+                                ),
+                            ))
+                        } else {
+                            Ok(SetAction::Apply)
+                        }
                     }
                     (Causality::Parameter, Variability::Fixed) => {
                         let current = get(&self.model);
@@ -688,7 +727,7 @@ impl<M: CoSimModel> Instance<M> {
     /// in, every Real of the variable table finite (state derivatives aside:
     /// `fmi2GetReal` refuses a non-finite one itself; and in the error state,
     /// which a diverged step may have left), and, past initialization, every
-    /// fixed parameter in its declared range. Then the model's own hook
+    /// parameter in its declared range. Then the model's own hook
     /// ([`CoSimModel::validate_restored`]). The reason of a refusal is logged
     /// and returned.
     pub(crate) fn validate_foreign_state(
@@ -741,12 +780,11 @@ impl<M: CoSimModel> Instance<M> {
                 }
             }
         }
-        // Tunable parameters are not among them: fmi2SetReal accepts any
-        // finite value for one while simulating, as it does for an input.
+        // Tunable ones too: fmi2SetReal refuses a value outside the range
+        // while the model runs.
         if data.state.initialized()
             && let Some(reason) = M::variables()
                 .iter()
-                .filter(|var| var.variability == Variability::Fixed)
                 .find_map(|var| parameter_out_of_range(var, &data.model))
         {
             return Err(refuse(format_args!(

@@ -709,19 +709,22 @@ impl CoSimModel for PiezoControllerFmu {
         _ctx: &mut Context<'_>,
         state: FmiState,
     ) -> Result<(), ModelError> {
-        // Whatever the machine state, the controller the instance holds was
-        // built from valid parameters (its constructor refuses others), so it
-        // can be rebuilt; its dynamic state may be non-finite only in the
-        // error state, which a step that overflowed leaves.
-        self.controller = self.controller.rebuilt().map_err(refused_parameter)?;
-        if state != FmiState::Error
-            && let Some(unreachable) = self.controller.unreachable_state()
-        {
-            return Err(ModelError(unreachable.to_string()));
-        }
-        // Past initialization it was built from the FMU's parameters.
+        // Before initialization, and in the error state, nothing runs the
+        // controller: its values are only read back (the last sample, as it
+        // is), and exit_initialization_mode builds it again from the
+        // parameters. Its tunable parameters may hold there what
+        // initialization will refuse (an importer's tuning reaches it before
+        // any range check), so it is neither checked nor rebuilt.
         if !state.initialized() {
             return Ok(());
+        }
+        // Past initialization every parameter holds its range (the layer
+        // checked the fixed ones at initialization and checks the tunable
+        // ones when they are set), so the controller is rebuilt from them
+        // and its dynamic state.
+        self.controller = self.controller.rebuilt().map_err(refused_parameter)?;
+        if let Some(unreachable) = self.controller.unreachable_state() {
+            return Err(ModelError(unreachable.to_string()));
         }
         let selectors = (
             selected(&HysteresisModel::CODES, self.selector_codes[0]),

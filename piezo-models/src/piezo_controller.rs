@@ -384,23 +384,17 @@ impl PiezoController {
     /// This controller rebuilt from its parameters and its dynamic state
     /// alone (see [`crate::restore`]): for a controller that comes from
     /// outside, such as a deserialized FMU state. The parameters are
-    /// validated as [`PiezoController::new`] validates them, except the PI
-    /// gains, which [`PiezoController::set_tuning`] changes while running
-    /// and which are carried over as they are; everything derived from the
-    /// parameters is built again (the inverse models' thresholds and
+    /// validated as [`PiezoController::new`] validates them (the tunable
+    /// ones included: an importer's tuning holds their ranges, which the FMI
+    /// layer checks when they are set), and everything derived from them is
+    /// built again (the inverse models' thresholds and
     /// exercised rests). The dynamic state (backlash memories, every
     /// Bouc-Wen model's point, the previous references, the integrators, the
     /// limit flags and the last sample) is carried over as it is
     /// ([`PiezoController::unreachable_state`] checks it). The rebuilt
     /// controller steps exactly as the original would have.
     pub fn rebuilt(&self) -> Result<PiezoController, ParamError> {
-        let defaults = ControllerParams::default();
-        let mut controller = PiezoController::new(ControllerParams {
-            translation_gains: defaults.translation_gains,
-            rotation_gains: defaults.rotation_gains,
-            ..self.params.clone()
-        })?;
-        controller.params = self.params.clone();
+        let mut controller = PiezoController::new(self.params.clone())?;
         for (model, own) in controller.models.iter_mut().zip(&self.models) {
             model.carry_memories(own);
         }

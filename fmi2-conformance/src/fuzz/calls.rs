@@ -437,6 +437,17 @@ impl Fuzzer<'_> {
                 }
                 if matches!(state, State::StepComplete | State::EventMode)
                     && var.causality == Causality::Parameter
+                    && var.variability == Some(Variability::Tunable)
+                    && (var.min.is_some_and(|min| value < min)
+                        || var.max.is_some_and(|max| value > max))
+                {
+                    // Nothing checks a tunable parameter later: its declared
+                    // range is checked when it is set while running.
+                    refusal = Some(format!("tunable {} = {value} out of range", var.name));
+                    break;
+                }
+                if matches!(state, State::StepComplete | State::EventMode)
+                    && var.causality == Causality::Parameter
                     && var.variability != Some(Variability::Tunable)
                 {
                     // A fixed parameter after initialization: the same value
