@@ -171,9 +171,11 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
     /// Called when an FMU state replaces the instance's values
     /// (`fmi2SetFMUstate`, and `fmi2DeSerializeFMUstate` for bytes from
     /// outside), on the candidate model value, after the layer checked that
-    /// every Real of the variable table is finite and, in `state`s past
-    /// initialization, that every fixed parameter is in its declared range
-    /// (tunable ones, like inputs, take any finite value while running). The
+    /// every Real of the variable table is finite, that no String parameter
+    /// or input holds a NUL byte, that every constant holds its start value
+    /// and, in `state`s past initialization, that every fixed parameter is in
+    /// its declared range (tunable ones, like inputs, take any finite value
+    /// while running). The
     /// model checks the rest of its invariants (what its own constructor
     /// would refuse) and rebuilds whatever it derives from its parameters,
     /// so that a state with valid checksum but made-up values never runs.
