@@ -52,7 +52,7 @@ pub struct Feedthrough {
 }
 
 /// The value of `real_constant_output`.
-pub const REAL_CONSTANT: f64 = 2.718_281_828_459_045;
+pub const REAL_CONSTANT: f64 = std::f64::consts::E;
 
 /// The start value of `string_fixed_parameter`: characters XML must escape,
 /// and one outside ASCII, so that an importer's reading of the start value
