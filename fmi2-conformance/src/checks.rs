@@ -193,12 +193,17 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
     assert!(categories >= 6, "log categories declared: {categories}");
     // At most one independent variable: a continuous Real without start
     // value or initial (FMI 2.0.4 §2.2.7).
-    let independent: Vec<&VariableInfo> = fmu.with_causality(Causality::Independent).collect();
+    let independent: Vec<(&VariableInfo, &fmi_schema::fmi2::ScalarVariable)> = fmu
+        .variables
+        .iter()
+        .zip(&md.model_variables.variables)
+        .filter(|(v, _)| v.causality == Causality::Independent)
+        .collect();
     assert!(
         independent.len() <= 1,
         "independent variables {independent:?}"
     );
-    for time in independent {
+    for (time, declared) in independent {
         assert_eq!(time.kind, "Real", "{}", time.name);
         assert!(
             time.variability
@@ -207,6 +212,7 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
             time.name
         );
         assert!(time.start.is_none(), "{} has a start value", time.name);
+        assert!(declared.initial.is_none(), "{} has an initial", time.name);
     }
     let exact = |v: &fmi_schema::fmi2::ScalarVariable| {
         v.initial == Some(Initial::Exact)

@@ -8,6 +8,9 @@
 use std::ffi::{CStr, CString, c_char};
 use std::ptr;
 
+mod common;
+
+use common::{ERROR, OK, WARNING, forge};
 use fmi2_cosim::abi;
 use fmi2_cosim::fmi_sys::fmi2 as sys;
 use fmi2_cosim::model_description::model_description;
@@ -127,10 +130,6 @@ impl CoSimModel for Labels {
     }
 }
 
-const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
-const WARNING: sys::fmi2Status = sys::fmi2Status_fmi2Warning;
-const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
-
 const LABEL: u32 = 0;
 const LINE: u32 = 1;
 const ECHO: u32 = 2;
@@ -139,57 +138,13 @@ const GRAVITY_VR: u32 = 4;
 const REVISION_VR: u32 = 5;
 const BROKEN: u32 = 6;
 
-/// An instance of `Labels`, freed on drop.
-struct Slave(sys::fmi2Component);
+type Slave = common::Slave<Labels>;
 
-impl Slave {
-    fn instantiate() -> Slave {
-        let callbacks = sys::fmi2CallbackFunctions {
-            logger: None,
-            allocateMemory: None,
-            freeMemory: None,
-            stepFinished: None,
-            componentEnvironment: ptr::null_mut(),
-        };
-        let guid = CString::new(fmi2_cosim::model_description::guid::<Labels>().unwrap()).unwrap();
-        // SAFETY: every pointer is valid for the call; the GUID and the
-        // callbacks outlive it (the layer copies what it keeps).
-        let c = unsafe {
-            abi::instantiate::<Labels>(
-                c"labels".as_ptr(),
-                sys::fmi2Type_fmi2CoSimulation,
-                guid.as_ptr(),
-                ptr::null(),
-                &callbacks,
-                0,
-                0,
-            )
-        };
-        assert!(!c.is_null());
-        Slave(c)
-    }
-
-    fn setup_and_enter(&self, start: f64) {
-        // SAFETY: `self.0` is a live instance of Labels.
-        unsafe {
-            assert_eq!(
-                abi::setup_experiment::<Labels>(self.0, 0, 0.0, start, 0, 0.0),
-                OK
-            );
-            assert_eq!(abi::enter_initialization_mode::<Labels>(self.0), OK);
-        }
-    }
-
-    fn exit(&self) {
-        // SAFETY: `self.0` is a live instance of Labels.
-        let status = unsafe { abi::exit_initialization_mode::<Labels>(self.0) };
-        assert_eq!(status, OK);
-    }
-
+impl common::Slave<Labels> {
     fn initialized(start: f64) -> Slave {
         let slave = Slave::instantiate();
         slave.setup_and_enter(start);
-        slave.exit();
+        assert_eq!(slave.exit_initialization(), OK);
         slave
     }
 
@@ -232,92 +187,6 @@ impl Slave {
         let owned: Vec<CString> = texts.iter().map(|t| CString::new(*t).unwrap()).collect();
         let pointers: Vec<*const c_char> = owned.iter().map(|c| c.as_ptr()).collect();
         self.set_raw(vrs, &pointers)
-    }
-
-    fn real(&self, vr: u32) -> (sys::fmi2Status, f64) {
-        let mut value = f64::NAN;
-        // SAFETY: one value reference and one value, both on the stack.
-        let status = unsafe { abi::get_real::<Labels>(self.0, &vr, 1, &mut value) };
-        (status, value)
-    }
-
-    fn set_real(&self, vr: u32, value: f64) -> sys::fmi2Status {
-        // SAFETY: as in `real`.
-        unsafe { abi::set_real::<Labels>(self.0, &vr, 1, &value) }
-    }
-
-    fn integer(&self, vr: u32) -> (sys::fmi2Status, i32) {
-        let mut value = i32::MIN;
-        // SAFETY: as in `real`.
-        let status = unsafe { abi::get_integer::<Labels>(self.0, &vr, 1, &mut value) };
-        (status, value)
-    }
-
-    fn set_integer(&self, vr: u32, value: i32) -> sys::fmi2Status {
-        // SAFETY: as in `real`.
-        unsafe { abi::set_integer::<Labels>(self.0, &vr, 1, &value) }
-    }
-
-    fn step(&self, t: f64, h: f64) -> sys::fmi2Status {
-        // SAFETY: `self.0` is a live instance of Labels.
-        unsafe { abi::do_step::<Labels>(self.0, t, h, 1) }
-    }
-
-    fn reset(&self) -> sys::fmi2Status {
-        // SAFETY: `self.0` is a live instance of Labels.
-        unsafe { abi::reset::<Labels>(self.0) }
-    }
-
-    fn get_state(&self) -> sys::fmi2FMUstate {
-        let mut state: sys::fmi2FMUstate = ptr::null_mut();
-        // SAFETY: `state` is a NULL slot the layer fills.
-        let status = unsafe { abi::get_fmu_state::<Labels>(self.0, &mut state) };
-        assert_eq!(status, OK);
-        state
-    }
-
-    fn set_state(&self, state: sys::fmi2FMUstate) -> sys::fmi2Status {
-        // SAFETY: `state` was made by this layer for Labels.
-        unsafe { abi::set_fmu_state::<Labels>(self.0, state) }
-    }
-
-    fn serialize(&self, state: sys::fmi2FMUstate) -> Vec<u8> {
-        let mut size = 0;
-        // SAFETY: `state` is a live state of this instance; the buffer has
-        // the size the layer asked for.
-        unsafe {
-            assert_eq!(
-                abi::serialized_fmu_state_size::<Labels>(self.0, state, &mut size),
-                OK
-            );
-            let mut bytes = vec![0u8; size];
-            assert_eq!(
-                abi::serialize_fmu_state::<Labels>(self.0, state, bytes.as_mut_ptr().cast(), size),
-                OK
-            );
-            bytes
-        }
-    }
-
-    fn deserialize(&self, bytes: &[u8]) -> (sys::fmi2Status, sys::fmi2FMUstate) {
-        let mut state: sys::fmi2FMUstate = ptr::null_mut();
-        // SAFETY: `bytes` is a live slice; `state` a NULL slot.
-        let status = unsafe {
-            abi::deserialize_fmu_state::<Labels>(
-                self.0,
-                bytes.as_ptr().cast(),
-                bytes.len(),
-                &mut state,
-            )
-        };
-        (status, state)
-    }
-}
-
-impl Drop for Slave {
-    fn drop(&mut self) {
-        // SAFETY: `self.0` is live; freeing it frees its FMU states too.
-        unsafe { abi::free_instance::<Labels>(self.0) };
     }
 }
 
@@ -457,7 +326,7 @@ fn strings_round_trip_and_the_output_follows_its_input_at_once() {
         assert_eq!(slave.get(&[LINE, ECHO]), [text, text]);
     }
     assert_eq!(slave.set(&[LABEL, LINE], &["left", "right"]), OK);
-    slave.exit();
+    assert_eq!(slave.exit_initialization(), OK);
     assert_eq!(slave.get(&[ECHO, LABEL, LINE]), ["right", "left", "right"]);
     assert_eq!(slave.step(0.0, 0.1), OK);
     assert_eq!(slave.set(&[LINE], &["after a step"]), OK);
@@ -545,60 +414,36 @@ fn a_fixed_string_parameter_is_frozen_after_initialization() {
 fn the_independent_variable_reads_the_time() {
     let slave = Slave::instantiate();
     slave.setup_and_enter(2.5);
-    assert_eq!(slave.real(TIME), (OK, 2.5));
-    slave.exit();
-    assert_eq!(slave.real(TIME), (OK, 2.5));
+    assert_eq!(slave.get_real(TIME), (OK, 2.5));
+    assert_eq!(slave.exit_initialization(), OK);
+    assert_eq!(slave.get_real(TIME), (OK, 2.5));
     assert_eq!(slave.step(2.5, 0.25), OK);
-    assert_eq!(slave.real(TIME), (OK, 2.75));
+    assert_eq!(slave.get_real(TIME), (OK, 2.75));
     let saved = slave.get_state();
     assert_eq!(slave.step(2.75, 0.25), OK);
-    assert_eq!(slave.real(TIME), (OK, 3.0));
+    assert_eq!(slave.get_real(TIME), (OK, 3.0));
     assert_eq!(slave.set_state(saved), OK);
-    assert_eq!(slave.real(TIME), (OK, 2.75));
+    assert_eq!(slave.get_real(TIME), (OK, 2.75));
     // Integer reads of a Real are refused, the time included.
-    assert_eq!(slave.integer(TIME).0, ERROR);
+    assert_eq!(slave.get_integer(TIME).0, ERROR);
 }
 
 #[test]
 fn constants_hold_their_value_in_every_state() {
     let slave = Slave::instantiate();
     slave.setup_and_enter(0.0);
-    assert_eq!(slave.real(GRAVITY_VR), (OK, GRAVITY));
-    assert_eq!(slave.integer(REVISION_VR), (OK, REVISION));
-    slave.exit();
+    assert_eq!(slave.get_real(GRAVITY_VR), (OK, GRAVITY));
+    assert_eq!(slave.get_integer(REVISION_VR), (OK, REVISION));
+    assert_eq!(slave.exit_initialization(), OK);
     assert_eq!(slave.step(0.0, 0.5), OK);
-    assert_eq!(slave.real(GRAVITY_VR), (OK, GRAVITY));
-    assert_eq!(slave.integer(REVISION_VR), (OK, REVISION));
+    assert_eq!(slave.get_real(GRAVITY_VR), (OK, GRAVITY));
+    assert_eq!(slave.get_integer(REVISION_VR), (OK, REVISION));
 }
 
 #[test]
 fn a_model_string_with_a_nul_byte_is_refused() {
     let slave = Slave::initialized(0.0);
     assert_eq!(slave.get_raw(&[LINE, BROKEN]).0, ERROR);
-}
-
-/// Header (magic, version, GUID, payload length) and trailer (CRC-32) of a
-/// serialized state: `fmu_state`'s documented byte form.
-const HEADER_LEN: usize = 8 + 4 + 38 + 8;
-const CRC_LEN: usize = 4;
-
-/// `bytes` with the one occurrence of `from` in the payload replaced by `to`
-/// (as long), and the checksum recomputed: bytes written on purpose.
-fn forge(bytes: &[u8], from: &[u8], to: &[u8]) -> Vec<u8> {
-    assert_eq!(from.len(), to.len());
-    let mut out = bytes.to_vec();
-    let payload = HEADER_LEN..out.len() - CRC_LEN;
-    let hits: Vec<usize> = out[payload.clone()]
-        .windows(from.len())
-        .enumerate()
-        .filter(|(_, w)| *w == from)
-        .map(|(i, _)| HEADER_LEN + i)
-        .collect();
-    assert_eq!(hits.len(), 1, "{from:?} occurs {} times", hits.len());
-    out[hits[0]..hits[0] + from.len()].copy_from_slice(to);
-    let crc = crc32fast::hash(&out[..payload.end]);
-    out[payload.end..].copy_from_slice(&crc.to_le_bytes());
-    out
 }
 
 #[test]
@@ -629,7 +474,7 @@ fn fmu_states_carry_strings_and_forged_ones_are_refused() {
     let (status, copy) = other.deserialize(&bytes);
     assert_eq!((status, copy.is_null()), (OK, false));
     assert_eq!(other.set_state(copy), OK);
-    assert_eq!(other.integer(REVISION_VR), (OK, REVISION));
+    assert_eq!(other.get_integer(REVISION_VR), (OK, REVISION));
 }
 
 /// postcard's encoding of an `i32`: zigzag, then LEB128.

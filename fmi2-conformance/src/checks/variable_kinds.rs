@@ -252,36 +252,16 @@ pub fn only_parameters_and_inputs_are_settable(fmu: &Fmu) {
     }
 }
 
-/// The independent variable (FMI 2.0.4 §2.2.7): a continuous Real without
-/// start value or `initial`, whose value is the time: the start time from
-/// initialization on, the end of each completed step, the time of a
-/// restored FMU state; `fmi2SetReal` refuses it with the reason.
+/// The independent variable's value is the time: the start time from
+/// initialization on, the end of each completed step, the time of a restored
+/// FMU state; `fmi2SetReal` refuses it with the reason. (How it is declared,
+/// FMI 2.0.4 §2.2.7, is checked for every FMU by
+/// [`model_description_declares_capabilities`](super::model_description_declares_capabilities).)
 pub fn independent_variable_is_the_time(fmu: &Fmu) {
-    let independent: Vec<(usize, &VariableInfo)> = fmu
-        .variables
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.causality == Causality::Independent)
-        .collect();
-    let [(index, time)] = independent.as_slice() else {
-        panic!("the FMU declares one independent variable, not {independent:?}")
-    };
-    assert_eq!(time.kind, "Real");
-    assert!(
-        time.variability
-            .is_none_or(|v| v == Variability::Continuous),
-        "{:?}",
-        time.variability
-    );
-    assert_eq!(
-        time.start, None,
-        "the independent variable has no start value"
-    );
-    let declared = &fmu.description.model_variables.variables[*index];
-    assert!(
-        declared.initial.is_none(),
-        "the independent variable has no initial"
-    );
+    let time = fmu
+        .with_causality(Causality::Independent)
+        .next()
+        .expect("the FMU declares an independent variable");
     let mut inst = fmu.instantiate("time", false);
     assert_eq!(inst.setup(1.25), OK);
     assert_eq!(inst.enter_init(), OK);
@@ -305,35 +285,20 @@ pub fn independent_variable_is_the_time(fmu: &Fmu) {
     );
 }
 
-/// Every constant (FMI 2.0.4 §2.2.7) is exact, declares its value as start
-/// value, and reads that value in every state an importer can read it in:
-/// initialization, after steps, after termination, after a reset.
+/// Every constant reads the start value it declares in every state an
+/// importer can read it in: initialization, after steps, after termination,
+/// after a reset. (That it is exact and declares a start value, FMI 2.0.4
+/// §2.2.7, is checked for every FMU by
+/// [`model_description_declares_capabilities`](super::model_description_declares_capabilities).)
 pub fn constants_hold_their_start_values(fmu: &Fmu) {
-    let constants: Vec<(usize, &VariableInfo)> = fmu
+    let constants: Vec<&VariableInfo> = fmu
         .variables
         .iter()
-        .enumerate()
-        .filter(|(_, v)| v.variability == Some(Variability::Constant))
+        .filter(|v| v.variability == Some(Variability::Constant))
         .collect();
     assert!(!constants.is_empty(), "the FMU declares a constant");
-    for (index, v) in &constants {
-        let declared = &fmu.description.model_variables.variables[*index];
-        assert!(
-            declared
-                .initial
-                .as_ref()
-                .is_none_or(|i| *i == fmi_schema::fmi2::Initial::Exact),
-            "{}: a constant is exact",
-            v.name
-        );
-        assert!(
-            v.start.is_some() || v.start_string.is_some(),
-            "{}: a constant declares its value",
-            v.name
-        );
-    }
     let read_all = |inst: &Instance<'_>, when: &str| {
-        for (_, v) in &constants {
+        for v in &constants {
             let matches = match v.kind {
                 "Real" => inst.get_real(&[v.vr]) == (OK, vec![v.start.unwrap()]),
                 "Integer" => inst.get_integer(&[v.vr]) == (OK, vec![v.start.unwrap() as i32]),
