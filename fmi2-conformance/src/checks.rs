@@ -4,20 +4,22 @@
 use std::ffi::{CStr, c_char};
 use std::ptr;
 
-use fmi_schema::fmi2::{Causality, Variability};
+use fmi_schema::fmi2::{Causality, Initial, Variability};
 use fmi_sys::fmi2 as sys;
 
 use crate::model_exchange::MODEL_EXCHANGE_FUNCTIONS;
 use crate::{
     DISCARD, DriveTo, ERROR, Fmu, FmuUnderTest, Instance, Interface, InterfaceStates, OK, State,
-    WARNING, allowed,
+    VariableInfo, WARNING, allowed,
 };
 
 mod model_exchange;
 mod restore;
+mod variable_kinds;
 
 pub use model_exchange::*;
 pub use restore::*;
+pub use variable_kinds::*;
 
 fn has_message(log: &[crate::LogRecord], needle: &str) -> bool {
     log.iter().any(|r| r.message.contains(needle))
@@ -189,7 +191,50 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
         .categories
         .len();
     assert!(categories >= 6, "log categories declared: {categories}");
-    // Every output appears in Outputs and in InitialUnknowns.
+    // At most one independent variable: a continuous Real without start
+    // value or initial (FMI 2.0.4 §2.2.7).
+    let independent: Vec<(&VariableInfo, &fmi_schema::fmi2::ScalarVariable)> = fmu
+        .variables
+        .iter()
+        .zip(&md.model_variables.variables)
+        .filter(|(v, _)| v.causality == Causality::Independent)
+        .collect();
+    assert!(
+        independent.len() <= 1,
+        "independent variables {independent:?}"
+    );
+    for (time, declared) in independent {
+        assert_eq!(time.kind, "Real", "{}", time.name);
+        assert!(
+            time.variability
+                .is_none_or(|v| v == Variability::Continuous),
+            "{}",
+            time.name
+        );
+        assert!(time.start.is_none(), "{} has a start value", time.name);
+        assert!(declared.initial.is_none(), "{} has an initial", time.name);
+    }
+    let exact = |v: &fmi_schema::fmi2::ScalarVariable| {
+        v.initial == Some(Initial::Exact)
+            || (v.initial.is_none() && v.variability == Some(Variability::Constant))
+    };
+    // Every constant is an exact output or local with a start value.
+    for (v, info) in md.model_variables.variables.iter().zip(&fmu.variables) {
+        if v.variability == Some(Variability::Constant) {
+            assert!(
+                matches!(v.causality, Causality::Output | Causality::Local) && exact(v),
+                "{}: a constant is an exact output or local",
+                v.name
+            );
+            assert!(
+                info.start.is_some() || info.start_string.is_some(),
+                "{}: a constant declares its value",
+                v.name
+            );
+        }
+    }
+    // Every output appears in Outputs; those computed at initialization (not
+    // exact, as a constant is) in InitialUnknowns.
     let outputs: Vec<u32> = md
         .model_variables
         .variables
@@ -206,10 +251,14 @@ pub fn model_description_declares_capabilities(fmu: &Fmu) {
         .map(|u| u.index)
         .collect();
     assert_eq!(listed, outputs, "ModelStructure/Outputs");
-    // InitialUnknowns: the outputs, the calculated parameters, and the states
-    // and state derivatives (FMI 2.0.4 §2.2.8; here all of them are
-    // calculated), in index order.
-    let mut expected = outputs.clone();
+    // InitialUnknowns: the outputs that are not exact, the calculated
+    // parameters, and the states and state derivatives (FMI 2.0.4 §2.2.8;
+    // here all of them are calculated), in index order.
+    let mut expected: Vec<u32> = outputs
+        .iter()
+        .copied()
+        .filter(|index| !exact(&md.model_variables.variables[*index as usize - 1]))
+        .collect();
     expected.extend(
         md.model_variables
             .variables
@@ -856,18 +905,6 @@ pub fn tunable_parameters_hold_their_ranges(fmu: &Fmu) {
         assert_eq!(inst.get_real_one(parameter.vr), start);
         assert_eq!(inst.reset(), OK, "fmi2Reset leaves the error state");
     }
-}
-
-/// Outputs and locals are never settable.
-pub fn calculated_variables_are_not_settable(fmu: &Fmu) {
-    let output = fmu
-        .with_causality(Causality::Output)
-        .find(|v| v.kind == "Real")
-        .expect("a Real output");
-    let mut inst = fmu.instantiate("calculated", false);
-    assert_eq!(inst.set_real(&[output.vr], &[1.0]), ERROR);
-    assert_logged(&inst.take_log(), "fmi2SetReal", "causality is output");
-    let _ = inst.reset();
 }
 
 pub fn step_sizes_must_be_positive_and_finite(fmu: &Fmu) {

@@ -210,7 +210,10 @@ pub fn allowed_in(function: &str, state: State) -> bool {
 /// Defines one `#[test]` per conformance check for an FMU: `$fmu` is an
 /// expression giving its [`Fmu`] (usually [`workspace::load`]), loaded once
 /// for all of them. With no list, every co-simulation check; with
-/// `model_exchange`, the Model Exchange checks as well; or the checks named.
+/// `model_exchange`, the Model Exchange checks as well; with
+/// `strings_time_constants`, the checks of settable String variables, the
+/// independent variable and constants, for an FMU that declares them; or the
+/// checks named.
 #[macro_export]
 macro_rules! conformance_tests {
     ($fmu:expr, model_exchange) => {
@@ -219,6 +222,13 @@ macro_rules! conformance_tests {
             model_exchange_arguments_are_checked,
             non_finite_derivatives_are_refused,
             derivative_dependencies_hold,
+        );
+    };
+    ($fmu:expr, strings_time_constants) => {
+        $crate::conformance_tests!($fmu; @co_simulation
+            string_arguments_are_checked,
+            independent_variable_is_the_time,
+            constants_hold_their_start_values,
         );
     };
     ($fmu:expr; @co_simulation $($more:ident),* $(,)?) => {
@@ -238,7 +248,8 @@ macro_rules! conformance_tests {
             non_finite_and_partial_sets_change_nothing,
             fixed_parameters_after_initialization,
             tunable_parameters_hold_their_ranges,
-            calculated_variables_are_not_settable,
+            only_parameters_and_inputs_are_settable,
+            string_values_round_trip,
             step_sizes_must_be_positive_and_finite,
             communication_points_must_continue,
             fmu_state_restores_bit_for_bit,
@@ -305,5 +316,88 @@ impl GetDiscrete for Instance<'_> {
                 .fmi2GetBoolean(self.c, vrs.as_ptr(), vrs.len(), values.as_mut_ptr())
         };
         (status, values)
+    }
+}
+
+/// Reading and writing String values through `fmi2GetString` and
+/// `fmi2SetString`, which the importer's [`Instance`] does not offer.
+pub trait StringValues {
+    /// `fmi2GetString`: the status, and with `fmi2OK` the strings, copied at
+    /// once (they belong to the FMU until the next call on the instance).
+    /// Panics, naming the value reference, when the FMU answers `fmi2OK`
+    /// with a NULL pointer or with bytes that are not UTF-8.
+    fn get_string(&self, vrs: &[u32]) -> (fmi_sys::fmi2::fmi2Status, Vec<String>);
+    /// `fmi2SetString` of the texts (none may hold a NUL byte).
+    fn set_string(&self, vrs: &[u32], texts: &[&str]) -> fmi_sys::fmi2::fmi2Status;
+    /// `fmi2SetString` of raw element pointers: the arguments an importer
+    /// may get wrong (NULL, bytes that are not UTF-8).
+    ///
+    /// # Safety
+    /// Each element must be NULL or point to a NUL-terminated string alive
+    /// for the call.
+    unsafe fn set_string_raw(
+        &self,
+        vrs: &[u32],
+        values: &[*const std::ffi::c_char],
+    ) -> fmi_sys::fmi2::fmi2Status;
+}
+
+impl StringValues for Instance<'_> {
+    fn get_string(&self, vrs: &[u32]) -> (fmi_sys::fmi2::fmi2Status, Vec<String>) {
+        let mut pointers: Vec<fmi_sys::fmi2::fmi2String> = vec![std::ptr::null(); vrs.len()];
+        // SAFETY: `self.c` is a live instance of the binding's FMU, and both
+        // arrays hold `vrs.len()` elements.
+        let status = unsafe {
+            self.fmu
+                .binding
+                .fmi2GetString(self.c, vrs.as_ptr(), vrs.len(), pointers.as_mut_ptr())
+        };
+        if status != OK {
+            return (status, Vec::new());
+        }
+        let texts = vrs
+            .iter()
+            .zip(&pointers)
+            .map(|(vr, p)| {
+                assert!(!p.is_null(), "fmi2GetString answered NULL for vr {vr}");
+                // SAFETY: a string the FMU just returned with fmi2OK: non-NULL
+                // (checked) and NUL-terminated, the FMU's until the next call
+                // on the instance, and none was made since.
+                let bytes = unsafe { std::ffi::CStr::from_ptr(*p) };
+                bytes
+                    .to_str()
+                    .unwrap_or_else(|e| panic!("fmi2GetString of vr {vr} is not UTF-8: {e}"))
+                    .to_owned()
+            })
+            .collect();
+        (status, texts)
+    }
+
+    fn set_string(&self, vrs: &[u32], texts: &[&str]) -> fmi_sys::fmi2::fmi2Status {
+        let owned: Vec<std::ffi::CString> = texts
+            .iter()
+            .map(|t| std::ffi::CString::new(*t).expect("no NUL in a text to set"))
+            .collect();
+        let pointers: Vec<*const std::ffi::c_char> = owned.iter().map(|c| c.as_ptr()).collect();
+        // SAFETY: every element points into `owned`, NUL-terminated C
+        // strings alive until the end of this function.
+        unsafe { self.set_string_raw(vrs, &pointers) }
+    }
+
+    unsafe fn set_string_raw(
+        &self,
+        vrs: &[u32],
+        values: &[*const std::ffi::c_char],
+    ) -> fmi_sys::fmi2::fmi2Status {
+        assert_eq!(vrs.len(), values.len());
+        // SAFETY: `self.c` is a live instance of the binding's FMU; both
+        // arrays hold `vrs.len()` elements, each value NULL or a
+        // NUL-terminated string alive for the call (this function's
+        // contract).
+        unsafe {
+            self.fmu
+                .binding
+                .fmi2SetString(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr())
+        }
     }
 }

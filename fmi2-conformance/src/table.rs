@@ -10,6 +10,7 @@
 use fmi_schema::fmi2::{Causality, Fmi2ModelDescription, ScalarVariableElement};
 use fmi_schema::traits::FmiModelDescription;
 use fmi2_cosim::CoSimModel;
+use fmi2_cosim::Variable;
 use fmi2_cosim::model_description::{
     description_without_guid, guid, guid_of_description, model_description,
 };
@@ -70,8 +71,25 @@ pub fn parsed_description_matches_the_table<M: CoSimModel>() {
             TableCausality::Input => Causality::Input,
             TableCausality::Output => Causality::Output,
             TableCausality::Local => Causality::Local,
+            TableCausality::Independent => Causality::Independent,
         };
         assert_eq!(parsed.causality, causality, "{}", var.name);
+        assert_eq!(
+            parsed
+                .variability
+                .as_ref()
+                .map(ToString::to_string)
+                .as_deref(),
+            Some(var.variability.as_str()),
+            "variability of {}",
+            var.name
+        );
+        assert_eq!(
+            parsed.initial.as_ref().map(ToString::to_string).as_deref(),
+            var.initial().map(|i| i.as_str()),
+            "initial of {}",
+            var.name
+        );
         match (&parsed.elem, &var.value) {
             (ScalarVariableElement::Real(r), Value::Real(v)) => {
                 if var.has_start() {
@@ -79,6 +97,9 @@ pub fn parsed_description_matches_the_table<M: CoSimModel>() {
                 } else {
                     assert_eq!(r.start, None, "{} has no start", var.name);
                 }
+            }
+            (ScalarVariableElement::Real(r), Value::Time(_)) => {
+                assert_eq!(r.start, None, "the independent {} has no start", var.name);
             }
             (ScalarVariableElement::Integer(i), Value::Integer(v)) => {
                 let start = var.has_start().then(|| (v.get)(&model));
@@ -88,8 +109,19 @@ pub fn parsed_description_matches_the_table<M: CoSimModel>() {
                 let start = var.has_start().then(|| (v.get)(&model));
                 assert_eq!(b.start, start, "start of {}", var.name);
             }
+            // fmi-schema keeps no attribute of a String element: its start
+            // is compared as the importer reads it (`string_starts`).
+            (ScalarVariableElement::String, Value::String(_)) => {}
             (parsed, _) => panic!("{}: type {parsed:?} differs from the table", var.name),
         }
+    }
+    let starts = crate::string_starts(&generated::<M>()).expect("the description reads");
+    for (var, start) in table.iter().zip(starts) {
+        let expected = match &var.value {
+            Value::String(s) if var.has_start() => Some((s.get)(&model).to_owned()),
+            _ => None,
+        };
+        assert_eq!(start, expected, "String start of {}", var.name);
     }
 }
 
@@ -174,6 +206,8 @@ pub fn every_parameter_has_a_model_path<M: CoSimModel>() {
             Value::Real(r) => serde_json::json!((r.get)(&model)),
             Value::Integer(i) => serde_json::json!((i.get)(&model)),
             Value::Boolean(b) => serde_json::json!((b.get)(&model)),
+            Value::String(s) => serde_json::json!((s.get)(&model)),
+            Value::Time(_) => unreachable!("the independent variable is no parameter"),
         };
         let found: Vec<&serde_json::Value> = fields
             .iter()
@@ -238,6 +272,61 @@ pub fn ports_have_units<M: CoSimModel>(ports: &[(&str, &str)]) {
     }
 }
 
+/// Checks a variable table against its committed record of value references
+/// (`record`, each FMU crate's `valueReferences.txt`: lines
+/// `<value reference> <name>`, `#` comments): every
+/// recorded name still has its recorded reference, and every variable of the
+/// table is recorded. Value references are append-only: a renamed, moved or
+/// removed variable fails here, and a new variable fails until its line is
+/// appended to the record (the message gives the lines).
+pub fn value_references_are_append_only<M>(variables: &[Variable<M>], record: &str) {
+    let mut recorded = 0;
+    let mut changed = Vec::new();
+    for (number, line) in record.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let (vr, name) = line
+            .split_once(' ')
+            .and_then(|(vr, name)| Some((vr.parse::<usize>().ok()?, name)))
+            .unwrap_or_else(|| {
+                panic!(
+                    "record line {}: {line:?} is not `<value reference> <name>`",
+                    number + 1
+                )
+            });
+        assert_eq!(
+            vr,
+            recorded,
+            "record line {}: references must run 0, 1, 2, ... in order",
+            number + 1
+        );
+        recorded += 1;
+        match variables.iter().position(|v| v.name == name) {
+            Some(now) if now == vr => {}
+            Some(now) => changed.push(format!("{name}: {vr} in the record, {now} now")),
+            None => changed.push(format!("{name} ({vr}) is no longer in the table")),
+        }
+    }
+    assert!(
+        changed.is_empty(),
+        "value references are append-only (importers keep them), but:\n{}",
+        changed.join("\n")
+    );
+    let unrecorded: Vec<String> = variables
+        .iter()
+        .enumerate()
+        .skip(recorded)
+        .map(|(vr, v)| format!("{vr} {}", v.name))
+        .collect();
+    assert!(
+        unrecorded.is_empty(),
+        "new variables: append their lines to the value-reference record:\n{}",
+        unrecorded.join("\n")
+    );
+}
+
 /// Defines one `#[test]` per table check for model type `$model`, whose
 /// committed description is at `$committed` (a path literal).
 #[macro_export]
@@ -268,4 +357,43 @@ macro_rules! table_tests {
             $crate::table::every_parameter_has_a_model_path::<$model>();
         }
     };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Model(f64);
+
+    const fn real(name: &'static str) -> Variable<Model> {
+        Variable::real_local(name, "", "", |m: &Model| m.0)
+    }
+
+    const TABLE: [Variable<Model>; 3] = [real("a"), real("b"), real("c")];
+    const RECORD: &str = "# a comment\n0 a\n1 b\n2 c\n";
+
+    #[test]
+    fn the_unchanged_table_passes() {
+        value_references_are_append_only(&TABLE, RECORD);
+    }
+
+    #[test]
+    #[should_panic(expected = "b: 1 in the record, 2 now")]
+    fn an_insertion_fails() {
+        value_references_are_append_only(&[real("a"), real("new"), real("b"), real("c")], RECORD);
+    }
+
+    #[test]
+    #[should_panic(expected = "c (2) is no longer in the table")]
+    fn a_rename_fails() {
+        value_references_are_append_only(&[real("a"), real("b"), real("c2")], RECORD);
+    }
+
+    #[test]
+    #[should_panic(expected = "append their lines to the value-reference record:\n3 d")]
+    fn an_unrecorded_appended_variable_fails_until_recorded() {
+        let table = [real("a"), real("b"), real("c"), real("d")];
+        value_references_are_append_only(&table, &format!("{RECORD}3 d\n"));
+        value_references_are_append_only(&table, RECORD);
+    }
 }

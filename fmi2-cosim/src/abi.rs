@@ -24,7 +24,7 @@ use std::ptr;
 use fmi_sys::fmi2 as sys;
 
 use crate::fmu_state::{self, Snapshot};
-use crate::instance::{FmiValue, Instance, Magic};
+use crate::instance::{FmiValue, Instance, Magic, SetValue, StringArg};
 use crate::logging::{LogCategory, Logger};
 use crate::model::CoSimModel;
 use crate::model_description;
@@ -636,14 +636,14 @@ unsafe fn get<M: CoSimModel, T: FmiValue, C>(
 
 /// # Safety
 /// Arguments as `fmi2SetReal` and friends; `values` points to `nvr` elements of
-/// the C type that `from_c` reads.
-unsafe fn set<M: CoSimModel, T: FmiValue, C: Copy>(
+/// the C type, each of which `from_c` may read under its own contract.
+unsafe fn set<M: CoSimModel, T: SetValue, C: Copy>(
     c: sys::fmi2Component,
     function: FmiFunction,
     vr: *const sys::fmi2ValueReference,
     nvr: usize,
     values: *const C,
-    from_c: fn(C) -> T,
+    from_c: unsafe fn(C) -> T,
 ) -> sys::fmi2Status {
     let body = |inst: &mut Instance<M>| {
         // SAFETY: `vr` points to `nvr` value references when non-NULL (this
@@ -657,7 +657,11 @@ unsafe fn set<M: CoSimModel, T: FmiValue, C: Copy>(
             Ok(raw) => raw,
             Err(status) => return status,
         };
-        inst.set_values(function, vrs, |i| from_c(raw[i]))
+        inst.set_values(function, vrs, |i| {
+            // SAFETY: `raw[i]` is an element of the importer's array, which
+            // meets `from_c`'s contract (this function's).
+            unsafe { from_c(raw[i]) }
+        })
     };
     // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe { call::<M, _, _>(c, function, |f| write!(f, "nvr = {nvr}"), body) }
@@ -707,27 +711,6 @@ pub unsafe fn get_boolean<M: CoSimModel>(
     unsafe { get::<M, bool, _>(c, FmiFunction::GetBoolean, vr, nvr, value, bool_to_c) }
 }
 
-/// A String value that no variable has: the models serve no String variables,
-/// so every value reference is refused with the variable's actual type.
-#[derive(Clone, Copy, PartialEq, PartialOrd)]
-struct NoString;
-
-impl std::fmt::Display for NoString {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("(string)")
-    }
-}
-
-impl FmiValue for NoString {
-    const TYPE_NAME: &'static str = "String";
-    fn getter<M>(_: &crate::variables::Value<M>) -> Option<fn(&M) -> NoString> {
-        None
-    }
-    fn setter<M>(_: &crate::variables::Value<M>) -> Option<fn(&mut M, NoString)> {
-        None
-    }
-}
-
 /// # Safety
 /// Arguments as `fmi2GetString`.
 pub unsafe fn get_string<M: CoSimModel>(
@@ -736,8 +719,50 @@ pub unsafe fn get_string<M: CoSimModel>(
     nvr: usize,
     value: *mut sys::fmi2String,
 ) -> sys::fmi2Status {
-    // SAFETY: the arguments are this function's, under the same contract.
-    unsafe { get::<M, NoString, _>(c, FmiFunction::GetString, vr, nvr, value, |_| ptr::null()) }
+    let function = FmiFunction::GetString;
+    let body = |inst: &mut Instance<M>| {
+        // SAFETY: `vr` points to `nvr` value references when non-NULL (this
+        // function's contract, the standard's for fmi2GetString).
+        let vrs = match unsafe { slice_in(inst, function, vr, nvr, "vr") } {
+            Ok(vrs) => vrs,
+            Err(status) => return status,
+        };
+        // SAFETY: `value` points to `nvr` writable pointers when non-NULL
+        // (as above).
+        let out = match unsafe { slice_out(inst, function, value, nvr, "value") } {
+            Ok(out) => out,
+            Err(status) => return status,
+        };
+        let status = inst.get_strings(function, vrs);
+        if status == Status::Ok {
+            // The instance owns the strings until its next fmi2GetString
+            // or fmi2FreeInstance (FMI 2.0.4 §2.1.7).
+            for (out, text) in out.iter_mut().zip(&inst.strings) {
+                out.write(text.as_ptr());
+            }
+        }
+        status
+    };
+    // SAFETY: `c` as for every FMI function (this function's contract).
+    unsafe { call::<M, _, _>(c, function, |f| write!(f, "nvr = {nvr}"), body) }
+}
+
+/// One element of `fmi2SetString`'s `value[]` as text, or why it is none.
+///
+/// # Safety
+/// `text` must be NULL or point to a NUL-terminated string that nothing
+/// writes while the call runs.
+unsafe fn string_value<'a>(text: sys::fmi2String) -> StringArg<'a> {
+    if text.is_null() {
+        return StringArg::Null;
+    }
+    // SAFETY: non-NULL, and NUL-terminated and unchanging during the call by
+    // this function's contract (the standard's `fmi2String`).
+    let bytes = unsafe { CStr::from_ptr(text) };
+    match bytes.to_str() {
+        Ok(text) => StringArg::Text(text),
+        Err(_) => StringArg::NotUtf8,
+    }
 }
 
 /// # Safety
@@ -776,16 +801,22 @@ pub unsafe fn set_boolean<M: CoSimModel>(
     unsafe { set::<M, bool, _>(c, FmiFunction::SetBoolean, vr, nvr, value, bool_from_c) }
 }
 
+/// `fmi2SetString`: each string is checked (not NULL, UTF-8) with the rest
+/// of the call's values before any is stored, and the model keeps a copy.
+///
 /// # Safety
-/// Arguments as `fmi2SetString`.
+/// Arguments as `fmi2SetString`: `value` points to `nvr` strings, each NULL
+/// or NUL-terminated.
 pub unsafe fn set_string<M: CoSimModel>(
     c: sys::fmi2Component,
     vr: *const sys::fmi2ValueReference,
     nvr: usize,
     value: *const sys::fmi2String,
 ) -> sys::fmi2Status {
-    // SAFETY: the arguments are this function's, under the same contract.
-    unsafe { set::<M, NoString, _>(c, FmiFunction::SetString, vr, nvr, value, |_| NoString) }
+    // SAFETY: the arguments are this function's, under the same contract;
+    // each element `set` hands `string_value` is a NULL or NUL-terminated
+    // string, as `string_value` requires.
+    unsafe { set::<M, _, _>(c, FmiFunction::SetString, vr, nvr, value, string_value) }
 }
 
 /// The snapshot behind an `fmi2FMUstate`, if it is one of ours.

@@ -2,6 +2,7 @@
 //! Rust. `abi` turns C pointers into the slices these methods take; the model
 //! only sees validated calls in legal states.
 
+use std::ffi::CString;
 use std::fmt;
 use std::path::PathBuf;
 
@@ -76,6 +77,11 @@ pub struct Instance<M: CoSimModel> {
     /// `fmi2FreeInstance` frees them (FMI 2.0.4 §2.1.5: it frees all memory
     /// the FMU interface allocated for the instance).
     pub(crate) fmu_states: Vec<*mut std::ffi::c_void>,
+    /// The strings the last `fmi2GetString` handed out: the FMU owns them,
+    /// and they stay valid until the next `fmi2GetString` on this instance
+    /// refills the buffer, or the instance is freed (FMI 2.0.4 §2.1.7 asks
+    /// for them to last until the next call of any FMI function on it).
+    pub(crate) strings: Vec<CString>,
 }
 
 /// What a setter does with one value after validation.
@@ -87,11 +93,20 @@ enum SetAction {
     KeepSameValue,
 }
 
-/// A value type served by fmi2Get/SetXXX.
+/// A value type served by fmi2GetXXX and fmi2SetXXX by value (Real,
+/// Integer, Boolean; Strings are lent and copied, see [`StringArg`]).
 pub(crate) trait FmiValue: Copy + PartialOrd + fmt::Display {
     const TYPE_NAME: &'static str;
+    /// What the importer may pass, said when a value is refused.
+    const ACCEPTED: &'static str = "";
     fn getter<M>(value: &Value<M>) -> Option<fn(&M) -> Self>;
     fn setter<M>(value: &Value<M>) -> Option<fn(&mut M, Self)>;
+    /// The independent variable's value at `time`, for the type it has
+    /// (Real).
+    fn time(time: f64) -> Option<Self> {
+        let _ = time;
+        None
+    }
     /// Why the value cannot be stored, if it cannot.
     fn invalid(self) -> Option<&'static str> {
         None
@@ -105,6 +120,7 @@ pub(crate) trait FmiValue: Copy + PartialOrd + fmt::Display {
 
 impl FmiValue for f64 {
     const TYPE_NAME: &'static str = "Real";
+    const ACCEPTED: &'static str = "only finite values are accepted";
     fn getter<M>(value: &Value<M>) -> Option<fn(&M) -> f64> {
         match value {
             Value::Real(r) => Some(r.get),
@@ -122,6 +138,9 @@ impl FmiValue for f64 {
             Value::Real(r) => (r.min, r.max),
             _ => (None, None),
         }
+    }
+    fn time(time: f64) -> Option<f64> {
+        Some(time)
     }
     fn invalid(self) -> Option<&'static str> {
         if self.is_nan() {
@@ -172,6 +191,93 @@ impl FmiValue for bool {
     }
 }
 
+/// One element of `fmi2SetString`'s `value[]`, as the gate read it: the
+/// importer's text, or why it is not one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum StringArg<'a> {
+    Text(&'a str),
+    Null,
+    /// Not UTF-8 (the text of a String variable and of modelDescription is).
+    NotUtf8,
+}
+
+impl fmt::Display for StringArg<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StringArg::Text(text) => write!(f, "{text:?}"),
+            StringArg::Null => f.write_str("NULL"),
+            StringArg::NotUtf8 => f.write_str("(bytes that are not UTF-8)"),
+        }
+    }
+}
+
+/// What the rules of `fmi2SetXXX` need of a value: its type, whether it can
+/// be stored, how it compares with the variable's current value, and how to
+/// store it.
+pub(crate) trait SetValue: Copy + fmt::Display {
+    const TYPE_NAME: &'static str;
+    const ACCEPTED: &'static str;
+    fn invalid(self) -> Option<&'static str>;
+    /// The variable's current value, written out, when it is not `self`.
+    fn differs<M>(self, value: &Value<M>, model: &M) -> Option<String>;
+    /// Stores `self` through the variable's setter (there is one: checked).
+    fn write<M>(self, value: &Value<M>, model: &mut M);
+    /// The variable's declared range, written out, when `self` is outside it.
+    fn out_of_range<M>(self, value: &Value<M>) -> Option<String>;
+}
+
+impl<T: FmiValue> SetValue for T {
+    const TYPE_NAME: &'static str = T::TYPE_NAME;
+    const ACCEPTED: &'static str = T::ACCEPTED;
+    fn invalid(self) -> Option<&'static str> {
+        FmiValue::invalid(self)
+    }
+    fn differs<M>(self, value: &Value<M>, model: &M) -> Option<String> {
+        let current = T::getter(value)?(model);
+        (current != self).then(|| current.to_string())
+    }
+    fn write<M>(self, value: &Value<M>, model: &mut M) {
+        let set = T::setter(value).expect("checked by check_set");
+        set(model, self);
+    }
+    fn out_of_range<M>(self, value: &Value<M>) -> Option<String> {
+        let (min, max) = T::range(value);
+        let outside = min.is_some_and(|min| self < min) || max.is_some_and(|max| self > max);
+        let bound = |b: Option<T>, inf: &str| b.map_or_else(|| inf.to_owned(), |b| b.to_string());
+        outside.then(|| format!("[{}, {}]", bound(min, "-inf"), bound(max, "inf")))
+    }
+}
+
+impl SetValue for StringArg<'_> {
+    const TYPE_NAME: &'static str = "String";
+    const ACCEPTED: &'static str =
+        "a String value must point to a NUL-terminated UTF-8 string, which the FMU copies";
+    fn invalid(self) -> Option<&'static str> {
+        match self {
+            StringArg::Text(_) => None,
+            StringArg::Null => Some("a NULL pointer"),
+            StringArg::NotUtf8 => Some("not valid UTF-8"),
+        }
+    }
+    fn differs<M>(self, value: &Value<M>, model: &M) -> Option<String> {
+        let (Value::String(s), StringArg::Text(text)) = (value, self) else {
+            return Some("(not a String)".to_owned());
+        };
+        let current = (s.get)(model);
+        (current != text).then(|| format!("{current:?}"))
+    }
+    fn write<M>(self, value: &Value<M>, model: &mut M) {
+        let (Value::String(s), StringArg::Text(text)) = (value, self) else {
+            unreachable!("checked by check_set");
+        };
+        let set = s.set.expect("checked by check_set");
+        set(model, text);
+    }
+    fn out_of_range<M>(self, _: &Value<M>) -> Option<String> {
+        None
+    }
+}
+
 impl<M: CoSimModel> Instance<M> {
     pub(crate) fn new(
         logger: Logger,
@@ -191,6 +297,7 @@ impl<M: CoSimModel> Instance<M> {
             resource_dir,
             guid,
             fmu_states: Vec::new(),
+            strings: Vec::new(),
         }
     }
 
@@ -375,10 +482,29 @@ impl<M: CoSimModel> Instance<M> {
         Status::Ok
     }
 
-    /// Reads `vrs` and hands the i-th value to `store(i, value)`. A state
-    /// derivative that is not finite is refused as `fmi2GetDerivatives`
-    /// refuses it: the importer sets the states and parameters of Model
-    /// Exchange, and the rates of some may overflow.
+    /// Refuses value reference `vr` of `var` for a call on another type.
+    fn wrong_type(
+        &self,
+        function: FmiFunction,
+        vr: u32,
+        var: &Variable<M>,
+        wanted: &str,
+    ) -> Status {
+        self.error(
+            function,
+            format_args!(
+                "value reference {vr} ({}) is a {} variable, not {wanted}",
+                var.name,
+                var.value.type_name(),
+            ),
+        )
+    }
+
+    /// Reads `vrs` and hands the i-th value to `store(i, value)`. The
+    /// independent variable reads the instance's time. A state derivative
+    /// that is not finite is refused as `fmi2GetDerivatives` refuses it: the
+    /// importer sets the states and parameters of Model Exchange, and the
+    /// rates of some may overflow.
     pub(crate) fn get_values<T: FmiValue>(
         &self,
         function: FmiFunction,
@@ -390,18 +516,14 @@ impl<M: CoSimModel> Instance<M> {
                 Ok(var) => var,
                 Err(status) => return status,
             };
-            let Some(get) = T::getter(&var.value) else {
-                return self.error(
-                    function,
-                    format_args!(
-                        "value reference {vr} ({}) is a {} variable, not {}",
-                        var.name,
-                        var.value.type_name(),
-                        T::TYPE_NAME
-                    ),
-                );
+            let value = match (T::getter(&var.value), &var.value) {
+                (Some(get), _) => get(&self.model),
+                (None, Value::Time(_)) => match T::time(self.time) {
+                    Some(time) => time,
+                    None => return self.wrong_type(function, *vr, var, T::TYPE_NAME),
+                },
+                (None, _) => return self.wrong_type(function, *vr, var, T::TYPE_NAME),
             };
-            let value = get(&self.model);
             // Folds away in a model without Model Exchange (no derivatives).
             if M::MODEL_EXCHANGE.is_some()
                 && var.derivative_of.is_some()
@@ -421,40 +543,78 @@ impl<M: CoSimModel> Instance<M> {
         Status::Ok
     }
 
-    /// Whether `var` may receive `value` now. Errors are logged here.
-    fn check_set<T: FmiValue>(
+    /// Reads the String variables `vrs` into the instance's buffer of C
+    /// strings ([`Instance::strings`], refilled: the strings of the previous
+    /// call are released). A model value that holds a NUL byte cannot be a
+    /// C string and is refused.
+    pub(crate) fn get_strings(&mut self, function: FmiFunction, vrs: &[u32]) -> Status {
+        let mut strings = std::mem::take(&mut self.strings);
+        strings.clear();
+        for vr in vrs {
+            let var = match self.variable(function, *vr) {
+                Ok(var) => var,
+                Err(status) => return status,
+            };
+            let Value::String(s) = &var.value else {
+                return self.wrong_type(function, *vr, var, "String");
+            };
+            match CString::new((s.get)(&self.model)) {
+                Ok(text) => strings.push(text),
+                Err(e) => {
+                    return self.error(
+                        function,
+                        format_args!(
+                            "value reference {vr} ({}) holds a NUL byte at offset {}, which a C \
+                             string cannot carry (a fault of the model)",
+                            var.name,
+                            e.nul_position()
+                        ),
+                    );
+                }
+            }
+        }
+        self.strings = strings;
+        Status::Ok
+    }
+
+    /// Whether `var` (value reference `vr`) may receive `value` now. Errors
+    /// are logged here.
+    fn check_set<T: SetValue>(
         &self,
         function: FmiFunction,
+        vr: u32,
         var: &Variable<M>,
         value: T,
     ) -> Result<SetAction, Status> {
-        let Some(get) = T::getter(&var.value) else {
-            return Err(self.error(
-                function,
-                format_args!(
-                    "{} is a {} variable, not {}",
-                    var.name,
-                    var.value.type_name(),
-                    T::TYPE_NAME
-                ),
-            ));
-        };
+        if var.value.type_name() != T::TYPE_NAME {
+            return Err(self.wrong_type(function, vr, var, T::TYPE_NAME));
+        }
         if let Some(reason) = value.invalid() {
             return Err(self.error(
                 function,
                 format_args!(
-                    "value of {} is {reason}; only finite values are accepted",
-                    var.name
+                    "value reference {vr} ({}): the value is {reason}; {}",
+                    var.name,
+                    T::ACCEPTED
                 ),
             ));
         }
         if !var.is_settable() {
+            let why = match (var.causality, var.variability) {
+                (Causality::Independent, _) => {
+                    "it is the independent variable, the FMU's time, which fmi2SetupExperiment \
+                     and fmi2DoStep move (fmi2SetTime in Model Exchange)"
+                }
+                (_, Variability::Constant) => "it is a constant",
+                _ => "",
+            };
             return Err(self.error(
                 function,
                 format_args!(
-                    "{} cannot be set: its causality is {}",
+                    "value reference {vr} ({}) cannot be set: its causality is {}{}{why}",
                     var.name,
-                    var.causality.as_str()
+                    var.causality.as_str(),
+                    if why.is_empty() { "" } else { "; " },
                 ),
             ));
         }
@@ -482,20 +642,13 @@ impl<M: CoSimModel> Instance<M> {
                     // (initialization checked the others), so its declared
                     // range is checked here.
                     (Causality::Parameter, Variability::Tunable) => {
-                        let (min, max) = T::range(&var.value);
-                        if min.is_some_and(|min| value < min) || max.is_some_and(|max| value > max)
-                        {
-                            let bound = |b: Option<T>, inf: &str| {
-                                b.map_or_else(|| inf.to_owned(), |b| b.to_string())
-                            };
+                        if let Some(range) = value.out_of_range(&var.value) {
                             Err(self.error(
                                 function,
                                 format_args!(
                                     "tunable parameter {} = {value} is outside its allowed \
-                                     range [{}, {}]; the value is kept",
-                                    var.name,
-                                    bound(min, "-inf"),
-                                    bound(max, "inf")
+                                     range {range}; the value is kept",
+                                    var.name
                                 ),
                             ))
                         } else {
@@ -503,18 +656,17 @@ impl<M: CoSimModel> Instance<M> {
                         }
                     }
                     (Causality::Parameter, Variability::Fixed) => {
-                        let current = get(&self.model);
-                        if current == value {
-                            Ok(SetAction::KeepSameValue)
-                        } else {
-                            Err(self.error(
-                            function,
-                            format_args!(
-                                "{} is a fixed parameter: it cannot change after initialization \
-                                 (it is {current}, {value} was requested); use fmi2Reset",
-                                var.name
-                            ),
-                        ))
+                        match value.differs(&var.value, &self.model) {
+                            None => Ok(SetAction::KeepSameValue),
+                            Some(current) => Err(self.error(
+                                function,
+                                format_args!(
+                                    "{} is a fixed parameter: it cannot change after \
+                                     initialization (it is {current}, {value} was requested); \
+                                     use fmi2Reset",
+                                    var.name
+                                ),
+                            )),
                         }
                     }
                     _ => Err(self.error(
@@ -532,7 +684,7 @@ impl<M: CoSimModel> Instance<M> {
 
     /// Validates every value (the i-th read by `value_at(i)`) first and applies
     /// them only if all are valid, so a refused call changes nothing.
-    pub(crate) fn set_values<T: FmiValue>(
+    pub(crate) fn set_values<T: SetValue>(
         &mut self,
         function: FmiFunction,
         vrs: &[u32],
@@ -545,7 +697,7 @@ impl<M: CoSimModel> Instance<M> {
                 Ok(var) => var,
                 Err(status) => return status,
             };
-            match self.check_set(function, var, value) {
+            match self.check_set(function, *vr, var, value) {
                 Ok(SetAction::Apply) => {}
                 Ok(SetAction::KeepSameValue) => {
                     self.logger.warning(
@@ -569,8 +721,7 @@ impl<M: CoSimModel> Instance<M> {
             {
                 continue;
             }
-            let set = T::setter(&var.value).expect("checked by check_set");
-            set(&mut self.model, value_at(i));
+            value_at(i).write(&var.value, &mut self.model);
         }
         status
     }
@@ -723,10 +874,12 @@ impl<M: CoSimModel> Instance<M> {
     /// state this FMU can be in) before it can replace the instance's values,
     /// and lets the model rebuild what it derives from its parameters. The
     /// layer checks what its own calls guarantee of every live instance: a
-    /// finite time, a machine state an instance of that interface is saved
-    /// in, every Real of the variable table finite (state derivatives aside:
-    /// `fmi2GetReal` refuses a non-finite one itself; and in the error state,
-    /// which a diverged step may have left), and, past initialization, every
+    /// finite time (the independent variable's value), a machine state an
+    /// instance of that interface is saved in, every Real of the variable
+    /// table finite (state derivatives aside: `fmi2GetReal` refuses a
+    /// non-finite one itself; and in the error state, which a diverged step
+    /// may have left), no NUL byte in a String parameter or input, every
+    /// constant at its start value, and, past initialization, every
     /// parameter in its declared range. Then the model's own hook
     /// ([`CoSimModel::validate_restored`]). The reason of a refusal is logged
     /// and returned.
@@ -778,6 +931,36 @@ impl<M: CoSimModel> Instance<M> {
                         data.state.name()
                     )));
                 }
+            }
+        }
+        // A String parameter or input never holds a NUL byte: fmi2SetString
+        // cannot pass one (and fmi2GetString could not hand it out).
+        if let Some((var, at)) = M::variables().iter().find_map(|var| match &var.value {
+            Value::String(s) if var.is_settable() => {
+                (s.get)(&data.model).find('\0').map(|at| (var, at))
+            }
+            _ => None,
+        }) {
+            return Err(refuse(format_args!(
+                "the state holds a NUL byte at offset {at} of the String {}, which no \
+                 fmi2SetString can put there",
+                var.name
+            )));
+        }
+        // A constant holds its start value in every state (only models with
+        // constants pay for the start-up model built to compare).
+        let mut constants = M::variables()
+            .iter()
+            .filter(|var| var.variability == Variability::Constant)
+            .peekable();
+        if constants.peek().is_some() {
+            let start = M::new();
+            if let Some(var) = constants.find(|var| !same_value(var, &data.model, &start)) {
+                return Err(refuse(format_args!(
+                    "the state changes the constant {}, which holds its start value in every \
+                     state",
+                    var.name
+                )));
             }
         }
         // Tunable ones too: fmi2SetReal refuses a value outside the range
@@ -896,6 +1079,18 @@ fn parameter_out_of_range<M>(var: &Variable<M>, model: &M) -> Option<String> {
                 )
             })
         }
-        Value::Boolean(_) => None,
+        Value::Boolean(_) | Value::String(_) | Value::Time(_) => None,
+    }
+}
+
+/// Whether variable `var` has the same value in `a` and `b` (Reals by their
+/// bits, so that a NaN equals itself; the time is not the model's).
+fn same_value<M>(var: &Variable<M>, a: &M, b: &M) -> bool {
+    match &var.value {
+        Value::Real(r) => (r.get)(a).to_bits() == (r.get)(b).to_bits(),
+        Value::Integer(i) => (i.get)(a) == (i.get)(b),
+        Value::Boolean(v) => (v.get)(a) == (v.get)(b),
+        Value::String(s) => (s.get)(a) == (s.get)(b),
+        Value::Time(_) => true,
     }
 }

@@ -173,9 +173,11 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
     /// outside), on the candidate model value, after the layer checked that
     /// every Real of the variable table is finite (state derivatives aside:
     /// they are not evaluated before this hook rebuilt what they are
-    /// computed from) and, in `state`s past
-    /// initialization, that every fixed parameter is in its declared range
-    /// (tunable ones, like inputs, take any finite value while running). The
+    /// computed from), that no String parameter or input holds a NUL byte,
+    /// that every constant holds its start value and, in `state`s past
+    /// initialization, that every parameter is in its declared range
+    /// (tunable ones included: `fmi2SetReal` refuses them outside it while
+    /// running). The
     /// model checks the rest of its invariants (what its own constructor
     /// would refuse) and rebuilds whatever it derives from its parameters,
     /// so that a state with valid checksum but made-up values never runs.

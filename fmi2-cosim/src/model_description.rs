@@ -37,12 +37,26 @@ pub fn format_real(x: f64) -> String {
     }
 }
 
-fn start_value<M>(var: &Variable<M>, model: &M) -> String {
-    match &var.value {
-        Value::Real(r) => format_real((r.get)(model)),
-        Value::Integer(i) => (i.get)(model).to_string(),
-        Value::Boolean(b) => (b.get)(model).to_string(),
+/// The start value modelDescription declares for `var` (those that have
+/// one: [`Variable::has_start`]), read from the start-up `model`.
+fn start_value<M>(var: &Variable<M>, model: &M) -> Option<String> {
+    if !var.has_start() {
+        return None;
     }
+    match &var.value {
+        Value::Real(r) => Some(format_real((r.get)(model))),
+        Value::Integer(i) => Some((i.get)(model).to_string()),
+        Value::Boolean(b) => Some((b.get)(model).to_string()),
+        Value::String(s) => Some((s.get)(model).to_owned()),
+        // The independent variable has none (check_table).
+        Value::Time(_) => None,
+    }
+}
+
+/// Whether XML 1.0 can carry `c` at all (§2.2 Char): not even a character
+/// reference spells the other control characters.
+fn xml_char(c: char) -> bool {
+    matches!(c, '\t' | '\n' | '\r' | '\u{20}'..='\u{d7ff}' | '\u{e000}'..='\u{fffd}' | '\u{10000}'..)
 }
 
 /// 1-based indices of the named variables, ascending, space separated.
@@ -293,7 +307,16 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
             attributes.push(("initial", initial.as_str()));
         }
         xml.open("ScalarVariable", &attributes)?;
-        let start = var.has_start().then(|| start_value(var, &start_model));
+        let start = start_value(var, &start_model);
+        if let Some(bad) = start
+            .as_deref()
+            .and_then(|s| s.chars().find(|c| !xml_char(*c)))
+        {
+            return Err(format!(
+                "the start value of {} holds U+{:04X}, which XML 1.0 cannot carry",
+                var.name, bad as u32
+            ));
+        }
         let mut typed: Vec<(&str, String)> = Vec::new();
         match &var.value {
             Value::Real(r) => {
@@ -310,6 +333,14 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
                     typed.push(("max", format_real(max)));
                 }
             }
+            Value::Time(t) => {
+                if let Some(unit) = t.unit {
+                    typed.push(("unit", unit.to_owned()));
+                }
+                if let Some(display) = t.display_unit {
+                    typed.push(("displayUnit", display.to_owned()));
+                }
+            }
             Value::Integer(i) => {
                 if let Some(min) = i.min {
                     typed.push(("min", min.to_string()));
@@ -318,7 +349,7 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
                     typed.push(("max", max.to_string()));
                 }
             }
-            Value::Boolean(_) => {}
+            Value::Boolean(_) | Value::String(_) => {}
         }
         if let Some(start) = start {
             typed.push(("start", start));
@@ -361,18 +392,20 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
         }
         xml.close("Derivatives")?;
     }
-    // FMI 2.0.4 §2.2.8: the outputs, calculated parameters, and the states and
-    // state derivatives that are not exact, in index order.
+    // FMI 2.0.4 §2.2.8: the outputs that are not exact (a constant output
+    // is known from its start value), the calculated parameters, and the
+    // states and state derivatives that are not exact, in index order.
     let states: Vec<usize> = continuous_states(table).iter().map(|(s, _)| *s).collect();
     let initial_unknowns: Vec<(usize, &Variable<M>)> = table
         .iter()
         .enumerate()
         .filter(|(i, v)| {
             let computed = v.initial() != Some(Initial::Exact);
-            matches!(
-                v.causality,
-                Causality::Output | Causality::CalculatedParameter
-            ) || (computed && (v.derivative_of.is_some() || states.contains(i)))
+            v.causality == Causality::CalculatedParameter
+                || (computed
+                    && (v.causality == Causality::Output
+                        || v.derivative_of.is_some()
+                        || states.contains(i)))
         })
         .collect();
     if !initial_unknowns.is_empty() {
@@ -467,13 +500,14 @@ pub fn variables_html<M: CoSimModel>() -> String {
          <th>description</th></tr></thead>\n<tbody>\n",
     );
     for (vr, var) in M::variables().iter().enumerate() {
+        let unit_text = |unit: Option<&str>, display: Option<&str>| match (unit, display) {
+            (Some(u), Some(d)) => format!("{u} (shown in {d})"),
+            (Some(u), None) => u.to_owned(),
+            _ => String::new(),
+        };
         let (unit, range) = match &var.value {
             Value::Real(r) => {
-                let unit = match (r.unit, r.display_unit) {
-                    (Some(u), Some(d)) => format!("{u} (shown in {d})"),
-                    (Some(u), None) => u.to_owned(),
-                    _ => String::new(),
-                };
+                let unit = unit_text(r.unit, r.display_unit);
                 let range = match (r.min, r.max) {
                     (None, None) => String::new(),
                     (min, max) => format!(
@@ -495,12 +529,13 @@ pub fn variables_html<M: CoSimModel>() -> String {
                 };
                 (String::new(), range)
             }
-            Value::Boolean(_) => (String::new(), String::new()),
+            Value::Time(t) => (unit_text(t.unit, t.display_unit), String::new()),
+            Value::Boolean(_) | Value::String(_) => (String::new(), String::new()),
         };
-        let start = if var.has_start() {
-            start_value(var, &model)
-        } else {
-            String::new()
+        let start = match (&var.value, start_value(var, &model)) {
+            // Quoted, so that an empty or blank String start shows.
+            (Value::String(_), Some(text)) => format!("{text:?}"),
+            (_, start) => start.unwrap_or_default(),
         };
         html.push_str(&format!(
             "<tr><td><code>{}</code></td><td>{vr}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>\

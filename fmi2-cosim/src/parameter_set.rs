@@ -10,12 +10,13 @@ use crate::model::CoSimModel;
 use crate::variables::{Causality, Value};
 
 /// One parameter's value, in its FMI type.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum ScalarValue {
     Real(f64),
     Integer(i32),
     Boolean(bool),
+    String(String),
 }
 
 /// Every parameter of `model` (causality "parameter"), in value-reference
@@ -24,13 +25,16 @@ pub fn parameter_values<M: CoSimModel>(model: &M) -> Vec<(&'static str, ScalarVa
     M::variables()
         .iter()
         .filter(|v| v.causality == Causality::Parameter)
-        .map(|v| {
+        .filter_map(|v| {
             let value = match &v.value {
                 Value::Real(r) => ScalarValue::Real((r.get)(model)),
                 Value::Integer(i) => ScalarValue::Integer((i.get)(model)),
                 Value::Boolean(b) => ScalarValue::Boolean((b.get)(model)),
+                Value::String(s) => ScalarValue::String((s.get)(model).to_owned()),
+                // The time is the independent variable, never a parameter.
+                Value::Time(_) => return None,
             };
-            (v.name, value)
+            Some((v.name, value))
         })
         .collect()
 }

@@ -4,9 +4,9 @@
 //! from outside (deserialized bytes with a valid checksum but made-up values)
 //! is checked before it can replace an instance's values.
 
-use std::ffi::CString;
-use std::ptr;
+mod common;
 
+use common::{DISCARD, ERROR, OK};
 use fmi2_cosim::abi;
 use fmi2_cosim::fmi_sys::fmi2 as sys;
 use fmi2_cosim::{
@@ -134,193 +134,34 @@ impl CoSimModel for Stepper {
     }
 }
 
-const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
-const DISCARD: sys::fmi2Status = sys::fmi2Status_fmi2Discard;
-const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
-
 const U: u32 = 0;
 const Y: u32 = 1;
 const Z: u32 = 2;
 const GAIN: u32 = 3;
 const MODE: u32 = 4;
 
-/// An instance of `Stepper`, freed on drop.
-struct Slave(sys::fmi2Component);
+type Slave = common::Slave<Stepper>;
 
-impl Slave {
-    fn instantiate() -> Slave {
-        let callbacks = sys::fmi2CallbackFunctions {
-            logger: None,
-            allocateMemory: None,
-            freeMemory: None,
-            stepFinished: None,
-            componentEnvironment: ptr::null_mut(),
-        };
-        let guid = CString::new(fmi2_cosim::model_description::guid::<Stepper>().unwrap()).unwrap();
-        // SAFETY: every pointer is valid for the call; the GUID and the
-        // callbacks outlive it (the layer copies what it keeps).
-        let c = unsafe {
-            abi::instantiate::<Stepper>(
-                c"stepper".as_ptr(),
-                sys::fmi2Type_fmi2CoSimulation,
-                guid.as_ptr(),
-                ptr::null(),
-                &callbacks,
-                0,
-                0,
-            )
-        };
-        assert!(!c.is_null());
-        Slave(c)
-    }
-
+impl common::Slave<Stepper> {
     /// Initialized at t = 0 with gain 1.25 and input 2.
     fn initialized() -> Slave {
         let slave = Slave::instantiate();
         assert_eq!(slave.set_real(GAIN, 1.25), OK);
         assert_eq!(slave.set_real(U, 2.0), OK);
-        // SAFETY: `slave.0` is a live instance of Stepper.
-        unsafe {
-            assert_eq!(
-                abi::setup_experiment::<Stepper>(slave.0, 0, 0.0, 0.0, 0, 0.0),
-                OK
-            );
-            assert_eq!(abi::enter_initialization_mode::<Stepper>(slave.0), OK);
-            assert_eq!(abi::exit_initialization_mode::<Stepper>(slave.0), OK);
-        }
+        slave.setup_and_enter(0.0);
+        assert_eq!(slave.exit_initialization(), OK);
         slave
     }
 
-    fn set_real(&self, vr: u32, value: f64) -> sys::fmi2Status {
-        // SAFETY: one value reference and one value, both on the stack.
-        unsafe { abi::set_real::<Stepper>(self.0, &vr, 1, &value) }
-    }
-
     fn set_mode(&self, mode: i32) -> sys::fmi2Status {
-        // SAFETY: as in `set_real`.
-        unsafe { abi::set_integer::<Stepper>(self.0, &MODE, 1, &mode) }
-    }
-
-    fn real(&self, vr: u32) -> f64 {
-        let mut value = f64::NAN;
-        // SAFETY: as in `set_real`.
-        let status = unsafe { abi::get_real::<Stepper>(self.0, &vr, 1, &mut value) };
-        assert_eq!(status, OK);
-        value
-    }
-
-    fn step(&self, t: f64, h: f64) -> sys::fmi2Status {
-        // SAFETY: `self.0` is a live instance of Stepper.
-        unsafe { abi::do_step::<Stepper>(self.0, t, h, 1) }
-    }
-
-    fn last_successful_time(&self) -> (sys::fmi2Status, f64) {
-        let mut time = f64::NAN;
-        // SAFETY: `time` is valid for a write.
-        let status = unsafe {
-            abi::get_real_status::<Stepper>(
-                self.0,
-                sys::fmi2StatusKind_fmi2LastSuccessfulTime,
-                &mut time,
-            )
-        };
-        (status, time)
-    }
-
-    fn terminated(&self) -> (sys::fmi2Status, sys::fmi2Boolean) {
-        let mut flag = -1;
-        // SAFETY: `flag` is valid for a write.
-        let status = unsafe {
-            abi::get_boolean_status::<Stepper>(
-                self.0,
-                sys::fmi2StatusKind_fmi2Terminated,
-                &mut flag,
-            )
-        };
-        (status, flag)
-    }
-
-    fn terminate(&self) -> sys::fmi2Status {
-        // SAFETY: `self.0` is a live instance of Stepper.
-        unsafe { abi::terminate::<Stepper>(self.0) }
-    }
-
-    fn get_state(&self) -> sys::fmi2FMUstate {
-        let mut state: sys::fmi2FMUstate = ptr::null_mut();
-        // SAFETY: `state` is a NULL slot the layer fills.
-        let status = unsafe { abi::get_fmu_state::<Stepper>(self.0, &mut state) };
-        assert_eq!(status, OK);
-        state
-    }
-
-    fn set_state(&self, state: sys::fmi2FMUstate) -> sys::fmi2Status {
-        // SAFETY: `state` was made by this layer for Stepper, or is refused.
-        unsafe { abi::set_fmu_state::<Stepper>(self.0, state) }
-    }
-
-    fn serialize(&self, state: sys::fmi2FMUstate) -> Vec<u8> {
-        let mut size = 0;
-        // SAFETY: `state` is a live state of this instance; the buffer has
-        // the size the layer asked for.
-        unsafe {
-            assert_eq!(
-                abi::serialized_fmu_state_size::<Stepper>(self.0, state, &mut size),
-                OK
-            );
-            let mut bytes = vec![0u8; size];
-            assert_eq!(
-                abi::serialize_fmu_state::<Stepper>(self.0, state, bytes.as_mut_ptr().cast(), size),
-                OK
-            );
-            bytes
-        }
-    }
-
-    /// Deserializes `bytes` into a new FMU state: the status and the state.
-    fn deserialize(&self, bytes: &[u8]) -> (sys::fmi2Status, sys::fmi2FMUstate) {
-        let mut state: sys::fmi2FMUstate = ptr::null_mut();
-        // SAFETY: `bytes` is a live slice; `state` a NULL slot.
-        let status = unsafe {
-            abi::deserialize_fmu_state::<Stepper>(
-                self.0,
-                bytes.as_ptr().cast(),
-                bytes.len(),
-                &mut state,
-            )
-        };
-        (status, state)
+        self.set_integer(MODE, mode)
     }
 }
-
-impl Drop for Slave {
-    fn drop(&mut self) {
-        // SAFETY: `self.0` is live; freeing it frees its FMU states too.
-        unsafe { abi::free_instance::<Stepper>(self.0) };
-    }
-}
-
-/// Header (magic, version, GUID, payload length) and trailer (CRC-32) of a
-/// serialized state: `fmu_state`'s documented byte form.
-const HEADER_LEN: usize = 8 + 4 + 38 + 8;
-const CRC_LEN: usize = 4;
 
 /// `bytes` with the one occurrence, in the payload, of the f64 `from`
-/// replaced by `to`, and the checksum recomputed: bytes written on purpose.
+/// replaced by `to`, and the checksum recomputed.
 fn forge(bytes: &[u8], from: f64, to: f64) -> Vec<u8> {
-    let mut out = bytes.to_vec();
-    let payload = HEADER_LEN..out.len() - CRC_LEN;
-    let needle = from.to_le_bytes();
-    let hits: Vec<usize> = out[payload.clone()]
-        .windows(8)
-        .enumerate()
-        .filter(|(_, w)| *w == needle)
-        .map(|(i, _)| HEADER_LEN + i)
-        .collect();
-    assert_eq!(hits.len(), 1, "{from} occurs {} times", hits.len());
-    out[hits[0]..hits[0] + 8].copy_from_slice(&to.to_le_bytes());
-    let crc = crc32fast::hash(&out[..payload.end]);
-    out[payload.end..].copy_from_slice(&crc.to_le_bytes());
-    out
+    common::forge(bytes, &from.to_le_bytes(), &to.to_le_bytes())
 }
 
 #[test]

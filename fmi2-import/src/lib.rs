@@ -119,6 +119,8 @@ pub struct VariableInfo {
     pub variability: Option<Variability>,
     pub kind: &'static str,
     pub start: Option<f64>,
+    /// The start value of a String variable (fmi-schema keeps none).
+    pub start_string: Option<String>,
     /// The declared range (`min`, `max` of the Real or Integer element).
     pub min: Option<f64>,
     pub max: Option<f64>,
@@ -149,21 +151,22 @@ impl Fmu {
             .map_err(|e| format!("cannot load {}: {e}", library.display()))?;
         let description = Fmi2ModelDescription::deserialize(model_description)
             .map_err(|e| format!("modelDescription does not parse with fmi-schema: {e}"))?;
-        // fmi-schema does not parse min/max; they are read here, in document order.
-        let ranges = declared_ranges(model_description)?;
-        if ranges.len() != description.model_variables.variables.len() {
+        // fmi-schema does not parse min/max, nor a String's start; they are
+        // read here, in document order.
+        let extras = type_attributes(model_description)?;
+        if extras.len() != description.model_variables.variables.len() {
             return Err(format!(
-                "{} ScalarVariables parsed but {} type elements with a range read",
+                "{} ScalarVariables parsed but {} type elements read",
                 description.model_variables.variables.len(),
-                ranges.len()
+                extras.len()
             ));
         }
         let variables = description
             .model_variables
             .variables
             .iter()
-            .zip(ranges)
-            .map(|(v, (min, max))| {
+            .zip(extras)
+            .map(|(v, extra)| {
                 let (kind, start) = match &v.elem {
                     ScalarVariableElement::Real(r) => ("Real", r.start),
                     ScalarVariableElement::Integer(i) => ("Integer", i.start.map(f64::from)),
@@ -180,8 +183,9 @@ impl Fmu {
                     variability: v.variability,
                     kind,
                     start,
-                    min,
-                    max,
+                    start_string: extra.string_start,
+                    min: extra.min,
+                    max: extra.max,
                 }
             })
             .collect();
@@ -278,15 +282,32 @@ impl Fmu {
     }
 }
 
-/// A declared `(min, max)`.
-type Range = (Option<f64>, Option<f64>);
+/// What fmi-schema does not read of a ScalarVariable's type element.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct TypeAttributes {
+    /// The declared range (`min`, `max` of a Real or Integer).
+    min: Option<f64>,
+    max: Option<f64>,
+    /// The `start` of a String.
+    string_start: Option<String>,
+}
 
-/// The `min` and `max` attributes of the type element (Real, Integer, ...) of
-/// every ScalarVariable, in document order.
-fn declared_ranges(model_description: &str) -> Result<Vec<Range>, String> {
+/// The start value of every ScalarVariable's `<String>` element (`None` for
+/// other types and for a String without one), in document order: what an
+/// importer reads, XML escapes resolved.
+pub fn string_starts(model_description: &str) -> Result<Vec<Option<String>>, String> {
+    Ok(type_attributes(model_description)?
+        .into_iter()
+        .map(|a| a.string_start)
+        .collect())
+}
+
+/// The attributes of the type element (Real, Integer, ...) of every
+/// ScalarVariable that fmi-schema leaves out, in document order.
+fn type_attributes(model_description: &str) -> Result<Vec<TypeAttributes>, String> {
     use quick_xml::events::Event;
     let mut reader = quick_xml::Reader::from_str(model_description);
-    let mut ranges = Vec::new();
+    let mut found = Vec::new();
     let mut in_variable = false;
     loop {
         let event = reader
@@ -302,28 +323,36 @@ fn declared_ranges(model_description: &str) -> Result<Vec<Range>, String> {
                         "Real" | "Integer" | "Boolean" | "String" | "Enumeration"
                     ) =>
             {
-                let mut range = (None, None);
+                let is_string = e.name().as_ref() == "String";
+                let mut attributes = TypeAttributes::default();
                 for attribute in e.attributes() {
                     let attribute =
                         attribute.map_err(|e| format!("bad attribute in modelDescription: {e}"))?;
+                    let value = attribute
+                        .normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                        .map_err(|e| format!("bad attribute value in modelDescription: {e}"))?;
                     let slot = match attribute.key.as_ref() {
-                        "min" => &mut range.0,
-                        "max" => &mut range.1,
+                        "start" if is_string => {
+                            attributes.string_start = Some(value.into_owned());
+                            continue;
+                        }
+                        "min" => &mut attributes.min,
+                        "max" => &mut attributes.max,
                         _ => continue,
                     };
-                    let text = attribute.value.as_ref();
                     *slot = Some(
-                        text.parse::<f64>()
-                            .map_err(|e| format!("range attribute {text:?}: {e}"))?,
+                        value
+                            .parse::<f64>()
+                            .map_err(|e| format!("range attribute {value:?}: {e}"))?,
                     );
                 }
-                ranges.push(range);
+                found.push(attributes);
             }
             Event::Eof => break,
             _ => {}
         }
     }
-    Ok(ranges)
+    Ok(found)
 }
 
 /// Callbacks whose logger writes into `sink`.

@@ -9,7 +9,7 @@ use piezo_models::ControllerParams;
 
 #[test]
 fn value_references_are_append_only() {
-    piezo_fmu_tables::check_value_references_append_only(
+    fmi2_conformance::table::value_references_are_append_only(
         PiezoControllerFmu::variables(),
         include_str!("../valueReferences.txt"),
     );

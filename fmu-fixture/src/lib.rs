@@ -6,18 +6,18 @@
 //! every answer is known, apart from the piezo models.
 //!
 //! What the layer serves, and so what the table holds:
-//! - types Real, Integer, Boolean;
-//! - causalities parameter, calculatedParameter, input, output, local;
-//! - variabilities fixed, tunable, discrete, continuous.
+//! - types Real, Integer, Boolean, String;
+//! - causalities parameter, calculatedParameter, input, output, local, and
+//!   independent (the time, `time`, which reads the instance's time);
+//! - variabilities constant (a Real output, exact, with its value as start
+//!   value), fixed, tunable, discrete, continuous.
 //!
-//! Not here because the layer does not serve them (yet): String variables
-//! (its `Value` has no String, and `fmi2SetString` refuses every value
-//! reference), the `independent` causality (time is not a table variable),
-//! and `constant` (FMI 2.0.4 §2.2.7 requires `initial="exact"` and a start
-//! value for a constant, while the layer derives `initial` from the causality
-//! and writes start values for parameters and inputs only).
+//! Not here because the layer does not serve them: Enumeration variables,
+//! `initial="approx"`, and a constant local (a constant output shows the
+//! rule both share).
 //!
-//! Value references are positions in [`VARIABLES`]: append only.
+//! Value references are positions in [`VARIABLES`]: append only, recorded in
+//! `valueReferences.txt` (tested).
 
 use fmi2_cosim::variables::{BooleanVariable, IntegerVariable, RealVariable, Value};
 use fmi2_cosim::{
@@ -47,7 +47,17 @@ pub struct Feedthrough {
     real_continuous_local: f64,
     /// Steps completed since initialization.
     integer_discrete_local: i32,
+    string_fixed_parameter: String,
+    string_input: String,
 }
+
+/// The value of `real_constant_output`.
+pub const REAL_CONSTANT: f64 = std::f64::consts::E;
+
+/// The start value of `string_fixed_parameter`: characters XML must escape,
+/// and one outside ASCII, so that an importer's reading of the start value
+/// is tested too.
+pub const STRING_PARAMETER_START: &str = "a \"String\" <parameter> & µ";
 
 const UNITS: &[UnitDefinition] = &[units::SECOND];
 
@@ -110,7 +120,7 @@ use Causality::{CalculatedParameter, Input, Local, Output, Parameter};
 use Variability::{Continuous, Discrete, Fixed, Tunable};
 
 /// The variable table; a variable's value reference is its index.
-pub static VARIABLES: [Variable<Feedthrough>; 15] = [
+pub static VARIABLES: [Variable<Feedthrough>; 20] = [
     variable(
         "real_fixed_parameter",
         "A fixed Real parameter, declared in [-1e6, 1e6]",
@@ -255,6 +265,36 @@ pub static VARIABLES: [Variable<Feedthrough>; 15] = [
         Discrete,
         integer(|m| m.integer_discrete_local, None),
     ),
+    Variable::string_parameter(
+        "string_fixed_parameter",
+        "A fixed String parameter",
+        Fixed,
+        |m: &Feedthrough| &m.string_fixed_parameter,
+        |m, v| m.string_fixed_parameter = v.to_owned(),
+    )
+    .model_path("string_fixed_parameter"),
+    Variable::string_input(
+        "string_input",
+        "A discrete String input",
+        |m: &Feedthrough| &m.string_input,
+        |m, v| m.string_input = v.to_owned(),
+    ),
+    Variable::string_output(
+        "string_output",
+        "string_input, fed through",
+        |m: &Feedthrough| &m.string_input,
+    )
+    .depends_on(&["string_input"])
+    .initially_depends_on(&["string_input"]),
+    Variable::independent("time", "The independent variable: the simulation time", "s"),
+    variable(
+        "real_constant_output",
+        "A Real constant output: e, in every state",
+        Output,
+        Continuous,
+        real(|_| REAL_CONSTANT, None),
+    )
+    .constant(),
 ];
 
 impl CoSimModel for Feedthrough {
@@ -291,6 +331,8 @@ impl CoSimModel for Feedthrough {
             boolean_input: false,
             real_continuous_local: 0.0,
             integer_discrete_local: 0,
+            string_fixed_parameter: STRING_PARAMETER_START.to_owned(),
+            string_input: String::new(),
         }
     }
 

@@ -1,10 +1,11 @@
 //! What the fixture computes, through the C ABI: every output equals its input
 //! as soon as the input is set (before any step), in initialization mode and
-//! between steps; the calculated parameter is the start time; the locals
-//! integrate and count; a reset brings back the start values.
+//! between steps, the String one included; the calculated parameter is the
+//! start time; the locals integrate and count; `time` is the time; the
+//! constant never moves; a reset brings back the start values.
 
-use fmi2_conformance::{Fmu, GetDiscrete, Instance, OK, WARNING, workspace};
-use fmu_fixture::Feedthrough;
+use fmi2_conformance::{Fmu, GetDiscrete, Instance, OK, StringValues, WARNING, workspace};
+use fmu_fixture::{Feedthrough, REAL_CONSTANT, STRING_PARAMETER_START};
 
 fn fixture() -> Fmu {
     workspace::load::<Feedthrough>("fmu-fixture")
@@ -22,6 +23,7 @@ fn assert_fed_through(
     discrete: f64,
     int: i32,
     flag: bool,
+    text: &str,
 ) {
     let inputs = [
         vr(fmu, "real_continuous_input"),
@@ -41,6 +43,12 @@ fn assert_fed_through(
     assert_eq!((status, ints[0]), (OK, int));
     let (status, flags) = inst.get_boolean(&[vr(fmu, "boolean_output")]);
     assert_eq!((status, flags[0]), (OK, i32::from(flag)));
+    assert_eq!(inst.set_string(&[vr(fmu, "string_input")], &[text]), OK);
+    let (status, texts) = inst.get_string(&[vr(fmu, "string_output")]);
+    assert_eq!(
+        (status, texts.as_slice()),
+        (OK, [text.to_owned()].as_slice())
+    );
 }
 
 #[test]
@@ -49,11 +57,11 @@ fn outputs_equal_inputs_before_any_step() {
     let mut inst = fmu.instantiate("feedthrough", false);
     assert_eq!(inst.setup(0.0), OK);
     assert_eq!(inst.enter_init(), OK);
-    assert_fed_through(&fmu, &inst, 1.5, -2.25, 7, true);
+    assert_fed_through(&fmu, &inst, 1.5, -2.25, 7, true, "first");
     assert_eq!(inst.exit_init(), OK);
-    assert_fed_through(&fmu, &inst, -3.0, 4.5, -11, false);
+    assert_fed_through(&fmu, &inst, -3.0, 4.5, -11, false, "");
     assert_eq!(inst.do_step(1e-3), OK);
-    assert_fed_through(&fmu, &inst, 1e300, -0.0, i32::MIN, true);
+    assert_fed_through(&fmu, &inst, 1e300, -0.0, i32::MIN, true, "après un pas ✓");
 }
 
 #[test]
@@ -89,4 +97,35 @@ fn calculated_parameter_and_locals() {
     assert_eq!(inst.get_real_one(gain), 1.0);
     assert_eq!(inst.get_real_one(vr(&fmu, "real_continuous_local")), 0.0);
     assert_eq!(inst.get_real_one(vr(&fmu, "real_continuous_output")), 0.0);
+}
+
+#[test]
+fn the_string_parameter_time_and_constant() {
+    let fmu = fixture();
+    let mut inst = fmu.instantiate("time", false);
+    assert_eq!(inst.setup(0.5), OK);
+    assert_eq!(inst.enter_init(), OK);
+    let parameter = vr(&fmu, "string_fixed_parameter");
+    assert_eq!(
+        inst.get_string(&[parameter]).1,
+        [STRING_PARAMETER_START.to_owned()]
+    );
+    assert_eq!(inst.set_string(&[parameter], &["set before the run"]), OK);
+    assert_eq!(inst.exit_init(), OK);
+    let (time, constant) = (vr(&fmu, "time"), vr(&fmu, "real_constant_output"));
+    assert_eq!(inst.get_real_one(time), 0.5);
+    for k in 1..=4 {
+        assert_eq!(inst.do_step(0.125), OK);
+        assert_eq!(inst.get_real_one(time), 0.5 + 0.125 * f64::from(k));
+        assert_eq!(inst.get_real_one(constant), REAL_CONSTANT);
+    }
+    assert_eq!(
+        inst.get_string(&[parameter]).1,
+        ["set before the run".to_owned()]
+    );
+    // The constant is declared with its value.
+    assert_eq!(
+        fmu.variable("real_constant_output").start,
+        Some(REAL_CONSTANT)
+    );
 }

@@ -1,6 +1,7 @@
-//! The generated modelDescription agrees with the variable table, and the
-//! table holds what the fixture promises: a variable of every type, causality
-//! and variability the layer serves.
+//! The generated modelDescription agrees with the variable table, the table
+//! keeps its released value references, and it holds what the fixture
+//! promises: a variable of every type, causality and variability the layer
+//! serves.
 
 use fmi2_cosim::CoSimModel;
 use fmi2_cosim::variables::Value;
@@ -28,9 +29,17 @@ fn every_parameter_has_a_model_path() {
 }
 
 #[test]
+fn value_references_are_append_only() {
+    fmi2_conformance::table::value_references_are_append_only(
+        Feedthrough::variables(),
+        include_str!("../valueReferences.txt"),
+    );
+}
+
+#[test]
 fn the_table_covers_what_the_layer_serves() {
     let table = Feedthrough::variables();
-    for kind in ["Real", "Integer", "Boolean"] {
+    for kind in ["Real", "Integer", "Boolean", "String"] {
         for causality in [Causality::Parameter, Causality::Input, Causality::Output] {
             assert!(
                 table
@@ -40,21 +49,18 @@ fn the_table_covers_what_the_layer_serves() {
             );
         }
     }
-    assert!(
-        table
-            .iter()
-            .any(|v| v.causality == Causality::CalculatedParameter)
-    );
     for (causality, variability) in [
         (Causality::Parameter, Variability::Fixed),
         (Causality::Parameter, Variability::Tunable),
         (Causality::CalculatedParameter, Variability::Fixed),
         (Causality::Input, Variability::Continuous),
         (Causality::Input, Variability::Discrete),
+        (Causality::Output, Variability::Constant),
         (Causality::Output, Variability::Continuous),
         (Causality::Output, Variability::Discrete),
         (Causality::Local, Variability::Continuous),
         (Causality::Local, Variability::Discrete),
+        (Causality::Independent, Variability::Continuous),
     ] {
         assert!(
             table
@@ -63,8 +69,17 @@ fn the_table_covers_what_the_layer_serves() {
             "no {causality:?} {variability:?}"
         );
     }
-    // Every output is an input fed through, declared as direct feedthrough.
-    for output in table.iter().filter(|v| v.causality == Causality::Output) {
+    let time = table
+        .iter()
+        .find(|v| v.causality == Causality::Independent)
+        .expect("the independent variable");
+    assert!(matches!(time.value, Value::Time(_)));
+    // Every output but the constant is an input fed through, declared as
+    // direct feedthrough.
+    for output in table
+        .iter()
+        .filter(|v| v.causality == Causality::Output && v.variability != Variability::Constant)
+    {
         let [input] = output.output_dependencies else {
             panic!("{} depends on one input", output.name)
         };
@@ -72,9 +87,5 @@ fn the_table_covers_what_the_layer_serves() {
         assert_eq!(input.causality, Causality::Input);
         assert_eq!(input.value.type_name(), output.value.type_name());
         assert_eq!(input.variability, output.variability, "{}", output.name);
-        assert!(matches!(
-            output.value,
-            Value::Real(_) | Value::Integer(_) | Value::Boolean(_)
-        ));
     }
 }

@@ -253,60 +253,6 @@ fn fmt(value: Option<f64>) -> String {
     value.map_or_else(String::new, |v| v.to_string())
 }
 
-/// Checks a variable table against its committed record of value references
-/// (`record`: lines `<value reference> <name>`, `#` comments): every
-/// recorded name still has its recorded reference, and every variable of the
-/// table is recorded. Value references are append-only: a renamed, moved or
-/// removed variable fails here, and a new variable fails until its line is
-/// appended to the record (the message gives the lines).
-pub fn check_value_references_append_only<M>(variables: &[Variable<M>], record: &str) {
-    let mut recorded = 0;
-    let mut changed = Vec::new();
-    for (number, line) in record.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let (vr, name) = line
-            .split_once(' ')
-            .and_then(|(vr, name)| Some((vr.parse::<usize>().ok()?, name)))
-            .unwrap_or_else(|| {
-                panic!(
-                    "record line {}: {line:?} is not `<value reference> <name>`",
-                    number + 1
-                )
-            });
-        assert_eq!(
-            vr,
-            recorded,
-            "record line {}: references must run 0, 1, 2, ... in order",
-            number + 1
-        );
-        recorded += 1;
-        match variables.iter().position(|v| v.name == name) {
-            Some(now) if now == vr => {}
-            Some(now) => changed.push(format!("{name}: {vr} in the record, {now} now")),
-            None => changed.push(format!("{name} ({vr}) is no longer in the table")),
-        }
-    }
-    assert!(
-        changed.is_empty(),
-        "value references are append-only (importers keep them), but:\n{}",
-        changed.join("\n")
-    );
-    let unrecorded: Vec<String> = variables
-        .iter()
-        .enumerate()
-        .skip(recorded)
-        .map(|(vr, v)| format!("{vr} {}", v.name))
-        .collect();
-    assert!(
-        unrecorded.is_empty(),
-        "new variables: append their lines to the value-reference record:\n{}",
-        unrecorded.join("\n")
-    );
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -317,32 +263,9 @@ mod tests {
         Variable::real_local(name, "", "", |m: &Model| m.0)
     }
 
-    const TABLE: [Variable<Model>; 3] = [real("a"), real("b"), real("c")];
-    const RECORD: &str = "# a comment\n0 a\n1 b\n2 c\n";
-
     #[test]
-    fn the_unchanged_table_passes() {
-        check_value_references_append_only(&TABLE, RECORD);
-        assert_eq!(total_len(&[&TABLE, &TABLE[..1]]), 4);
-    }
-
-    #[test]
-    #[should_panic(expected = "b: 1 in the record, 2 now")]
-    fn an_insertion_fails() {
-        check_value_references_append_only(&[real("a"), real("new"), real("b"), real("c")], RECORD);
-    }
-
-    #[test]
-    #[should_panic(expected = "c (2) is no longer in the table")]
-    fn a_rename_fails() {
-        check_value_references_append_only(&[real("a"), real("b"), real("c2")], RECORD);
-    }
-
-    #[test]
-    #[should_panic(expected = "append their lines to the value-reference record:\n3 d")]
-    fn an_unrecorded_appended_variable_fails_until_recorded() {
-        let table = [real("a"), real("b"), real("c"), real("d")];
-        check_value_references_append_only(&table, &format!("{RECORD}3 d\n"));
-        check_value_references_append_only(&table, RECORD);
+    fn total_len_adds_the_blocks() {
+        let table = [real("a"), real("b"), real("c")];
+        assert_eq!(total_len(&[&table, &table[..1]]), 4);
     }
 }

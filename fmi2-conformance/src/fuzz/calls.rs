@@ -117,7 +117,9 @@ impl Fuzzer<'_> {
                 continue;
             }
             let value = self.live(slot).model.values[index];
-            if value.map(f64::to_bits) != v.start.map(f64::to_bits) {
+            if value.map(f64::to_bits) != v.start.map(f64::to_bits)
+                || (v.kind == "String" && self.live(slot).model.strings[index] != v.start_string)
+            {
                 changed = true;
             }
             if let Some(value) = value
@@ -237,10 +239,10 @@ impl Fuzzer<'_> {
 
     pub(super) fn get(&mut self, slot: usize, kind: ValueType, benign: bool) {
         let function = Function::Get(kind);
-        let vrs = if benign && kind == ValueType::Real {
-            self.real_outputs.clone()
-        } else {
-            self.vrs(kind.name(), false)
+        let vrs = match kind {
+            ValueType::Real if benign => self.real_outputs.clone(),
+            ValueType::String if benign => self.by_kind.get("String").cloned().unwrap_or_default(),
+            _ => self.vrs(kind.name(), false),
         };
         let null_vr = !benign && !vrs.is_empty() && self.chance(0.04);
         let null_values = !benign && !vrs.is_empty() && self.chance(0.04);
@@ -311,21 +313,59 @@ impl Fuzzer<'_> {
         // state excuse a non-finite value.
         let unreliable =
             live.model.failed || live.model.wild_states || (tainted && live.state == State::Error);
+        let mut lent = Vec::new();
         for (i, index) in resolved.expect("valid").into_iter().enumerate() {
             let var = &self.fmu.variables[index];
-            let expected = live.model.values[index];
+            // What the value must be: a constant its start value in every
+            // state (a restored state may not change it either), the
+            // independent variable the time, a parameter or input what was
+            // set; unknown after a forged state.
+            let constant = var.variability == Some(Variability::Constant);
+            let expected = if constant {
+                var.start
+            } else if var.causality == Causality::Independent {
+                (!tainted).then_some(live.model.time)
+            } else {
+                live.model.values[index].filter(|_| !tainted)
+            };
+            let expected_text = if constant {
+                var.start_string.as_deref()
+            } else {
+                live.model.strings[index].as_deref().filter(|_| !tainted)
+            };
             let problem = match kind {
+                ValueType::String => {
+                    let pointer = strings[i];
+                    if pointer.is_null() {
+                        Some(format!("{} is a NULL pointer", var.name))
+                    } else {
+                        // SAFETY: returned with fmi2OK by the call just made on
+                        // this instance: a NUL-terminated string the FMU keeps
+                        // until the next call on the instance.
+                        let bytes = unsafe { std::ffi::CStr::from_ptr(pointer) };
+                        match bytes.to_str() {
+                            Err(e) => Some(format!("{} is not UTF-8 ({e}): {bytes:?}", var.name)),
+                            Ok(text) if expected_text.is_some_and(|e| e != text) => Some(format!(
+                                "{} reads {text:?} but {:?} was set",
+                                var.name,
+                                expected_text.unwrap()
+                            )),
+                            Ok(text) => {
+                                lent.push((pointer, text.to_owned()));
+                                None
+                            }
+                        }
+                    }
+                }
                 // The layer never hands out a non-finite derivative.
                 ValueType::Real
                     if (!unreliable || self.fmu.is_derivative(index)) && !reals[i].is_finite() =>
                 {
                     Some(format!("{} is {}", var.name, reals[i]))
                 }
-                ValueType::Real
-                    if !tainted && expected.is_some_and(|e| e.to_bits() != reals[i].to_bits()) =>
-                {
+                ValueType::Real if expected.is_some_and(|e| e.to_bits() != reals[i].to_bits()) => {
                     Some(format!(
-                        "{} reads {} but {} was set",
+                        "{} reads {} but it is {}",
                         var.name,
                         reals[i],
                         expected.unwrap()
@@ -336,10 +376,10 @@ impl Fuzzer<'_> {
                     var.name, ints[i]
                 )),
                 ValueType::Integer | ValueType::Boolean
-                    if !tainted && expected.is_some_and(|e| e != f64::from(ints[i])) =>
+                    if expected.is_some_and(|e| e != f64::from(ints[i])) =>
                 {
                     Some(format!(
-                        "{} reads {} but {} was set",
+                        "{} reads {} but it is {}",
                         var.name,
                         ints[i],
                         expected.unwrap()
@@ -355,12 +395,20 @@ impl Fuzzer<'_> {
                 ));
             }
         }
+        if kind == ValueType::String {
+            self.report.strings_read += lent.len() as u64;
+            self.live_mut(slot).lent = lent;
+        }
     }
 
     pub(super) fn set(&mut self, slot: usize, kind: ValueType, benign: bool) {
         let function = Function::Set(kind);
         let vrs = if benign {
-            let inputs = self.real_inputs.clone();
+            let inputs = if kind == ValueType::String {
+                self.string_inputs.clone()
+            } else {
+                self.real_inputs.clone()
+            };
             let k = self.rng.random_range(1..=inputs.len().max(1));
             inputs.into_iter().take(k).collect()
         } else {
@@ -397,13 +445,38 @@ impl Fuzzer<'_> {
         }
         reals.push(0.0);
         ints.push(0);
-        let strings: Vec<sys::fmi2String> = vec![c"text".as_ptr(); vrs.len().max(1)];
+        // String arguments: NULL (None) or bytes without NUL, maybe not UTF-8.
+        let texts: Vec<Option<Vec<u8>>> = if kind == ValueType::String {
+            vrs.iter()
+                .map(|vr| {
+                    if benign {
+                        let k: u16 = self.rng.random();
+                        return Some(format!("text {k}").into_bytes());
+                    }
+                    let index = self.by_vr.get(vr).copied();
+                    let current = index.and_then(|i| self.live(slot).model.strings[i].clone());
+                    self.string_value(index, current.as_deref())
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let owned: Vec<Option<CString>> = texts
+            .iter()
+            .map(|t| t.clone().map(|b| CString::new(b).expect("no NUL inside")))
+            .collect();
+        let mut strings: Vec<sys::fmi2String> = owned
+            .iter()
+            .map(|c| c.as_ref().map_or(ptr::null(), |c| c.as_ptr()))
+            .collect();
+        strings.push(ptr::null());
 
         // What the standard and the modelDescription say of each value.
         let is_legal = self.legal_now(slot, function);
         let live = self.live(slot);
         let state = live.state;
         let mut refusal: Option<String> = None;
+        let mut bad_string = false;
         let mut warning_certain = false;
         let mut ambiguous = false;
         if n > 0 && (null_vr || null_values) {
@@ -422,6 +495,24 @@ impl Fuzzer<'_> {
                     refusal = Some(format!("{} = {value}", var.name));
                     break;
                 }
+                // FMI 2.0.4 §2.1.7: a String is a pointer to a NUL-terminated
+                // string; this layer's are UTF-8, as modelDescription is.
+                let text = match texts.get(i) {
+                    Some(None) => {
+                        refusal = Some(format!("{}: a NULL string", var.name));
+                        bad_string = true;
+                        break;
+                    }
+                    Some(Some(bytes)) => match std::str::from_utf8(bytes) {
+                        Ok(text) => Some(text),
+                        Err(_) => {
+                            refusal = Some(format!("{}: bytes that are not UTF-8", var.name));
+                            bad_string = true;
+                            break;
+                        }
+                    },
+                    None => None,
+                };
                 let settable = matches!(var.causality, Causality::Parameter | Causality::Input);
                 if !settable {
                     refusal = Some(format!("{} has causality {:?}", var.name, var.causality));
@@ -452,9 +543,13 @@ impl Fuzzer<'_> {
                 {
                     // A fixed parameter after initialization: the same value
                     // again is harmless (a warning), a new one is refused.
-                    match live.model.values[*index] {
-                        Some(current) if !live.model.tainted => {
-                            if current == value {
+                    let same = match text {
+                        Some(text) => live.model.strings[*index].as_deref().map(|c| c == text),
+                        None => live.model.values[*index].map(|c| c == value),
+                    };
+                    match same {
+                        Some(same) if !live.model.tainted => {
+                            if same {
                                 warning_certain = true;
                             } else {
                                 refusal = Some(format!(
@@ -500,12 +595,26 @@ impl Fuzzer<'_> {
         };
         self.check(slot, function.name(), status, allowed, !is_legal, || {
             format!(
-                "vr {vrs:?} (n {n}, NULL vr {null_vr}, NULL values {null_values}), values {:?}: {refusal:?}",
-                if kind == ValueType::Real { format!("{reals:?}") } else { format!("{ints:?}") }
+                "vr {vrs:?} (n {n}, NULL vr {null_vr}, NULL values {null_values}), values {}: {refusal:?}",
+                match kind {
+                    ValueType::Real => format!("{reals:?}"),
+                    ValueType::String => format!(
+                        "{:?}",
+                        texts
+                            .iter()
+                            .map(|t| t.as_ref().map(|b| String::from_utf8_lossy(b)))
+                            .collect::<Vec<_>>()
+                    ),
+                    _ => format!("{ints:?}"),
+                }
             )
         });
+        if bad_string {
+            self.report.bad_strings_refused += 1;
+        }
         if (status == OK || status == WARNING) && n > 0 {
             let indices = resolved.expect("accepted");
+            self.report.strings_set += texts.len() as u64;
             let live = self.live_mut(slot);
             for (i, index) in indices.into_iter().enumerate() {
                 let value = match kind {
@@ -513,7 +622,13 @@ impl Fuzzer<'_> {
                     ValueType::Boolean => f64::from(u8::from(ints[i] != 0)),
                     _ => f64::from(ints[i]),
                 };
-                live.model.values[index] = Some(value);
+                match &texts.get(i) {
+                    Some(Some(bytes)) => {
+                        let text = String::from_utf8(bytes.clone()).expect("accepted: UTF-8");
+                        live.model.strings[index] = Some(text);
+                    }
+                    _ => live.model.values[index] = Some(value),
+                }
             }
         }
     }

@@ -71,6 +71,80 @@ impl Fuzzer<'_> {
         }
     }
 
+    /// A String argument for variable `index`: `None` for a NULL pointer,
+    /// else the bytes before the terminating NUL (none inside): mostly
+    /// plausible text, often markup, characters outside ASCII or long, and
+    /// sometimes bytes that are not UTF-8.
+    pub(super) fn string_value(
+        &mut self,
+        index: Option<usize>,
+        current: Option<&str>,
+    ) -> Option<Vec<u8>> {
+        let start = index
+            .and_then(|i| self.fmu.variables[i].start_string.clone())
+            .unwrap_or_default();
+        let text: Vec<u8> = match self.rng.random_range(0..100) {
+            0..20 => current.map_or(start, str::to_owned).into_bytes(),
+            20..30 => start.into_bytes(),
+            30..45 => {
+                let n = self.rng.random_range(1..24);
+                (0..n).map(|_| self.rng.random_range(b' '..=b'~')).collect()
+            }
+            45..55 => Vec::new(),
+            55..65 => self
+                .pick(&[
+                    "µ",
+                    "✓ ok",
+                    "日本語のテキスト",
+                    "𝄞 clef",
+                    "mixed ASCII и кириллица",
+                ])
+                .into(),
+            65..72 => self
+                .pick(&[
+                    "<a href=\"x\">&amp;</a>",
+                    "'quoted' \"twice\"",
+                    "%s%d%n%%",
+                    "tab\tnew\nline\r",
+                ])
+                .into(),
+            72..78 => {
+                let n = self.rng.random_range(256..8192);
+                (0..n).map(|_| self.rng.random_range(b' '..=b'~')).collect()
+            }
+            // Control characters and DEL: C strings carry them.
+            78..82 => (0..self.rng.random_range(1..8))
+                .map(|_| self.pick(&[1u8, 7, 8, 27, 31, 127]))
+                .collect(),
+            // Not UTF-8: a lone continuation byte, an overlong NUL, an
+            // encoded surrogate, a cut sequence, a byte never in UTF-8,
+            // alone or inside text.
+            82..90 => {
+                let bad = self.pick(&[
+                    &b"\x80"[..],
+                    b"\xc0\x80",
+                    b"\xed\xa0\x80",
+                    b"\xe2\x82",
+                    b"\xff",
+                    b"\xf8\x88\x80\x80\x80",
+                ]);
+                let mut text = if self.chance(0.5) {
+                    b"before ".to_vec()
+                } else {
+                    Vec::new()
+                };
+                text.extend_from_slice(bad);
+                if self.chance(0.5) {
+                    text.extend_from_slice(b" after");
+                }
+                text
+            }
+            90..97 => current.map_or(start, str::to_owned).into_bytes(),
+            _ => return None,
+        };
+        Some(text)
+    }
+
     /// Value references for a call on type `kind`.
     pub(super) fn vrs(&mut self, kind: &'static str, settable: bool) -> Vec<u32> {
         let n = match self.rng.random_range(0..20) {

@@ -8,8 +8,11 @@ use super::*;
 #[derive(Clone, Debug)]
 pub(super) struct Shadow {
     /// Current value of each settable variable (by index in the description;
-    /// Integer and Boolean as f64), `None` where not settable.
+    /// Integer and Boolean as f64), `None` where not settable or a String.
     pub(super) values: Vec<Option<f64>>,
+    /// Current value of each settable String variable (by index), `None`
+    /// elsewhere.
+    pub(super) strings: Vec<Option<String>>,
     pub(super) time: f64,
     /// The `startTime` of the last successful `fmi2SetupExperiment`.
     pub(super) start_time: f64,
@@ -36,6 +39,11 @@ pub(super) struct Live {
     pub(super) has_logger: bool,
     pub(super) state: State,
     pub(super) model: Shadow,
+    /// The strings the last `fmi2GetString` on this instance returned, with
+    /// their text: the FMU's until the next call on the instance (FMI 2.0.4
+    /// §2.1.7), so they must still read the same when that call is made,
+    /// calls on other instances in between.
+    pub(super) lent: Vec<(sys::fmi2String, String)>,
 }
 
 /// An FMU state the fuzzer got from the FMU and has not freed.
@@ -84,9 +92,34 @@ impl Fuzzer<'_> {
         );
     }
 
+    /// The strings the last `fmi2GetString` on the instance in `slot` lent
+    /// still read what they read then; checked when the next call on the
+    /// instance is about to be made, after which they may go.
+    pub(super) fn verify_lent_strings(&mut self, slot: usize) {
+        let Some(live) = self.slots[slot].as_mut() else {
+            return;
+        };
+        let lent = std::mem::take(&mut live.lent);
+        for (pointer, text) in lent {
+            // SAFETY: a string this instance's fmi2GetString returned, which
+            // the FMU keeps valid until the next call on the instance; that
+            // call has not been made yet.
+            let now = unsafe { std::ffi::CStr::from_ptr(pointer) };
+            if now.to_bytes() != text.as_bytes() {
+                self.fail(format!(
+                    "a string fmi2GetString returned changed before the next call on its \
+                     instance: {text:?} now reads {now:?}"
+                ));
+            }
+        }
+    }
+
     /// Counts a call before it is made (so that the watchdog and a failure
     /// name its number).
     pub(super) fn begin(&mut self, function: &'static str, slot: Option<usize>) {
+        if let Some(slot) = slot {
+            self.verify_lent_strings(slot);
+        }
         self.report.calls += 1;
         self.progress.store(self.report.calls, Ordering::Relaxed);
         let state = slot.and_then(|s| self.slots[s].as_ref()).map(|l| l.state);
@@ -240,6 +273,14 @@ impl Fuzzer<'_> {
                 value.is_some() && value.map(f64::to_bits) != v.start.map(f64::to_bits)
             })
             .map(|(v, value)| format!("{} = {:e}", v.name, value.unwrap()))
+            .chain(
+                self.fmu
+                    .variables
+                    .iter()
+                    .zip(&live.model.strings)
+                    .filter(|(v, text)| text.is_some() && **text != v.start_string)
+                    .map(|(v, text)| format!("{} = {:?}", v.name, text.as_deref().unwrap())),
+            )
             .collect();
         format!(
             "slot {slot} ({}): {:?} {:?}, time {:e}, start time {:e}, wild states {}, tainted {}, failed {}, set: {}",
@@ -273,7 +314,10 @@ impl Fuzzer<'_> {
             && self.fmu.variables.iter().enumerate().all(|(index, v)| {
                 let value = live.model.values[index];
                 match v.causality {
-                    Causality::Parameter => value.map(f64::to_bits) == v.start.map(f64::to_bits),
+                    Causality::Parameter => {
+                        value.map(f64::to_bits) == v.start.map(f64::to_bits)
+                            && live.model.strings[index] == v.start_string
+                    }
                     Causality::Input => value.is_none_or(|x| x.abs() <= 1e3),
                     _ => true,
                 }

@@ -32,6 +32,13 @@ pub struct FuzzReport {
     pub model_exchange_instances: u64,
     /// Model Exchange integrator steps completed.
     pub integrator_steps: u64,
+    /// Strings fmi2GetString returned, each checked (a valid C string in
+    /// UTF-8, the value set, still the same at the next call on the instance).
+    pub strings_read: u64,
+    /// String values fmi2SetString accepted.
+    pub strings_set: u64,
+    /// fmi2SetString calls refused for a NULL or non-UTF-8 element.
+    pub bad_strings_refused: u64,
     pub by_function: BTreeMap<&'static str, [u64; 5]>,
     pub elapsed: Duration,
 }
@@ -77,6 +84,11 @@ impl fmt::Display for FuzzReport {
             self.states_restored,
             self.corrupted_states_refused,
             self.forged_states_accepted
+        )?;
+        writeln!(
+            f,
+            "  strings read {}, strings set {}, calls with a NULL or non-UTF-8 string refused {}",
+            self.strings_read, self.strings_set, self.bad_strings_refused
         )?;
         write!(f, "  calls in state:")?;
         for (state, n) in State::ALL.iter().zip(self.calls_in_state) {

@@ -24,6 +24,7 @@ pub(super) struct Fuzzer<'a> {
     pub(super) settable_by_kind: BTreeMap<&'static str, Vec<u32>>,
     pub(super) real_outputs: Vec<u32>,
     pub(super) real_inputs: Vec<u32>,
+    pub(super) string_inputs: Vec<u32>,
     pub(super) unknown_vrs: Vec<u32>,
     pub(super) categories: Vec<String>,
     pub(super) fresh: Shadow,
@@ -41,6 +42,7 @@ impl<'a> Fuzzer<'a> {
         let mut by_kind: BTreeMap<&'static str, Vec<u32>> = BTreeMap::new();
         let mut settable_by_kind: BTreeMap<&'static str, Vec<u32>> = BTreeMap::new();
         let mut values = Vec::new();
+        let mut strings = Vec::new();
         for (index, v) in fmu.variables.iter().enumerate() {
             by_vr.insert(v.vr, index);
             by_kind.entry(v.kind).or_default().push(v.vr);
@@ -49,6 +51,11 @@ impl<'a> Fuzzer<'a> {
                 settable_by_kind.entry(v.kind).or_default().push(v.vr);
             }
             values.push(if settable { v.start } else { None });
+            strings.push(if settable && v.kind == "String" {
+                Some(v.start_string.clone().unwrap_or_default())
+            } else {
+                None
+            });
         }
         let real_outputs = fmu
             .with_causality(Causality::Output)
@@ -58,6 +65,11 @@ impl<'a> Fuzzer<'a> {
         let real_inputs = fmu
             .with_causality(Causality::Input)
             .filter(|v| v.kind == "Real")
+            .map(|v| v.vr)
+            .collect();
+        let string_inputs = fmu
+            .with_causality(Causality::Input)
+            .filter(|v| v.kind == "String")
             .map(|v| v.vr)
             .collect();
         let max_vr = fmu.variables.iter().map(|v| v.vr).max().unwrap_or(0);
@@ -109,10 +121,12 @@ impl<'a> Fuzzer<'a> {
             settable_by_kind,
             real_outputs,
             real_inputs,
+            string_inputs,
             unknown_vrs,
             categories,
             fresh: Shadow {
                 values,
+                strings,
                 time: 0.0,
                 start_time: 0.0,
                 machine: State::Instantiated,
@@ -221,6 +235,12 @@ impl<'a> Fuzzer<'a> {
                 3 => self.get(slot, ValueType::Real, true),
                 4 if self.chance(0.1) => self.get_fmu_state(slot, true),
                 4 if self.chance(0.1) => self.set_fmu_state(slot, true),
+                // Text inputs while running (an FMU without any draws nothing
+                // here, so its runs are the same as before they existed).
+                5 if !self.string_inputs.is_empty() && self.chance(0.3) => {
+                    self.set(slot, ValueType::String, true);
+                    self.get(slot, ValueType::String, true);
+                }
                 _ => self.do_step(slot, true),
             }
         }
@@ -374,6 +394,7 @@ impl<'a> Fuzzer<'a> {
             has_logger,
             state: State::Instantiated,
             model,
+            lent: Vec::new(),
         });
     }
 
@@ -393,6 +414,9 @@ impl<'a> Fuzzer<'a> {
                 self.handles.swap_remove(index);
             }
         }
+        // Freeing is the next call on the instance: what it lent must hold
+        // until then.
+        self.verify_lent_strings(slot);
         let live = self.slots[slot].take().expect("a live instance");
         self.begin("fmi2FreeInstance", Some(slot));
         self.report.calls_without_status += 1;
