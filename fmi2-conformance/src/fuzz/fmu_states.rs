@@ -36,7 +36,7 @@ impl Fuzzer<'_> {
             Target::Null => false,
         };
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, Function::GetFmuState);
+        let is_legal = self.legal_now(slot, Function::FmuState(FmuStateCall::Get));
         self.begin("fmi2GetFMUstate", Some(slot));
         // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
         // least the length passed with it, and each FMU-state argument is NULL, a live state of
@@ -89,7 +89,7 @@ impl Fuzzer<'_> {
     pub(super) fn set_fmu_state(&mut self, slot: usize, benign: bool) {
         let (own, state) = self.state_argument(if benign { 1.0 } else { 0.85 });
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, Function::SetFmuState);
+        let is_legal = self.legal_now(slot, Function::FmuState(FmuStateCall::Set));
         let interface = self.live(slot).model.interface;
         let same_interface = own.is_some_and(|i| self.handles[i].model.interface == interface);
         // A forged state may claim anything, its interface and machine state
@@ -150,7 +150,7 @@ impl Fuzzer<'_> {
             self.rng.random_range(0..10)
         };
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, Function::FreeFmuState);
+        let is_legal = self.legal_now(slot, Function::FmuState(FmuStateCall::Free));
         match choice {
             0..6 if !self.handles.is_empty() => {
                 let index = self.rng.random_range(0..self.handles.len());
@@ -240,7 +240,7 @@ impl Fuzzer<'_> {
         let (own, state) = self.state_argument(if benign { 1.0 } else { 0.85 });
         let null_size = !benign && self.chance(0.05);
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, Function::SerializedFmuStateSize);
+        let is_legal = self.legal_now(slot, Function::FmuState(FmuStateCall::SerializedSize));
         let mut size = usize::MAX;
         self.begin("fmi2SerializedFMUstateSize", Some(slot));
         // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
@@ -280,7 +280,7 @@ impl Fuzzer<'_> {
     pub(super) fn serialize(&mut self, slot: usize, benign: bool) {
         let (own, state) = self.state_argument(if benign { 1.0 } else { 0.9 });
         let c = self.live(slot).c;
-        let state_legal = self.legal_now(slot, Function::SerializeFmuState);
+        let state_legal = self.legal_now(slot, Function::FmuState(FmuStateCall::Serialize));
         let mut needed = 0usize;
         if own.is_some() && state_legal {
             self.begin("fmi2SerializedFMUstateSize", Some(slot));
@@ -440,7 +440,7 @@ impl Fuzzer<'_> {
             _ => (bytes.as_ptr().cast(), bytes.len()),
         };
         let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, Function::DeSerializeFmuState);
+        let is_legal = self.legal_now(slot, Function::FmuState(FmuStateCall::DeSerialize));
         let allowed: &[sys::fmi2Status] = if !is_legal || !out_valid {
             &[ERROR]
         } else {

@@ -32,7 +32,10 @@ impl Fuzzer<'_> {
         };
         let takes_state = matches!(
             function,
-            F::SetFmuState | F::FreeFmuState | F::SerializedFmuStateSize | F::SerializeFmuState
+            F::FmuState(FmuStateCall::Set)
+                | F::FmuState(FmuStateCall::Free)
+                | F::FmuState(FmuStateCall::SerializedSize)
+                | F::FmuState(FmuStateCall::Serialize)
         );
         let mut state = if takes_state {
             self.state_argument(0.5).1
@@ -74,14 +77,16 @@ impl Fuzzer<'_> {
                 F::Set(ValueType::Integer) => b.fmi2SetInteger(c, vr, 1, int_in),
                 F::Set(ValueType::Boolean) => b.fmi2SetBoolean(c, vr, 1, int_in),
                 F::Set(ValueType::String) => b.fmi2SetString(c, vr, 1, string_in),
-                F::GetFmuState => b.fmi2GetFMUstate(c, &mut state_slot),
-                F::SetFmuState => b.fmi2SetFMUstate(c, state),
-                F::FreeFmuState => b.fmi2FreeFMUstate(c, &mut state),
-                F::SerializedFmuStateSize => b.fmi2SerializedFMUstateSize(c, state, &mut size),
-                F::SerializeFmuState => {
+                F::FmuState(FmuStateCall::Get) => b.fmi2GetFMUstate(c, &mut state_slot),
+                F::FmuState(FmuStateCall::Set) => b.fmi2SetFMUstate(c, state),
+                F::FmuState(FmuStateCall::Free) => b.fmi2FreeFMUstate(c, &mut state),
+                F::FmuState(FmuStateCall::SerializedSize) => {
+                    b.fmi2SerializedFMUstateSize(c, state, &mut size)
+                }
+                F::FmuState(FmuStateCall::Serialize) => {
                     b.fmi2SerializeFMUstate(c, state, bytes.as_mut_ptr().cast(), bytes.len())
                 }
-                F::DeSerializeFmuState => b.fmi2DeSerializeFMUstate(
+                F::FmuState(FmuStateCall::DeSerialize) => b.fmi2DeSerializeFMUstate(
                     c,
                     serialized.as_ptr().cast(),
                     serialized.len(),

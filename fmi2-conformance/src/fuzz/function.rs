@@ -34,6 +34,18 @@ pub(super) enum Simple {
     CancelStep,
 }
 
+/// The FMU-state functions (FMI 2.0.4 §2.1.8): get, set and free a state,
+/// and its serialization.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum FmuStateCall {
+    Get,
+    Set,
+    Free,
+    SerializedSize,
+    Serialize,
+    DeSerialize,
+}
+
 /// The capabilities modelDescription declares absent.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum NotOffered {
@@ -77,12 +89,7 @@ pub(super) enum Function {
     Simple(Simple),
     Get(ValueType),
     Set(ValueType),
-    GetFmuState,
-    SetFmuState,
-    FreeFmuState,
-    SerializedFmuStateSize,
-    SerializeFmuState,
-    DeSerializeFmuState,
+    FmuState(FmuStateCall),
     NotOffered(NotOffered),
     DoStep,
     StatusQuery(StatusQuery),
@@ -123,12 +130,12 @@ impl Function {
             F::Set(ValueType::Integer) => L::SetInteger,
             F::Set(ValueType::Boolean) => L::SetBoolean,
             F::Set(ValueType::String) => L::SetString,
-            F::GetFmuState => L::GetFmuState,
-            F::SetFmuState => L::SetFmuState,
-            F::FreeFmuState => L::FreeFmuState,
-            F::SerializedFmuStateSize => L::SerializedFmuStateSize,
-            F::SerializeFmuState => L::SerializeFmuState,
-            F::DeSerializeFmuState => L::DeSerializeFmuState,
+            F::FmuState(FmuStateCall::Get) => L::GetFmuState,
+            F::FmuState(FmuStateCall::Set) => L::SetFmuState,
+            F::FmuState(FmuStateCall::Free) => L::FreeFmuState,
+            F::FmuState(FmuStateCall::SerializedSize) => L::SerializedFmuStateSize,
+            F::FmuState(FmuStateCall::Serialize) => L::SerializeFmuState,
+            F::FmuState(FmuStateCall::DeSerialize) => L::DeSerializeFmuState,
             F::NotOffered(NotOffered::GetDirectionalDerivative) => L::GetDirectionalDerivative,
             F::NotOffered(NotOffered::SetRealInputDerivatives) => L::SetRealInputDerivatives,
             F::NotOffered(NotOffered::GetRealOutputDerivatives) => L::GetRealOutputDerivatives,
@@ -172,12 +179,12 @@ pub(super) const FUNCTIONS: &[(Function, u32)] = {
         (F::Set(ValueType::Integer), 3),
         (F::Set(ValueType::Boolean), 3),
         (F::Set(ValueType::String), 1),
-        (F::GetFmuState, 5),
-        (F::SetFmuState, 5),
-        (F::FreeFmuState, 3),
-        (F::SerializedFmuStateSize, 2),
-        (F::SerializeFmuState, 4),
-        (F::DeSerializeFmuState, 6),
+        (F::FmuState(FmuStateCall::Get), 5),
+        (F::FmuState(FmuStateCall::Set), 5),
+        (F::FmuState(FmuStateCall::Free), 3),
+        (F::FmuState(FmuStateCall::SerializedSize), 2),
+        (F::FmuState(FmuStateCall::Serialize), 4),
+        (F::FmuState(FmuStateCall::DeSerialize), 6),
         (F::NotOffered(NotOffered::GetDirectionalDerivative), 1),
         (F::NotOffered(NotOffered::SetRealInputDerivatives), 1),
         (F::NotOffered(NotOffered::GetRealOutputDerivatives), 1),
