@@ -751,7 +751,8 @@ pub unsafe fn get_string<M: CoSimModel>(
 ///
 /// # Safety
 /// `text` must be NULL or point to a NUL-terminated string that nothing
-/// writes while the call runs.
+/// writes while the call runs; the text returned borrows that string, and
+/// must not be kept past the call (the model's setter copies it).
 unsafe fn string_value<'a>(text: sys::fmi2String) -> StringArg<'a> {
     if text.is_null() {
         return StringArg::Null;
