@@ -2,10 +2,9 @@
 //! points: no panic crosses the C boundary, and a failing model puts the
 //! instance in its error state until fmi2Reset.
 
-use std::ffi::CString;
-use std::ptr;
+mod common;
 
-use fmi2_cosim::abi;
+use common::{ERROR, OK, Slave};
 use fmi2_cosim::fmi_sys::fmi2 as sys;
 use fmi2_cosim::{
     BaseUnit, CoSimModel, Context, DefaultExperiment, ModelError, ModelInfo, StepOutcome,
@@ -84,129 +83,60 @@ impl CoSimModel for Faulty {
     }
 }
 
-const OK: sys::fmi2Status = sys::fmi2Status_fmi2OK;
-const ERROR: sys::fmi2Status = sys::fmi2Status_fmi2Error;
-
-struct Instance(sys::fmi2Component);
-
-impl Instance {
-    fn new(mode: i32) -> Instance {
-        let callbacks = sys::fmi2CallbackFunctions {
-            logger: None,
-            allocateMemory: None,
-            freeMemory: None,
-            stepFinished: None,
-            componentEnvironment: ptr::null_mut(),
-        };
-        let guid = CString::new(fmi2_cosim::model_description::guid::<Faulty>().unwrap()).unwrap();
-        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-        // freed; the other pointers are to locals that outlive the call, with the lengths
-        // passed.
-        let c = unsafe {
-            abi::instantiate::<Faulty>(
-                c"faulty".as_ptr(),
-                sys::fmi2Type_fmi2CoSimulation,
-                guid.as_ptr(),
-                ptr::null(),
-                &callbacks,
-                0,
-                0,
-            )
-        };
-        assert!(!c.is_null());
-        let instance = Instance(c);
-        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-        // freed; the other pointers are to locals that outlive the call, with the lengths
-        // passed.
-        assert_eq!(unsafe { abi::set_integer::<Faulty>(c, &2, 1, &mode) }, OK);
-        instance
-    }
-
-    fn initialize(&self) -> sys::fmi2Status {
-        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-        // freed; the other pointers are to locals that outlive the call, with the lengths
-        // passed.
-        unsafe {
-            assert_eq!(
-                abi::setup_experiment::<Faulty>(self.0, 0, 0.0, 0.0, 0, 0.0),
-                OK
-            );
-            assert_eq!(abi::enter_initialization_mode::<Faulty>(self.0), OK);
-            abi::exit_initialization_mode::<Faulty>(self.0)
-        }
-    }
-
-    fn step(&self, t: f64) -> sys::fmi2Status {
-        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-        // freed; the other pointers are to locals that outlive the call, with the lengths
-        // passed.
-        unsafe { abi::do_step::<Faulty>(self.0, t, 0.1, 1) }
-    }
+/// An instance of `Faulty` behaving as `mode` says (see `Faulty::mode`).
+fn instance(mode: i32) -> Slave<Faulty> {
+    let inst = Slave::instantiate();
+    assert_eq!(inst.set_integer(2, mode), OK);
+    inst
 }
 
-impl Drop for Instance {
-    fn drop(&mut self) {
-        // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-        // freed; the other pointers are to locals that outlive the call, with the lengths
-        // passed.
-        unsafe { abi::free_instance::<Faulty>(self.0) };
-    }
+/// fmi2SetupExperiment, fmi2EnterInitializationMode, and the status of
+/// fmi2ExitInitializationMode.
+fn initialize(inst: &Slave<Faulty>) -> sys::fmi2Status {
+    inst.setup_and_enter(0.0);
+    inst.exit_initialization()
 }
 
 #[test]
 fn a_panic_in_the_model_returns_error_instead_of_unwinding_into_c() {
-    let inst = Instance::new(1);
-    assert_eq!(inst.initialize(), OK);
-    assert_eq!(inst.step(0.0), ERROR);
+    let inst = instance(1);
+    assert_eq!(initialize(&inst), OK);
+    assert_eq!(inst.step(0.0, 0.1), ERROR);
     // The instance is in its error state: stepping stays refused...
-    assert_eq!(inst.step(0.0), ERROR);
+    assert_eq!(inst.step(0.0, 0.1), ERROR);
     // ...getters still answer, and fmi2Reset recovers.
-    let mut y = f64::NAN;
-    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
-    let status = unsafe { abi::get_real::<Faulty>(inst.0, &1, 1, &mut y) };
+    let (status, _) = inst.get_real(1);
     assert_eq!(status, OK);
-    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
-    assert_eq!(unsafe { abi::reset::<Faulty>(inst.0) }, OK);
-    assert_eq!(inst.initialize(), OK);
-    assert_eq!(inst.step(0.0), OK);
+    assert_eq!(inst.reset(), OK);
+    assert_eq!(initialize(&inst), OK);
+    assert_eq!(inst.step(0.0, 0.1), OK);
 }
 
 #[test]
 fn a_failing_step_enters_the_error_state() {
-    let inst = Instance::new(2);
-    assert_eq!(inst.initialize(), OK);
-    assert_eq!(inst.step(0.0), ERROR);
-    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
-    assert_eq!(unsafe { abi::terminate::<Faulty>(inst.0) }, ERROR);
+    let inst = instance(2);
+    assert_eq!(initialize(&inst), OK);
+    assert_eq!(inst.step(0.0, 0.1), ERROR);
+    assert_eq!(inst.terminate(), ERROR);
 }
 
 #[test]
 fn a_refused_initialization_enters_the_error_state() {
-    let inst = Instance::new(3);
-    assert_eq!(inst.initialize(), ERROR);
-    assert_eq!(inst.step(0.0), ERROR);
-    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
-    assert_eq!(unsafe { abi::reset::<Faulty>(inst.0) }, OK);
+    let inst = instance(3);
+    assert_eq!(initialize(&inst), ERROR);
+    assert_eq!(inst.step(0.0, 0.1), ERROR);
+    assert_eq!(inst.reset(), OK);
 }
 
 #[test]
 fn a_healthy_model_integrates() {
-    let inst = Instance::new(0);
-    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
-    assert_eq!(unsafe { abi::set_real::<Faulty>(inst.0, &0, 1, &2.0) }, OK);
-    assert_eq!(inst.initialize(), OK);
+    let inst = instance(0);
+    assert_eq!(inst.set_real(0, 2.0), OK);
+    assert_eq!(initialize(&inst), OK);
     for k in 0..10 {
-        assert_eq!(inst.step(k as f64 * 0.1), OK);
+        assert_eq!(inst.step(k as f64 * 0.1, 0.1), OK);
     }
-    let mut y = 0.0;
-    // SAFETY: the instance pointer comes from `abi::instantiate` and is live until it is
-    // freed; the other pointers are to locals that outlive the call, with the lengths passed.
-    let status = unsafe { abi::get_real::<Faulty>(inst.0, &1, 1, &mut y) };
+    let (status, y) = inst.get_real(1);
     assert_eq!(status, OK);
     assert!((y - 2.0).abs() < 1e-12, "y = {y}");
 }
