@@ -105,11 +105,15 @@ pub fn cdylib_sources(package: &str) -> Vec<PathBuf> {
 /// ([`cdylib_sources`]) is newer than it.
 pub fn cdylib_path(package: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("the test knows its path");
-    // target/<profile>/deps/<test binary>, or target/<profile>/<binary>.
+    // target/<profile>/deps/<test binary>, target/<profile>/examples/<example>
+    // or target/<profile>/<binary>.
     let profile_dir = exe
         .ancestors()
         .skip(1)
-        .find(|dir| dir.file_name().is_some_and(|n| n != "deps"))
+        .find(|dir| {
+            dir.file_name()
+                .is_some_and(|n| n != "deps" && n != "examples")
+        })
         .expect("binaries live in target/<profile>");
     let file = format!(
         "{}{}{}",
