@@ -102,19 +102,22 @@ where
         refuse_sequence(inst, function);
         return ERROR;
     }
-    let outcome = panic::catch_unwind(AssertUnwindSafe(|| body(&mut *inst)));
-    let status = match outcome {
-        Ok(status) => status,
-        Err(payload) => {
-            inst.logger.error(
-                function.name(),
-                format_args!("internal error (panic): {}", panic_message(&*payload)),
-            );
-            Status::Error
-        }
-    };
-    inst.enter_error_state(status);
-    status.to_raw()
+    // The status is turned into the instance's state and the C value inside
+    // the guarded call, where the compiler sees which status the body
+    // returned: a step that returns fmi2OK pays no test for the error state.
+    let outcome = panic::catch_unwind(AssertUnwindSafe(|| {
+        let status = body(&mut *inst);
+        inst.enter_error_state(status);
+        status.to_raw()
+    }));
+    outcome.unwrap_or_else(|payload| {
+        inst.logger.error(
+            function.name(),
+            format_args!("internal error (panic): {}", panic_message(&*payload)),
+        );
+        inst.enter_error_state(Status::Error);
+        ERROR
+    })
 }
 
 /// Logs why `function` is not allowed now and moves the instance to its error

@@ -346,7 +346,18 @@ impl<M: CoSimModel> Instance<M> {
 
     /// After `fmi2Error` the instance accepts only what the error state allows
     /// (FMI 2.0.4 §2.1.3): getters, state handling, `fmi2Reset`, freeing.
+    #[inline]
     pub(crate) fn enter_error_state(&mut self, status: Status) {
+        // One compare on every call's way out; the states change only on
+        // the rare error.
+        if status >= Status::Error {
+            self.enter_error_state_for(status);
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn enter_error_state_for(&mut self, status: Status) {
         match status {
             Status::Fatal => self.state = FmiState::Fatal,
             Status::Error if self.state != FmiState::Fatal => self.state = FmiState::Error,
@@ -439,7 +450,7 @@ impl<M: CoSimModel> Instance<M> {
         }
         let mut ctx = Context {
             logger: &self.logger,
-            function: function.name(),
+            function,
             resource_dir: &self.resource_dir,
             interface: self.interface,
         };
@@ -730,21 +741,22 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn do_step(&mut self, current_time: f64, step_size: f64) -> Status {
         let function = FmiFunction::DoStep;
         let end = current_time + step_size;
-        // The step is positive and finite, starts at a finite point and ends
-        // at one (the next communication point: no step could follow an
-        // infinite one), and starts at the FMU's time (most importers pass it
-        // exactly). One test of all of it on the way; the reason is worked out
-        // only when it fails. A NaN fails every compare, and a positive step
-        // from an infinite point, or an infinite step from a finite one, ends
-        // at an infinity or NaN: a finite end and a positive step make both
-        // finite.
-        let sound = (step_size > 0.0) & (end.abs() < f64::INFINITY) & (current_time == self.time);
+        // The step is positive and finite, starts at the FMU's time (most
+        // importers pass it exactly) and ends at a finite point (the next
+        // communication point: no step could follow an infinite one). One
+        // test of all of it on the way; the reason is worked out only when it
+        // fails. The FMU's time is always finite (setupExperiment and a
+        // restored state refuse any other, and every step ends at a finite
+        // point), so a start equal to it is finite, and a positive step from
+        // it ends above -inf: `end < inf` is all that is left of the end's
+        // finiteness. A NaN fails every compare.
+        let sound = (step_size > 0.0) & (end < f64::INFINITY) & (current_time == self.time);
         if !sound && let Err(status) = self.check_step(current_time, step_size) {
             return status;
         }
         let mut ctx = Context {
             logger: &self.logger,
-            function: function.name(),
+            function,
             resource_dir: &self.resource_dir,
             interface: self.interface,
         };
@@ -977,7 +989,7 @@ impl<M: CoSimModel> Instance<M> {
         }
         let mut ctx = Context {
             logger: &self.logger,
-            function: function.name(),
+            function,
             resource_dir: &self.resource_dir,
             interface: data.interface,
         };

@@ -6,7 +6,7 @@ use std::fmt;
 use std::path::Path;
 
 use crate::logging::{LogCategory, Logger};
-use crate::status::{FmiState, Interface, Status};
+use crate::status::{FmiFunction, FmiState, Interface, Status};
 use crate::variables::Variable;
 
 /// `DefaultExperiment` of modelDescription.
@@ -200,7 +200,9 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
 /// through the importer's callback, and the resources folder.
 pub struct Context<'a> {
     pub(crate) logger: &'a Logger,
-    pub(crate) function: &'static str,
+    /// The FMI function being served (one byte: building a context is on
+    /// every step's path; the name is looked up only when a line is logged).
+    pub(crate) function: FmiFunction,
     /// The instance's own field, dereferenced only when asked for: building a
     /// context is on every step's path.
     pub(crate) resource_dir: &'a Option<std::path::PathBuf>,
@@ -211,7 +213,8 @@ impl Context<'_> {
     /// Logs `args`, prefixed with the FMI function being served. Formats into a
     /// stack buffer: no allocation.
     pub fn log(&self, status: Status, category: LogCategory, args: fmt::Arguments<'_>) {
-        self.logger.log_in(self.function, status, category, args);
+        self.logger
+            .log_in(self.function.name(), status, category, args);
     }
 
     pub fn warning(&self, args: fmt::Arguments<'_>) {

@@ -143,7 +143,7 @@ impl<M: ModelExchange> Instance<M> {
         let time = self.time;
         let mut ctx = Context {
             logger: &self.logger,
-            function: function.name(),
+            function,
             resource_dir: &self.resource_dir,
             interface: self.interface,
         };
@@ -161,7 +161,7 @@ impl<M: ModelExchange> Instance<M> {
         let time = self.time;
         let mut ctx = Context {
             logger: &self.logger,
-            function: function.name(),
+            function,
             resource_dir: &self.resource_dir,
             interface: self.interface,
         };

@@ -680,13 +680,13 @@ impl CoSimModel for PiezoControllerFmu {
         // The inputs are finite: fmi2SetReal refuses a non-finite value, and
         // fmi2DeSerializeFMUstate a state that holds one (the FMI layer).
         let [x_ref, y_ref, theta_ref] = self.references;
-        let out = self
-            .controller
+        self.controller
             .step(x_ref, y_ref, theta_ref, self.sensors, step_size);
         // Finite inputs do not make every step computable: a huge step
         // overflows the PI integrators. Such a step fails instead of handing
-        // NaN or infinite commands to the stage.
-        if !out.is_finite() {
+        // NaN or infinite commands to the stage. The sample is checked where
+        // the controller keeps it, which the getters read: no copy of it.
+        if !self.controller.output().is_finite() {
             return Err(self.non_finite_step(current_time, step_size));
         }
         // Limiting is part of normal operation (a demand of 0 µm asks for a

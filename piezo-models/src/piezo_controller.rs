@@ -298,18 +298,28 @@ impl ControllerOutput {
 
     /// Whether every value of the sample is finite: a step that overflowed
     /// (a huge step size over the integrators) is not. This runs at every
-    /// sample, so without a compare or branch per value: x·0 is ±0 for a
-    /// finite x and NaN for an infinite or NaN one, and a sum with a NaN in
-    /// it is NaN. Summed in two lanes, which the compiler keeps in one vector
-    /// register: one multiplication and one addition per pair of values.
+    /// sample, so without a compare or branch per value: the values are
+    /// summed in two lanes (one vector register, one addition per pair), and
+    /// a sum with an infinity or a NaN in it is not finite. A finite sum
+    /// proves every value finite; a sum that is not finite is checked value
+    /// by value, since finite values of opposite huge magnitudes can overflow
+    /// it (a sample that is that far gone is rare and need not be fast).
     #[inline]
     pub fn is_finite(&self) -> bool {
         let mut lanes = [0.0f64; 2];
         for pair in self.values().chunks_exact(2) {
-            lanes[0] += pair[0] * 0.0;
-            lanes[1] += pair[1] * 0.0;
+            lanes[0] += pair[0];
+            lanes[1] += pair[1];
         }
-        lanes[0] + lanes[1] == 0.0
+        // x·0 is ±0 for a finite x and NaN otherwise: one multiplication
+        // and one compare for the whole sample.
+        (lanes[0] + lanes[1]) * 0.0 == 0.0 || self.each_is_finite()
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn each_is_finite(&self) -> bool {
+        self.values().iter().all(|v| v.is_finite())
     }
 }
 
@@ -536,6 +546,7 @@ impl PiezoController {
 
     /// One sample of period `dt` (> 0): references x_ref, y_ref [µm],
     /// theta_ref [rad]; sensors s1, s2, s3 [µm].
+    #[inline]
     pub fn step(
         &mut self,
         x_ref: f64,

@@ -271,3 +271,47 @@ fn inverse_bouc_wen_feedforward_and_model_based_decoupling_follow_their_models()
         y_from_x.advance_to(0.5 * (out.u[1] + out.u[2]), 0.01);
     }
 }
+
+/// `ControllerOutput::is_finite` sums the sample before testing it: finite
+/// values whose sum overflows are still finite, and one infinite or NaN value
+/// anywhere in the sample is found.
+#[test]
+fn a_sample_is_finite_exactly_when_each_value_is() {
+    use piezo_models::piezo_controller::ControllerOutput;
+    let mut sample = ControllerOutput::default();
+    assert!(sample.is_finite());
+    // f64::MAX + f64::MAX overflows to +inf; the values themselves are finite.
+    sample.u = [f64::MAX, f64::MAX, -f64::MAX];
+    sample.feedback = [f64::MAX, 0.0, 0.0];
+    assert!(sample.is_finite());
+    for index in 0..ControllerOutput::NAMES.len() {
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let mut sample = ControllerOutput::default();
+            set_value(&mut sample, index, bad);
+            assert_eq!(sample.values()[index].to_bits(), bad.to_bits());
+            assert!(
+                !sample.is_finite(),
+                "{} = {bad}",
+                ControllerOutput::NAMES[index]
+            );
+        }
+    }
+}
+
+/// Writes value `index` of [`ControllerOutput::values`] order.
+fn set_value(sample: &mut piezo_models::piezo_controller::ControllerOutput, index: usize, v: f64) {
+    let d = &mut sample.decoupled;
+    let slot = match index {
+        0..=2 => &mut sample.u[index],
+        3..=5 => &mut sample.feedforward[index - 3],
+        6..=8 => &mut sample.feedback[index - 6],
+        9 => &mut sample.e_x,
+        10 => &mut sample.e_y,
+        11 => &mut sample.e_theta,
+        12 => &mut d.x_r2,
+        13 => &mut d.x_r3,
+        14 => &mut d.y_rx,
+        _ => &mut d.y_rtheta,
+    };
+    *slot = v;
+}
