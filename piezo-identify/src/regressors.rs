@@ -211,7 +211,7 @@ pub fn for_each_rate_dependent_row(
 /// half the loops' span is the same trap: eq. (5) puts r_9 = 0.5·u1max, and
 /// with z spanning about u1max it travels 1-3 % of the span, least squares
 /// gives it the largest weight of all (1.1 V per unit of z on the P-885 test
-/// record, against at most 0.4 for the others), and a loop 3.6 % wider
+/// record, against at most 0.62 for the others), and a loop 3.6 % wider
 /// triples its travel: the fitted model shifts by 0.09 V (3 % of the input
 /// span) for as long as the wider loops last.
 #[allow(clippy::too_many_arguments)]

@@ -205,7 +205,7 @@ fn p885_test_record_split_in_two() {
 ///   error over 5 s windows climbs steadily from −0.3 % to +0.5 % of the
 ///   input span over its 70 s, in the fit part as in the scored part, and
 ///   no hysteresis model fitted on the first half predicts the second
-///   half's share of it (its mean error there is +0.35 %);
+///   half's share of it (its mean error there is +0.33 %);
 /// - Model_Vi_Do.dat fitted, Test_Vi_Do_Di.dat validated: inverse-pi 3.07 %
 ///   against classical 1.65 %, Bouc-Wen 2.58 % against a best line of
 ///   5.81 % (2.2×, not 5×): the Test file reads about 1.1 µm below what the
