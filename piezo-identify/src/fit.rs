@@ -43,6 +43,10 @@
 //! ties to the lowest index) is bit-identical for any number of rayon
 //! threads.
 //!
+//! `FitOptions::c_range` bounds c instead (the identification protocol
+//! does, `protocol::DEAD_ZONE_SCALE_RANGE` says why); the starts are then
+//! stratified over the bounds.
+//!
 //! Decimation: the search may use every m-th sample (m = `decimation`) with the
 //! rates by backward difference at m·T, which is far cheaper at 10 kHz; the
 //! final linear part (a, k, b) is then solved once on all samples for the
@@ -83,7 +87,7 @@ const SIMPLEX_STEP: f64 = 0.2;
 const POLISH_SIMPLEX_STEP: f64 = 0.05;
 /// Range of the random initial c, in units of y_max, drawn log-uniformly and
 /// stratified over the starts.
-const INITIAL_C_RANGE: (f64, f64) = (1e-3, 0.11);
+pub const INITIAL_C_RANGE: (f64, f64) = (1e-3, 0.11);
 /// Range of the random initial w_s,j/w_s,1, j ≥ 2 (before normalising).
 const INITIAL_WEIGHT_RANGE: (f64, f64) = (-1.0, 1.0);
 /// Cost returned for parameters the model cannot use (c not finite, z not
@@ -122,6 +126,12 @@ pub struct FitOptions {
     /// weight (`regressors::reversing_operators` says why), in the search
     /// and in the final solve.
     pub reversing_operators_only: bool,
+    /// Bounds (low, high) on c in units of y_max, the top of the working
+    /// range (None: c is free, as in seed 000, and its initial values are
+    /// drawn from [`INITIAL_C_RANGE`]). Within bounds the search runs on
+    /// ln c = ln(y_max·low) + ln(high/low)·(1 + sin θ)/2, smooth and
+    /// periodic in θ, and the initial values are drawn from the bounds.
+    pub c_range: Option<(f64, f64)>,
 }
 
 /// Every start first runs `iterations` Nelder-Mead iterations; only the
@@ -155,6 +165,7 @@ impl Default for FitOptions {
             screening: None,
             rss_increase: 0.0,
             reversing_operators_only: false,
+            c_range: None,
         }
     }
 }
@@ -357,6 +368,7 @@ pub fn modified_inverse_pi_for(
     }
     let mut problem = SeparableProblem::new(layout, y, u, &fitted, sample_period, y_max);
     problem.reversing_only = options.reversing_operators_only;
+    problem.c_range = options.c_range;
     let (u1max, solution) =
         problem
             .solve(c, ws, options.rss_increase)
@@ -587,6 +599,7 @@ fn fit_rate_dependent(
         y_max,
     );
     search.reversing_only = options.reversing_operators_only;
+    search.c_range = options.c_range;
 
     let starts = run_starts(&search, options, progress)?;
     // Lowest F, ties to the lowest start index (`min_by` keeps the first).
@@ -601,6 +614,7 @@ fn fit_rate_dependent(
     let ws = starts[best].ws.clone();
     let mut full = SeparableProblem::new(layout, y, u, &fitted, sample_period, y_max);
     full.reversing_only = options.reversing_operators_only;
+    full.c_range = options.c_range;
     let (u1max, solution) = full
         .solve(c, &ws, options.rss_increase)
         .ok_or(FitError::Optimizer(format!(
@@ -676,7 +690,7 @@ fn run_starts(
         .into_par_iter()
         .map(|&start| {
             let screened = &starts[start];
-            let mut point = vec![screened.c.ln()];
+            let mut point = vec![search.encode_c(screened.c)];
             point.extend(to_hyperspherical(&screened.ws));
             let tolerance = (screening.relative_tolerance * screened.objective / search.reference)
                 .max(SIMPLEX_COST_TOLERANCE);
@@ -785,6 +799,8 @@ struct SeparableProblem<'a> {
     rows: usize,
     /// Only operators that reverse get a weight.
     reversing_only: bool,
+    /// Bounds on c in units of y_max (`FitOptions::c_range`).
+    c_range: Option<(f64, f64)>,
 }
 
 impl<'a> SeparableProblem<'a> {
@@ -811,12 +827,32 @@ impl<'a> SeparableProblem<'a> {
             reference: if spread > 0.0 { spread } else { 1.0 },
             rows: targets.len(),
             reversing_only: false,
+            c_range: None,
         }
     }
 
     /// (c, w_s) from the search vector [ln c, φ_1 … φ_{m−1}].
     fn decode(&self, theta: &[f64]) -> (f64, Vec<f64>) {
-        (theta[0].exp(), from_hyperspherical(&theta[1..]))
+        let c = match self.c_range {
+            Some((low, high)) => {
+                let fraction = (1.0 + theta[0].sin()) / 2.0;
+                self.y_max * low * ((high / low).ln() * fraction).exp()
+            }
+            None => theta[0].exp(),
+        };
+        (c, from_hyperspherical(&theta[1..]))
+    }
+
+    /// The search coordinate of c (inverse of [`Self::decode`]'s first
+    /// value; a c outside the bounds goes to the nearest bound).
+    fn encode_c(&self, c: f64) -> f64 {
+        match self.c_range {
+            Some((low, high)) => {
+                let fraction = (c / (self.y_max * low)).ln() / (high / low).ln();
+                (2.0 * fraction - 1.0).clamp(-1.0, 1.0).asin()
+            }
+            None => c.ln(),
+        }
     }
 
     /// The dead-zone thresholds and u1max (eq. 5) of (c, w_s); None when they
@@ -919,14 +955,15 @@ impl<'a> SeparableProblem<'a> {
         for _ in 0..start {
             rng.jump();
         }
-        let (low, high) = (INITIAL_C_RANGE.0.ln(), INITIAL_C_RANGE.1.ln());
+        let range = self.c_range.unwrap_or(INITIAL_C_RANGE);
+        let (low, high) = (range.0.ln(), range.1.ln());
         let slice = (start as f64 + rng.random_range(0.0..1.0)) / starts as f64;
         let c = self.y_max * (low + slice * (high - low)).exp();
         let mut direction = vec![1.0];
         for _ in 1..self.layout.dead_zone_count() {
             direction.push(rng.random_range(INITIAL_WEIGHT_RANGE.0..INITIAL_WEIGHT_RANGE.1));
         }
-        let mut theta = vec![c.ln()];
+        let mut theta = vec![self.encode_c(c)];
         theta.extend(to_hyperspherical(&direction));
         theta
     }

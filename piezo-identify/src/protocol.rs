@@ -28,6 +28,12 @@
 //!   cycle remain; 30 starts are screened for 60 Nelder-Mead iterations and
 //!   the best 5 run on to convergence ([`crate::fit::Screening`]). The
 //!   linear part and every error use all samples.
+//! - **What the fit may use**: c, the scale of the dead-zone thresholds,
+//!   stays within [`DEAD_ZONE_SCALE_RANGE`] of the fitted working range,
+//!   and only backlash operators that travel at least
+//!   [`crate::regressors::MIN_REVERSING_TRAVEL`] of z's span back and forth
+//!   get a weight: both say how far the model may be trusted beyond the
+//!   loops it was fitted on.
 //! - **Baselines**, fitted on the same samples: the classical P-I model and
 //!   a straight line; for Bouc-Wen also the best straight line of the scored
 //!   part itself (fitted on what it is scored on: no line can do better).
@@ -79,6 +85,24 @@ pub const SMOOTHING_CYCLE_FRACTIONS: [f64; 3] = [1.0 / 160.0, 1.0 / 80.0, 1.0 / 
 pub const SEARCH_SAMPLES_PER_CYCLE: f64 = 100.0;
 /// ... and otherwise decimates to about this many samples.
 pub const SEARCH_SAMPLES: usize = 3000;
+
+/// Bounds on c, the scale of the dead-zone thresholds d = c·[0, 1, 3, 5, 7,
+/// 9] (seed 000 eq. 5), in units of y_max, the top of the fitted working
+/// range (its span, with the default offset): every threshold inside the
+/// working range and at least 5 % of it from either end (c ≥ 0.05,
+/// 9c ≤ 0.95). z(y) is linear between thresholds, and
+/// beyond the working range the model continues with the slope of the
+/// outermost piece; a piece narrower than the growth it must carry (5 %, as
+/// for [`crate::regressors::MIN_REVERSING_TRAVEL`]) has its slope set by
+/// the few samples at the loops' turning points, which least squares uses to
+/// shape the turn, not the branch. Left free, the search puts c at 0.4 % of
+/// the span on the P-885 test record: z rises 5× faster below c than above
+/// and, with the weights of the moving operators summing negative, the
+/// model's descending branch turns back below y = c; the scored half's
+/// loops reach 0.75 µm lower and the model's voltage there is 0.1 V (3 % of
+/// the input span) too high. An upper threshold beyond the range would be
+/// worse: its weight is not seen by the fit at all.
+pub const DEAD_ZONE_SCALE_RANGE: (f64, f64) = (0.05, 0.95 / 9.0);
 
 /// The linear parts are regularised, allowing their residual sum of squares
 /// to grow by this fraction (RMS by 0.05 %):
@@ -616,6 +640,7 @@ pub fn identify_inverse_pi(
         screening: settings.screening,
         rss_increase: LINEAR_RSS_INCREASE,
         reversing_operators_only: true,
+        c_range: Some(DEAD_ZONE_SCALE_RANGE),
     };
     let tick = |s: &StartResult| progress(ProgressEvent::Step { best: s.objective });
 

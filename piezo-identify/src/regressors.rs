@@ -200,13 +200,20 @@ pub fn for_each_rate_dependent_row(
 
 /// Which backlash operators of a model of the eq. (3)-(5) family reverse
 /// over the fitted samples: their output both rises and falls between
-/// consecutive samples of which the later is fitted. An operator whose
-/// play is wider than the loops it sees moves only when the input sets a
-/// new extreme: on a first loading, or a hair at a time as noise and drift
+/// consecutive samples of which the later is fitted, and travels at least
+/// [`MIN_REVERSING_TRAVEL`] of the span of z over those samples. An operator
+/// whose play is wider than the loops it sees moves only when the input sets
+/// a new extreme: on a first loading, or a hair at a time as noise and drift
 /// push the extremes out. Its output is then a slowly creeping offset, and
 /// the weight least squares gives it describes drift, not hysteresis; when
 /// the loops grow later it moves and that weight bends the model
-/// (`protocol` drops such operators).
+/// (`protocol` drops such operators). An operator whose play is just under
+/// half the loops' span is the same trap: eq. (5) puts r_9 = 0.5·u1max, and
+/// with z spanning about u1max it travels 1-3 % of the span, least squares
+/// gives it the largest weight of all (1.1 V per unit of z on the P-885 test
+/// record, against at most 0.62 for the others), and a loop 3.6 % wider
+/// triples its travel: the fitted model shifts by 0.09 V (3 % of the input
+/// span) for as long as the wider loops last.
 #[allow(clippy::too_many_arguments)]
 pub fn reversing_operators(
     layout: RateDependentLayout,
@@ -228,19 +235,39 @@ pub fn reversing_operators(
     let mut memories = [0.0; BACKLASH_OPERATORS];
     let mut rose = [false; BACKLASH_OPERATORS];
     let mut fell = [false; BACKLASH_OPERATORS];
+    let mut lowest = [f64::INFINITY; BACKLASH_OPERATORS];
+    let mut highest = [f64::NEG_INFINITY; BACKLASH_OPERATORS];
+    let (mut z_low, mut z_high) = (f64::INFINITY, f64::NEG_INFINITY);
     for (&yn, &fit) in y.iter().zip(fitted) {
         let z = crate::models::dead_zone_sum(yn, ws, dead_zone_thresholds);
+        if fit {
+            z_low = z_low.min(z);
+            z_high = z_high.max(z);
+        }
         for (i, (memory, r)) in memories.iter_mut().zip(&thresholds).enumerate() {
             let next = backlash(z, *r, *memory);
             if fit {
                 rose[i] |= next > *memory;
                 fell[i] |= next < *memory;
+                lowest[i] = lowest[i].min(next);
+                highest[i] = highest[i].max(next);
             }
             *memory = next;
         }
     }
-    std::array::from_fn(|i| rose[i] && fell[i])
+    let travel = MIN_REVERSING_TRAVEL * (z_high - z_low);
+    std::array::from_fn(|i| rose[i] && fell[i] && highest[i] - lowest[i] >= travel)
 }
+
+/// The least travel of a backlash operator's output over the fitted samples,
+/// as a fraction of the span of its input z, for it to get a weight
+/// ([`reversing_operators`]). An operator that travels m while the loops span
+/// Z travels m + δZ when they grow by δZ: at least 10 % keeps a growth of 5 %
+/// of the span (the drift of a record's extremes, a demand a little beyond
+/// the identification's) below half of its travel. It is also where the
+/// classical P-I model's evenly spaced thresholds put their outermost
+/// operator (r = 0.45 of the span: it travels 10 % of it).
+pub const MIN_REVERSING_TRAVEL: f64 = 0.1;
 
 /// [`reversing_operators`] for the classical P-I model's operators on y.
 pub fn reversing_classical_operators(

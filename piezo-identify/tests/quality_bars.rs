@@ -135,13 +135,20 @@ fn figures(value: &serde_json::Value) -> piezo_identify::protocol::ErrorFigures 
 
 #[test]
 fn p885_identification_record_split_in_two() {
-    let report = p885("inverse-pi", "Model_Vi_Do.dat", &["--split", "0.5"]);
-    inverse_pi_bars(
-        "Model_Vi_Do.dat, inverse-pi --split 0.5",
-        &inverse_errors(&report["identification"]["unseen"]),
-    );
+    let mut inverse = Vec::new();
     let mut bouc_wen = Vec::new();
     for seed in ["0", "1", "2"] {
+        let report = p885(
+            "inverse-pi",
+            "Model_Vi_Do.dat",
+            &["--split", "0.5", "--seed", seed],
+        );
+        let errors = inverse_errors(&report["identification"]["unseen"]);
+        inverse_pi_bars(
+            &format!("Model_Vi_Do.dat, inverse-pi --split 0.5 --seed {seed}"),
+            &errors,
+        );
+        inverse.push(errors.proposed.rms);
         let report = p885(
             "bouc-wen",
             "Model_Vi_Do.dat",
@@ -154,31 +161,55 @@ fn p885_identification_record_split_in_two() {
         );
         bouc_wen.push(errors.bouc_wen.rms);
     }
+    within_ten_percent("Model_Vi_Do.dat, inverse-pi --split 0.5", &inverse);
     within_ten_percent("Model_Vi_Do.dat, bouc-wen --split 0.5", &bouc_wen);
 }
 
+/// Test_Vi_Do_Di.dat split in two: Bouc-Wen meets its bars; the proposed
+/// inverse model is at or below the classical one and the same for every
+/// seed, but not below 0.5 % (`known_gaps_on_real_records`).
 #[test]
-fn p885_test_record_split_in_two_bouc_wen() {
+fn p885_test_record_split_in_two() {
     let report = p885("bouc-wen", "Test_Vi_Do_Di.dat", &["--split", "0.5"]);
     bouc_wen_bars(
         "Test_Vi_Do_Di.dat, bouc-wen --split 0.5",
         &forward_errors(&report["unseen"]),
     );
+    let mut inverse = Vec::new();
+    for seed in ["0", "1"] {
+        let report = p885(
+            "inverse-pi",
+            "Test_Vi_Do_Di.dat",
+            &["--split", "0.5", "--seed", seed],
+        );
+        let e = inverse_errors(&report["identification"]["unseen"]);
+        println!(
+            "Test_Vi_Do_Di.dat, inverse-pi --split 0.5 --seed {seed}: proposed {:.3} %, classical P-I {:.3} %",
+            e.proposed.rms_percent, e.classical.rms_percent
+        );
+        assert!(
+            e.proposed.rms <= e.classical.rms,
+            "proposed {} V above classical {} V",
+            e.proposed.rms,
+            e.classical.rms
+        );
+        inverse.push(e.proposed.rms);
+    }
+    within_ten_percent("Test_Vi_Do_Di.dat, inverse-pi --split 0.5", &inverse);
 }
 
 /// The bars not met on the real records (docs/identification.md, "Where
 /// the bars are not met"): measured with the defaults, seed 0,
-/// - Test_Vi_Do_Di.dat split in two, inverse-pi: proposed 1.63 %, classical
-///   1.45 % (its second half reaches 3.6 % of the fitted span beyond the
-///   fitted displacements, where both inverse models extrapolate);
-/// - Model_Vi_Do.dat fitted, Test_Vi_Do_Di.dat validated: inverse-pi 3.06 %
+/// - Test_Vi_Do_Di.dat split in two, inverse-pi: proposed 0.555 % (below
+///   the classical 1.45 %, not below 0.5 %): the record drifts; the mean
+///   error over 5 s windows climbs steadily from −0.3 % to +0.5 % of the
+///   input span over its 70 s, in the fit part as in the scored part, and
+///   no hysteresis model fitted on the first half predicts the second
+///   half's share of it (its mean error there is +0.33 %);
+/// - Model_Vi_Do.dat fitted, Test_Vi_Do_Di.dat validated: inverse-pi 3.07 %
 ///   against classical 1.65 %, Bouc-Wen 2.58 % against a best line of
 ///   5.81 % (2.2×, not 5×): the Test file reads about 1.1 µm below what the
-///   identification file's sensor offset predicts, for every model;
-/// - Model_Vi_Do.dat split, inverse-pi over seeds 0, 1, 2: 0.31, 0.26,
-///   0.20 % (each below 0.5 % and below the classical 0.81 %, but not within
-///   10 % of each other: the search ends in different optima of F, and a
-///   lower F does not predict better).
+///   identification file's sensor offset predicts, for every model.
 #[test]
 #[ignore = "quality bars not met on these real records; see the doc comment"]
 fn known_gaps_on_real_records() {
@@ -213,21 +244,6 @@ fn known_gaps_on_real_records() {
             bouc_wen_bars("pair", &forward_errors(&report["validation"]["errors"]));
         },
     );
-    check("Model_Vi_Do.dat inverse-pi --split 0.5 over seeds", &|| {
-        let values: Vec<f64> = ["0", "1", "2"]
-            .iter()
-            .map(|seed| {
-                p885(
-                    "inverse-pi",
-                    "Model_Vi_Do.dat",
-                    &["--split", "0.5", "--seed", seed],
-                )["identification"]["unseen"]["proposed"]["rms"]
-                    .as_f64()
-                    .unwrap()
-            })
-            .collect();
-        within_ten_percent("model split seeds", &values);
-    });
     assert!(failures.is_empty(), "bars not met: {failures:?}");
 }
 
