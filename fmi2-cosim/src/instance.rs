@@ -142,15 +142,22 @@ impl FmiValue for f64 {
     fn time(time: f64) -> Option<f64> {
         Some(time)
     }
+    /// One test for the finite value every set call passes; which of NaN
+    /// and infinity it is, only when it is one.
+    #[inline]
     fn invalid(self) -> Option<&'static str> {
-        if self.is_nan() {
-            Some("NaN")
-        } else if self.is_infinite() {
-            Some("infinite")
-        } else {
+        if self.is_finite() {
             None
+        } else {
+            Some(non_finite(self))
         }
     }
+}
+
+#[cold]
+#[inline(never)]
+fn non_finite(value: f64) -> &'static str {
+    if value.is_nan() { "NaN" } else { "infinite" }
 }
 
 impl FmiValue for i32 {
