@@ -22,7 +22,10 @@ import re
 REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
 DOCS = REPO_ROOT / "docs"
 
-NUMBER = re.compile(r"[-+−]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+−]?\d+)?")
+#: A number as the documents print it: `-1.4e-13`, `−2.3e-13` (a minus sign),
+#: `0.19`, `1,000,011` (thousands separated by commas). tests/docs_figures.rs
+#: reads them the same way for the Rust tests.
+NUMBER = re.compile(r"[-+−]?(?:\d{1,3}(?:,\d{3})+(?!\d)(?:\.\d*)?|\d+\.\d*|\.\d+|\d+)(?:[eE][-+−]?\d+)?")
 RELATIVE = 0.01
 
 
@@ -51,7 +54,7 @@ def numbers(text: str) -> list[tuple[float, float]]:
     """(value, unit of the last printed digit) of every number in `text`."""
     found = []
     for literal in NUMBER.findall(text):
-        literal = literal.replace("−", "-")
+        literal = literal.replace("−", "-").replace(",", "")
         mantissa, _, exponent = literal.lower().partition("e")
         decimals = len(mantissa.partition(".")[2])
         unit = 10.0 ** (-decimals + (int(exponent) if exponent else 0))

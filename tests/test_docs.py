@@ -3,9 +3,19 @@ of the repository and every #anchor to a heading of it, and every document
 of measurements says when they were measured (a commit of this repository)
 and how (a command block).
 
+Every table of figures in docs/ says, above it in its section (or in the
+document's opening paragraphs), the commit it was measured at: "measured at
+commit `abc1234`"; a table whose nearest such statement says "measured
+before" fails.
+
 The figures themselves are checked by the tests that measure them again
-(tests/docs_figures.py: docs/seed000.md in test_closed_loop.py,
-docs/seed001.md in test_seed001_controller.py)."""
+(tests/docs_figures.py and tests/docs_figures.rs: docs/seed000.md in
+test_closed_loop.py, docs/seed001.md in test_seed001_controller.py, the fmpy
+table of docs/fmi.md in test_model_exchange.py; the Rust table of docs/fmi.md
+in fmu-plant/tests/model_exchange.rs, the fuzz and memory tables of
+docs/robustness.md in the fmi_fuzz tests and fmi2-conformance/tests/memory.rs,
+the P-885 rows of docs/identification.md in
+piezo-identify/tests/quality_bars.rs)."""
 
 from __future__ import annotations
 
@@ -22,6 +32,16 @@ LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 COMMAND = re.compile(r"^```(?:sh|python)$|`(?:make|cargo|python3?|\.venv/bin/|target/release/|"
                      r"piezo-identify/benches/|farm-bench|PYTHONPATH=)[^`]*`", re.MULTILINE)
 COMMIT = re.compile(r"`(?=[0-9a-f]*[a-f])([0-9a-f]{7,40})`")
+#: When a block of figures was measured: at a commit, or (stale) before one.
+MEASURED = re.compile(r"[Mm]easured (?:again )?(at|before) (?:commit )?`[0-9a-f]{7,40}`")
+#: Tables of figures waiting to be measured again at a commit, by (document,
+#: section heading): the speed figures, which are measured on a quiet machine
+#: (docs/speed.md says how), still carry the commit they were measured
+#: before.
+AWAITING_MEASUREMENT = {
+    ("sweeps.md", "The master: one 4 s closed-loop run"),
+    ("sweeps.md", "Sweeps on dask"),
+}
 
 
 def prose(text: str) -> list[str]:
@@ -90,3 +110,71 @@ def test_every_document_of_figures_says_when_and_how(document):
     assert commits, f"{document.name}: names no commit the figures were measured at"
     unknown = [c for c in sorted(commits) if _in_history(c) is False]
     assert not unknown, f"{document.name}: not commits of this repository: {unknown}"
+
+
+def figure_tables(text: str) -> list[tuple[int, str, str, str]]:
+    """(line, section heading, the section's text above the table, the
+    document's text above its first section) of every table with a number in
+    its body; a section is what follows a heading of level 1 or 2."""
+    lines = text.splitlines()
+    first_section = next((i for i, line in enumerate(lines) if line.startswith("## ")), len(lines))
+    preamble = " ".join(lines[:first_section])
+    found, fenced, heading, section_start, in_table = [], False, "", 0, False
+    for number, line in enumerate(lines, 1):
+        if line.lstrip().startswith("```"):
+            fenced = not fenced
+        if fenced:
+            continue
+        level = re.match(r"^(#{1,6})\s+(.*?)\s*$", line)
+        if level and len(level.group(1)) <= 2:
+            heading, section_start = level.group(2), number
+        is_row = line.strip().startswith("|")
+        if is_row and not in_table:
+            table_end = number  # index of the first line after the table
+            while table_end < len(lines) and lines[table_end].strip().startswith("|"):
+                table_end += 1
+            # lines[number] is the separator row; the body follows it.
+            if any(re.search(r"\d", row) for row in lines[number + 1:table_end]):
+                found.append((number, heading, " ".join(lines[section_start:number - 1]), preamble))
+        in_table = is_row
+    return found
+
+
+def unmeasured_tables(name: str, text: str) -> list[str]:
+    """The tables of figures of a document that say no commit they were
+    measured at (see the module's docstring)."""
+    problems = []
+    for line, heading, above, preamble in figure_tables(text):
+        if (name, heading) in AWAITING_MEASUREMENT:
+            continue
+        statements = MEASURED.findall(above) or MEASURED.findall(preamble)
+        if not statements:
+            problems.append(f"{name}:{line}: a table of figures with no \"measured at commit `...`\" "
+                            f"above it in its section ({heading!r}) or at the top of the document")
+        elif statements[-1] == "before":
+            problems.append(f"{name}:{line}: the figures of {heading!r} were measured before a commit, "
+                            f"not at one: measure them again and say the commit")
+    return problems
+
+
+@pytest.mark.parametrize("document", sorted((REPO_ROOT / "docs").glob("*.md")),
+                         ids=lambda p: p.relative_to(REPO_ROOT).as_posix())
+def test_every_table_of_figures_says_the_commit_it_was_measured_at(document):
+    problems = unmeasured_tables(document.name, document.read_text(encoding="utf-8"))
+    assert not problems, "\n".join(problems)
+
+
+def test_a_table_without_its_commit_is_found():
+    """The rule above catches a table left without its commit, and one
+    measured before a commit."""
+    table = ["| what | value |", "|---|---|", "| speed | 12 ms |"]
+    measured = ["# Figures", "", "## Speed", "", "Measured at commit `abc1234`:", "", *table]
+    assert not unmeasured_tables("x.md", "\n".join(measured))
+    at_top = ["# Figures", "", "Every figure was measured at commit `abc1234`.", "", "## Speed", *table]
+    assert not unmeasured_tables("x.md", "\n".join(at_top))
+    missing = ["# Figures", "", "## Speed", "", *table]
+    assert unmeasured_tables("x.md", "\n".join(missing))
+    stale = ["# Figures", "", "## Speed", "", "Measured before commit `abc1234`:", "", *table]
+    assert unmeasured_tables("x.md", "\n".join(stale))
+    elsewhere = ["# Figures", "", "## Other", "Measured at `abc1234`.", "## Speed", "", *table]
+    assert unmeasured_tables("x.md", "\n".join(elsewhere))

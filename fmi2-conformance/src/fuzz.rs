@@ -125,8 +125,13 @@ impl FuzzConfig {
 
 /// The fuzz test of an FMU crate: [`run`] with the budget of [`FuzzConfig::from_env`],
 /// the report printed, and the coverage a generator that stopped reaching a
-/// state or a function would lose asserted.
-pub fn assert_rules_hold(fmu: &Fmu, foreign: &Fmu, default_calls: u64, default_seed: u64) {
+/// state or a function would lose asserted. Returns the report.
+pub fn assert_rules_hold(
+    fmu: &Fmu,
+    foreign: &Fmu,
+    default_calls: u64,
+    default_seed: u64,
+) -> FuzzReport {
     let config = FuzzConfig::from_env(default_calls, default_seed);
     let report = run(fmu, Some(foreign), config);
     println!("{report}");
@@ -151,6 +156,7 @@ pub fn assert_rules_hold(fmu: &Fmu, foreign: &Fmu, default_calls: u64, default_s
             "{report}"
         );
     }
+    report
 }
 
 /// Runs `config.calls` calls on `fmu`; `foreign`, another FMU built with the

@@ -3,6 +3,9 @@
 //! and states it passes by mistake. `FMI_FUZZ_CALLS` and `FMI_FUZZ_SEED` run it
 //! longer or replay a failure; `-- --nocapture` shows the figures.
 
+#[path = "../../tests/docs_figures.rs"]
+mod docs_figures;
+
 use fmi2_conformance::{fuzz, workspace};
 use fmu_plant::FlexureStageFmu;
 
@@ -16,5 +19,15 @@ const SEED: u64 = 0x5eed_0001;
 fn random_call_sequences_keep_every_rule() {
     let fmu = workspace::load::<FlexureStageFmu>("fmu-plant");
     let other = workspace::load_committed("fmu-controller", "PiezoController");
-    fuzz::assert_rules_hold(&fmu, &other, CALLS, SEED);
+    let report = fuzz::assert_rules_hold(&fmu, &other, CALLS, SEED);
+    let config = fuzz::FuzzConfig::from_env(CALLS, SEED);
+    if (config.calls, config.seed) == (CALLS, SEED) {
+        // docs/robustness.md prints this run's counts (the time varies).
+        let row = docs_figures::row(
+            &format!("`make test`, FlexureStage, seed {SEED:#x}"),
+            report.table_cells(),
+            &[fuzz::FuzzReport::TIME_CELL],
+        );
+        docs_figures::assert_documented("robustness.md", "## Call-sequence fuzzing", 1, &[row]);
+    }
 }

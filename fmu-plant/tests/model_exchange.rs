@@ -17,7 +17,12 @@
 //!
 //! Asserted: every sensor reading of every sample within 1e-6 µm; the
 //! fingerprints computed from them (coupling spans and loop widths, major
-//! loops, the 790 Hz θ mode) the same. `-- --nocapture` prints the figures.
+//! loops, the 790 Hz θ mode) the same; and docs/fmi.md's table ("On the
+//! calibration fingerprints") prints these figures (`tests/docs_figures.rs`
+//! says within what). `-- --nocapture` prints the figures.
+
+#[path = "../../tests/docs_figures.rs"]
+mod docs_figures;
 
 use fmi2_conformance::{Fmu, Instance, OK, WARNING};
 use fmu_plant::FlexureStageFmu;
@@ -205,7 +210,7 @@ fn procedures(params: &FlexureStageParams) -> Vec<(&'static str, Procedure, f64)
         let s = d * (tau * t).sin();
         [0.0, u_home + s, u_home - s]
     });
-    list.push(("rotation sweep (y from theta)", rotation, 1.75));
+    list.push(("rotation sweep (y from θ)", rotation, 1.75));
 
     let wave = move |t: f64| 0.5 * FULL_COMMAND * (1.0 - (tau * t).cos());
     let mut major_x = Procedure::new();
@@ -231,7 +236,7 @@ fn procedures(params: &FlexureStageParams) -> Vec<(&'static str, Procedure, f64)
         RESONANCE_SAMPLE_PERIOD,
         |_| held,
     );
-    list.push(("theta resonance record", resonance, 1.5));
+    list.push(("θ resonance record", resonance, 1.5));
     list
 }
 
@@ -283,6 +288,8 @@ fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
     let fmu = plant();
     let params = FlexureStageParams::default();
     let spacing = params.sensor_spacing_mm * 1e3;
+    // docs/fmi.md's rows: procedure, samples, largest difference, fingerprint.
+    let mut rows = Vec::new();
     for (name, procedure, from) in procedures(&params) {
         let (cs, _) = simulate(Rig::co_simulation(&fmu), &procedure);
         let (me, evaluations) = simulate(Rig::model_exchange(&fmu), &procedure);
@@ -311,71 +318,44 @@ fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
             let y: Vec<f64> = readings.iter().map(|s| output(s)).collect();
             fingerprint::loop_shape(&u, &y)
         };
-        let compare = |what: &str, a: fingerprint::LoopShape, b: fingerprint::LoopShape| {
+        // ME - CS of the loop's span and width.
+        let compare = |what: &str,
+                       input: &dyn Fn(&[f64; 3]) -> f64,
+                       output: &dyn Fn(&[f64; 3]) -> f64|
+         -> (f64, f64) {
+            let (a, b) = (
+                shapes(&cs_window, input, output),
+                shapes(&me_window, input, output),
+            );
+            let (span, width) = (b.span_um - a.span_um, b.max_width_um - a.max_width_um);
             println!(
-                "  {what}: span {:.6} um, width {:.6} um (ME - CS: {:.1e}, {:.1e})",
-                a.span_um,
-                a.max_width_um,
-                b.span_um - a.span_um,
-                b.max_width_um - a.max_width_um
+                "  {what}: span {:.6} um, width {:.6} um (ME - CS: {span:.1e}, {width:.1e})",
+                a.span_um, a.max_width_um
             );
-            assert!(
-                (a.span_um - b.span_um).abs() <= 2.0 * TOLERANCE_UM,
-                "{what} span"
-            );
-            assert!(
-                (a.max_width_um - b.max_width_um).abs() <= 2.0 * TOLERANCE_UM,
-                "{what} width"
-            );
+            assert!(span.abs() <= 2.0 * TOLERANCE_UM, "{what} span");
+            assert!(width.abs() <= 2.0 * TOLERANCE_UM, "{what} width");
+            (span, width)
         };
-        match name {
+        let signed = |(span, width): (f64, f64)| format!("span {span:.1e}, width {width:.1e} µm");
+        let fingerprints = match name {
             "y sweep (s2, s3 from y)" => {
-                for (k, label) in [(1, "s2 from y"), (2, "s3 from y")] {
-                    let input = |u: &[f64; 3]| u[0];
-                    let output = move |s: &[f64; 3]| s[k];
-                    compare(
-                        label,
-                        shapes(&cs_window, &input, &output),
-                        shapes(&me_window, &input, &output),
-                    );
-                }
-            }
-            "x sweep (y from x)" => {
-                let input = |u: &[f64; 3]| u[1];
-                let output = |s: &[f64; 3]| s[0];
-                compare(
-                    "y from x",
-                    shapes(&cs_window, &input, &output),
-                    shapes(&me_window, &input, &output),
-                );
-            }
-            "rotation sweep (y from theta)" => {
-                let input = |u: &[f64; 3]| 0.5 * (u[1] - u[2]);
-                let output = |s: &[f64; 3]| s[0];
-                compare(
-                    "y from rotation",
-                    shapes(&cs_window, &input, &output),
-                    shapes(&me_window, &input, &output),
-                );
-            }
-            "major loop x" => {
-                let input = |u: &[f64; 3]| u[1];
-                let output = |s: &[f64; 3]| 0.5 * (s[1] + s[2]);
-                compare(
-                    "major loop x",
-                    shapes(&cs_window, &input, &output),
-                    shapes(&me_window, &input, &output),
-                );
-            }
-            "major loop y" => {
                 let input = |u: &[f64; 3]| u[0];
-                let output = |s: &[f64; 3]| s[0];
-                compare(
-                    "major loop y",
-                    shapes(&cs_window, &input, &output),
-                    shapes(&me_window, &input, &output),
-                );
+                let s2 = compare("s2 from y", &input, &|s| s[1]);
+                let s3 = compare("s3 from y", &input, &|s| s[2]);
+                format!(
+                    "spans within {:.1e}, loop widths within {:.1e} µm",
+                    s2.0.abs().max(s3.0.abs()),
+                    s2.1.abs().max(s3.1.abs())
+                )
             }
+            "x sweep (y from x)" => signed(compare("y from x", &|u| u[1], &|s| s[0])),
+            "rotation sweep (y from θ)" => {
+                signed(compare("y from rotation", &|u| 0.5 * (u[1] - u[2]), &|s| {
+                    s[0]
+                }))
+            }
+            "major loop x" => signed(compare("major loop x", &|u| u[1], &|s| 0.5 * (s[1] + s[2]))),
+            "major loop y" => signed(compare("major loop y", &|u| u[0], &|s| s[0])),
             _ => {
                 let theta = |readings: &[&[f64; 3]]| -> Vec<f64> {
                     readings.iter().map(|s| (s[1] - s[2]) / spacing).collect()
@@ -390,7 +370,15 @@ fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
                     (cs_peak - 790.0).abs() <= 0.02 * 790.0,
                     "seed 000 §2: 790 Hz"
                 );
+                format!("θ mode: {cs_peak:.0} Hz in both")
             }
-        }
+        };
+        rows.push(vec![
+            Some(name.to_owned()),
+            Some(docs_figures::thousands(procedure.len() as u64)),
+            Some(format!("{worst:.1e} µm")),
+            Some(fingerprints),
+        ]);
     }
+    docs_figures::assert_documented("fmi.md", "### On the calibration fingerprints", 1, &rows);
 }

@@ -17,6 +17,13 @@
 //! Where a bar is not met, `known_gaps_on_real_records` (ignored) asserts it
 //! and says what was measured: `cargo test --release -p piezo-identify
 //! --test quality_bars -- --ignored` shows them.
+//!
+//! The P-885 runs and the lab-like records of the normal suite are rows of
+//! docs/identification.md's table: each is compared with the printed row (`tests/docs_figures.rs`
+//! says within what; the fit time varies and is not compared).
+
+#[path = "../../tests/docs_figures.rs"]
+mod docs_figures;
 
 use std::path::Path;
 use std::process::Command;
@@ -99,6 +106,70 @@ fn p885(subcommand: &str, file: &str, extra: &[&str]) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap()
 }
 
+/// docs/identification.md's table: the line it follows.
+const DOC_TABLE: &str = "## Quality bars";
+
+/// The row of docs/identification.md's table (record, model, seed, unseen
+/// RMS %, classical P-I %, line %, best line %, choices, fit s) that
+/// `report`, the `--report` of a run of `model` on `record`, measures, as
+/// `piezo-identify/benches/figures.sh` prints it.
+fn documented_row(
+    record: &str,
+    model: &str,
+    seed: &str,
+    report: &serde_json::Value,
+) -> Vec<Option<String>> {
+    let percent = |figures: &serde_json::Value| {
+        let value = figures["rms_percent"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("rms_percent in {figures}"));
+        format!("{value:.3}")
+    };
+    let identification = &report["identification"];
+    let (errors, best_line, choices) = match model {
+        "inverse-pi" => {
+            let errors = &identification["unseen"];
+            let kind = match identification["rate_dependent"].as_bool() {
+                Some(true) => "rate-dependent",
+                Some(false) => "constant",
+                None => panic!("rate_dependent in {identification}"),
+            };
+            let choices = format!("{kind}, smooth {}", identification["smoothing"]);
+            (errors, String::new(), choices)
+        }
+        _ => {
+            let errors = &report["unseen"];
+            let n = identification["refined"]["params"]["n"]
+                .as_f64()
+                .expect("the refined n");
+            let kept = identification["refinement_kept"]
+                .as_bool()
+                .expect("refinement_kept");
+            let choices = format!("n {n:.3}, LM {}", if kept { "kept" } else { "not kept" });
+            (errors, percent(&errors["best_line"]), choices)
+        }
+    };
+    let proposed = if model == "inverse-pi" {
+        "proposed"
+    } else {
+        "bouc_wen"
+    };
+    docs_figures::row(
+        record,
+        vec![
+            model.to_owned(),
+            seed.to_owned(),
+            percent(&errors[proposed]),
+            percent(&errors["classical"]),
+            percent(&errors["line"]),
+            best_line,
+            choices,
+            String::new(),
+        ],
+        &[7],
+    )
+}
+
 fn inverse_errors(value: &serde_json::Value) -> InversePiErrors {
     InversePiErrors {
         proposed: figures(&value["proposed"]),
@@ -135,6 +206,8 @@ fn figures(value: &serde_json::Value) -> piezo_identify::protocol::ErrorFigures 
 
 #[test]
 fn p885_identification_record_split_in_two() {
+    let record = "Model_Vi_Do.dat --split 0.5";
+    let mut rows = Vec::new();
     let mut inverse = Vec::new();
     let mut bouc_wen = Vec::new();
     for seed in ["0", "1", "2"] {
@@ -149,6 +222,9 @@ fn p885_identification_record_split_in_two() {
             &errors,
         );
         inverse.push(errors.proposed.rms);
+        if seed == "0" {
+            rows.push(documented_row(record, "inverse-pi", seed, &report));
+        }
         let report = p885(
             "bouc-wen",
             "Model_Vi_Do.dat",
@@ -160,9 +236,11 @@ fn p885_identification_record_split_in_two() {
             &errors,
         );
         bouc_wen.push(errors.bouc_wen.rms);
+        rows.push(documented_row(record, "bouc-wen", seed, &report));
     }
     within_ten_percent("Model_Vi_Do.dat, inverse-pi --split 0.5", &inverse);
     within_ten_percent("Model_Vi_Do.dat, bouc-wen --split 0.5", &bouc_wen);
+    docs_figures::assert_documented("identification.md", DOC_TABLE, 3, &rows);
 }
 
 /// Test_Vi_Do_Di.dat split in two: Bouc-Wen meets its bars; the proposed
@@ -175,6 +253,8 @@ fn p885_test_record_split_in_two() {
         "Test_Vi_Do_Di.dat, bouc-wen --split 0.5",
         &forward_errors(&report["unseen"]),
     );
+    let record = "Test_Vi_Do_Di.dat --split 0.5";
+    let mut rows = vec![documented_row(record, "bouc-wen", "0", &report)];
     let mut inverse = Vec::new();
     for seed in ["0", "1"] {
         let report = p885(
@@ -182,6 +262,9 @@ fn p885_test_record_split_in_two() {
             "Test_Vi_Do_Di.dat",
             &["--split", "0.5", "--seed", seed],
         );
+        if seed == "0" {
+            rows.push(documented_row(record, "inverse-pi", seed, &report));
+        }
         let e = inverse_errors(&report["identification"]["unseen"]);
         println!(
             "Test_Vi_Do_Di.dat, inverse-pi --split 0.5 --seed {seed}: proposed {:.3} %, classical P-I {:.3} %",
@@ -196,6 +279,7 @@ fn p885_test_record_split_in_two() {
         inverse.push(e.proposed.rms);
     }
     within_ten_percent("Test_Vi_Do_Di.dat, inverse-pi --split 0.5", &inverse);
+    docs_figures::assert_documented("identification.md", DOC_TABLE, 3, &rows);
 }
 
 /// The bars not met on the real records (docs/identification.md, "Where
@@ -247,13 +331,15 @@ fn known_gaps_on_real_records() {
     assert!(failures.is_empty(), "bars not met: {failures:?}");
 }
 
-/// The lab-like records of the tests: (name, spec). Lengths keep every fit
-/// within a few seconds: 10 to 12 cycles of fit part at 1 Hz and 10 Hz, two
-/// at 0.1 Hz.
-fn lab_records() -> Vec<(&'static str, LabRecordSpec)> {
+/// The lab-like records of the tests: (name, the record's name in
+/// docs/identification.md and `piezo-identify/benches/figures.sh`, spec).
+/// Lengths keep every fit within a few seconds: 10 to 12 cycles of fit part
+/// at 1 Hz and 10 Hz, two at 0.1 Hz.
+fn lab_records() -> Vec<(&'static str, &'static str, LabRecordSpec)> {
     vec![
         (
             "200 Hz, unipolar, 1 Hz",
+            "lab_200Hz_unipolar_1Hz",
             LabRecordSpec::new(
                 200.0,
                 Drive::Unipolar,
@@ -263,6 +349,7 @@ fn lab_records() -> Vec<(&'static str, LabRecordSpec)> {
         ),
         (
             "200 Hz, bipolar, 0.1 Hz",
+            "lab_200Hz_bipolar_0.1Hz",
             LabRecordSpec::new(
                 200.0,
                 Drive::Bipolar,
@@ -272,6 +359,7 @@ fn lab_records() -> Vec<(&'static str, LabRecordSpec)> {
         ),
         (
             "5 kHz, unipolar, 10 Hz",
+            "lab_5kHz_unipolar_10Hz",
             LabRecordSpec::new(
                 5000.0,
                 Drive::Unipolar,
@@ -281,6 +369,7 @@ fn lab_records() -> Vec<(&'static str, LabRecordSpec)> {
         ),
         (
             "5 kHz, bipolar, 1 Hz",
+            "lab_5kHz_bipolar_1Hz",
             LabRecordSpec::new(
                 5000.0,
                 Drive::Bipolar,
@@ -290,6 +379,7 @@ fn lab_records() -> Vec<(&'static str, LabRecordSpec)> {
         ),
         (
             "200 Hz, unipolar, 1 Hz swept 100..20 % in 10 s",
+            "lab_200Hz_unipolar_1Hz_swept",
             LabRecordSpec::new(
                 200.0,
                 Drive::Unipolar,
@@ -304,8 +394,15 @@ fn lab_records() -> Vec<(&'static str, LabRecordSpec)> {
 }
 
 /// Both models on one lab record split in two, with the given seed; the
-/// scored RMS of each.
-fn lab_fit(name: &str, spec: &LabRecordSpec, seed: u64, check: bool) -> (f64, f64) {
+/// scored RMS of each, and the rows of docs/identification.md's table they
+/// measure (`documented` names the record there).
+fn lab_fit(
+    name: &str,
+    documented: &str,
+    spec: &LabRecordSpec,
+    seed: u64,
+    check: bool,
+) -> (f64, f64, [Vec<Option<String>>; 2]) {
     let record = lab_record(spec).unwrap();
     let fit_end = record.input.len() / 2;
     let plan = Plan::new(
@@ -338,6 +435,22 @@ fn lab_fit(name: &str, spec: &LabRecordSpec, seed: u64, check: bool) -> (f64, f6
         &|_| {},
     )
     .unwrap();
+    // The rows as the command line's reports (the same structures) give them.
+    let seed_text = seed.to_string();
+    let rows = [
+        documented_row(
+            documented,
+            "inverse-pi",
+            &seed_text,
+            &serde_json::json!({ "identification": inverse }),
+        ),
+        documented_row(
+            documented,
+            "bouc-wen",
+            &seed_text,
+            &serde_json::to_value(&bouc_wen).expect("the fit serializes"),
+        ),
+    ];
     let (inverse_unseen, forward_unseen) = (inverse.unseen.unwrap(), bouc_wen.unseen.unwrap());
     if check {
         inverse_pi_bars(&format!("{name}, inverse-pi"), &inverse_unseen);
@@ -347,16 +460,26 @@ fn lab_fit(name: &str, spec: &LabRecordSpec, seed: u64, check: bool) -> (f64, f6
         "{name}, seed {seed}: fits {:.2} s and {:.2} s",
         inverse.seconds, bouc_wen.seconds
     );
-    (inverse_unseen.proposed.rms, forward_unseen.bouc_wen.rms)
+    (
+        inverse_unseen.proposed.rms,
+        forward_unseen.bouc_wen.rms,
+        rows,
+    )
 }
 
 #[test]
 fn lab_records_meet_the_bars_for_any_seed() {
-    for (i, (name, spec)) in lab_records().iter().enumerate() {
+    let mut rows = Vec::new();
+    for (i, (name, documented, spec)) in lab_records().iter().enumerate() {
         let seeds: &[u64] = if i == 0 || i == 3 { &[0, 1, 2] } else { &[0] };
         let results: Vec<(f64, f64)> = seeds
             .iter()
-            .map(|&seed| lab_fit(name, spec, seed, seed == 0))
+            .map(|&seed| {
+                let (inverse, bouc_wen, measured) =
+                    lab_fit(name, documented, spec, seed, seed == 0);
+                rows.extend(measured);
+                (inverse, bouc_wen)
+            })
             .collect();
         if seeds.len() > 1 {
             within_ten_percent(
@@ -369,4 +492,5 @@ fn lab_records_meet_the_bars_for_any_seed() {
             );
         }
     }
+    docs_figures::assert_documented("identification.md", DOC_TABLE, 3, &rows);
 }

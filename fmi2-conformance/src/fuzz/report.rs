@@ -43,6 +43,51 @@ pub struct FuzzReport {
     pub elapsed: Duration,
 }
 
+/// `n` with its thousands separated by commas, as docs/ prints counts.
+fn thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+impl FuzzReport {
+    /// Column of [`FuzzReport::table_cells`] that holds the wall time.
+    pub const TIME_CELL: usize = 1;
+
+    /// The run's figures as the fuzz table of docs/robustness.md prints them,
+    /// after the run's label: calls, time, crashes, statuses (OK / Warning /
+    /// Discard / Error), forged states accepted, and strings read / set /
+    /// calls refused for a NULL or non-UTF-8 string ("none to read or set"
+    /// for an FMU without String variables).
+    pub fn table_cells(&self) -> Vec<String> {
+        let [ok, warning, discard, error, _fatal] = self.by_status.map(thousands);
+        let strings = if self.strings_read == 0 && self.strings_set == 0 {
+            "none to read or set".to_owned()
+        } else {
+            format!(
+                "{} / {} / {}",
+                thousands(self.strings_read),
+                thousands(self.strings_set),
+                thousands(self.bad_strings_refused)
+            )
+        };
+        vec![
+            thousands(self.calls),
+            format!("{:.2} s", self.elapsed.as_secs_f64()),
+            "0".to_owned(), // a crash ends the run before its report
+            format!("{ok} / {warning} / {discard} / {error}"),
+            thousands(self.forged_states_accepted),
+            strings,
+        ]
+    }
+}
+
 impl fmt::Display for FuzzReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let secs = self.elapsed.as_secs_f64();
