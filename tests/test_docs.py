@@ -38,10 +38,7 @@ MEASURED = re.compile(r"[Mm]easured (?:again )?(at|before) (?:commit )?`[0-9a-f]
 #: section heading): the speed figures, which are measured on a quiet machine
 #: (docs/speed.md says how), still carry the commit they were measured
 #: before.
-AWAITING_MEASUREMENT = {
-    ("sweeps.md", "The master: one 4 s closed-loop run"),
-    ("sweeps.md", "Sweeps on dask"),
-}
+AWAITING_MEASUREMENT: set[tuple[str, str]] = set()
 
 
 def prose(text: str) -> list[str]:
