@@ -98,7 +98,7 @@ where
         return ERROR;
     };
     trace(inst, function, arguments);
-    if !function.allowed(inst.interface, inst.state) {
+    if !function.allowed(inst.env.interface, inst.state) {
         refuse_sequence(inst, function);
         return ERROR;
     }
@@ -111,7 +111,7 @@ where
         status.to_raw()
     }));
     outcome.unwrap_or_else(|payload| {
-        inst.logger.error(
+        inst.env.logger.error(
             function.name(),
             format_args!("internal error (panic): {}", panic_message(&*payload)),
         );
@@ -126,16 +126,16 @@ where
 #[inline(never)]
 fn refuse_sequence<M: CoSimModel>(inst: &mut Instance<M>, function: FmiFunction) {
     match function.interface() {
-        Some(own) if own != inst.interface => inst.logger.error(
+        Some(own) if own != inst.env.interface => inst.env.logger.error(
             function.name(),
             format_args!(
                 "illegal call sequence: a {} function, and this instance was instantiated \
                  for {}",
                 own.name(),
-                inst.interface.name()
+                inst.env.interface.name()
             ),
         ),
-        _ => inst.logger.error(
+        _ => inst.env.logger.error(
             function.name(),
             format_args!(
                 "illegal call sequence: not allowed in state {}",
@@ -301,8 +301,8 @@ where
     M: CoSimModel,
     A: Fn(&mut fmt::Formatter<'_>) -> fmt::Result,
 {
-    if inst.logger.is_enabled(LogCategory::FmiCalls) {
-        inst.logger.log_in(
+    if inst.env.logger.is_enabled(LogCategory::FmiCalls) {
+        inst.env.logger.log_in(
             function.name(),
             Status::Ok,
             LogCategory::FmiCalls,
@@ -444,8 +444,8 @@ unsafe fn instantiate_checked<M: CoSimModel>(
         }
     };
     let instance = Instance::<M>::new(logger, interface, resource_dir, guid);
-    if instance.logger.is_enabled(LogCategory::FmiCalls) {
-        instance.logger.log_in(
+    if instance.env.logger.is_enabled(LogCategory::FmiCalls) {
+        instance.env.logger.log_in(
             NAME,
             Status::Ok,
             LogCategory::FmiCalls,
@@ -457,7 +457,7 @@ unsafe fn instantiate_checked<M: CoSimModel>(
             ),
         );
     }
-    instance.logger.log_in(
+    instance.env.logger.log_in(
         NAME,
         Status::Ok,
         LogCategory::Events,
@@ -1275,7 +1275,7 @@ unsafe fn status_query<M: CoSimModel, T>(
                 Status::Ok
             }
             None => {
-                inst.logger.log_in(
+                inst.env.logger.log_in(
                     function.name(),
                     Status::Discard,
                     LogCategory::StatusDiscard,

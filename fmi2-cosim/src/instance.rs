@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use crate::fmu_state::SnapshotData;
 use crate::logging::{LogCategory, Logger};
-use crate::model::{CoSimModel, Context, StepOutcome};
+use crate::model::{CoSimModel, Context, Environment, StepOutcome};
 use crate::status::{FmiFunction, FmiState, Interface, Status};
 use crate::variables::{Causality, Value, Variability, Variable};
 
@@ -60,9 +60,10 @@ impl<M: CoSimModel> Magic<M> {
 #[repr(C)]
 pub struct Instance<M: CoSimModel> {
     pub(crate) magic: u64,
-    pub(crate) logger: Logger,
     pub(crate) state: FmiState,
-    pub(crate) interface: Interface,
+    /// The logger, resources folder and interface, which the model reaches
+    /// through its [`Context`].
+    pub(crate) env: Environment,
     /// The time the instance stands at: after a discarded step, the last
     /// successful time (`fmi2LastSuccessfulTime`).
     pub(crate) time: f64,
@@ -71,7 +72,6 @@ pub struct Instance<M: CoSimModel> {
     /// (`fmi2GetBooleanStatus(fmi2Terminated)`).
     pub(crate) terminate_requested: bool,
     pub(crate) model: M,
-    pub(crate) resource_dir: Option<PathBuf>,
     pub(crate) guid: String,
     /// FMU states this instance made and the importer has not freed:
     /// `fmi2FreeInstance` frees them (FMI 2.0.4 §2.1.5: it frees all memory
@@ -294,14 +294,16 @@ impl<M: CoSimModel> Instance<M> {
     ) -> Self {
         Instance {
             magic: Magic::<M>::INSTANCE,
-            logger,
             state: FmiState::Instantiated,
-            interface,
+            env: Environment {
+                logger,
+                resource_dir,
+                interface,
+            },
             time: 0.0,
             start_time: 0.0,
             terminate_requested: false,
             model: M::new(),
-            resource_dir,
             guid,
             fmu_states: Vec::new(),
             strings: Vec::new(),
@@ -313,7 +315,7 @@ impl<M: CoSimModel> Instance<M> {
     }
 
     pub fn interface(&self) -> Interface {
-        self.interface
+        self.env.interface
     }
 
     /// Whether the instance is past initialization and simulating: the
@@ -342,12 +344,13 @@ impl<M: CoSimModel> Instance<M> {
     }
 
     pub(crate) fn error(&self, function: FmiFunction, args: fmt::Arguments<'_>) -> Status {
-        self.logger.error(function.name(), args);
+        self.env.logger.error(function.name(), args);
         Status::Error
     }
 
     fn event(&self, function: FmiFunction, args: fmt::Arguments<'_>) {
-        self.logger
+        self.env
+            .logger
             .log_in(function.name(), Status::Ok, LogCategory::Events, args);
     }
 
@@ -387,17 +390,17 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn set_debug_logging(&mut self, logging_on: bool, categories: &[&str]) -> Status {
         let function = FmiFunction::SetDebugLogging;
         if categories.is_empty() {
-            self.logger.set_all(logging_on);
+            self.env.logger.set_all(logging_on);
             return Status::Ok;
         }
         let mut status = Status::Ok;
         for name in categories {
             if *name == LogCategory::ALL_NAME {
-                self.logger.set_all(logging_on);
+                self.env.logger.set_all(logging_on);
             } else if let Some(category) = LogCategory::from_name(name) {
-                self.logger.set(category, logging_on);
+                self.env.logger.set(category, logging_on);
             } else {
-                self.logger.warning(
+                self.env.logger.warning(
                     function.name(),
                     format_args!(
                         "unknown log category {name:?} ignored (known: logEvents, logStatusWarning, \
@@ -447,7 +450,8 @@ impl<M: CoSimModel> Instance<M> {
         let mut violations = 0;
         for var in M::variables() {
             if let Some(message) = parameter_out_of_range(var, &self.model) {
-                self.logger
+                self.env
+                    .logger
                     .error(function.name(), format_args!("{message}"));
                 violations += 1;
             }
@@ -456,10 +460,8 @@ impl<M: CoSimModel> Instance<M> {
             return Status::Error;
         }
         let mut ctx = Context {
-            logger: &self.logger,
+            env: &self.env,
             function,
-            resource_dir: &self.resource_dir,
-            interface: self.interface,
         };
         if let Err(e) = self
             .model
@@ -468,7 +470,7 @@ impl<M: CoSimModel> Instance<M> {
             return self.error(function, format_args!("{e}"));
         }
         self.time = self.start_time;
-        self.state = match self.interface {
+        self.state = match self.env.interface {
             Interface::CoSimulation => FmiState::StepComplete,
             Interface::ModelExchange => FmiState::EventMode,
         };
@@ -718,7 +720,7 @@ impl<M: CoSimModel> Instance<M> {
             match self.check_set(function, *vr, var, value) {
                 Ok(SetAction::Apply) => {}
                 Ok(SetAction::KeepSameValue) => {
-                    self.logger.warning(
+                    self.env.logger.warning(
                         function.name(),
                         format_args!(
                             "fixed parameter {} was written again after initialization with its \
@@ -761,21 +763,14 @@ impl<M: CoSimModel> Instance<M> {
         if !sound && let Err(status) = self.check_step(current_time, step_size) {
             return status;
         }
+        self.time = end;
         let mut ctx = Context {
-            logger: &self.logger,
+            env: &self.env,
             function,
-            resource_dir: &self.resource_dir,
-            interface: self.interface,
         };
         match self.model.do_step(&mut ctx, current_time, step_size) {
-            Ok(StepOutcome::Completed) => {
-                self.time = end;
-                Status::Ok
-            }
-            Ok(StepOutcome::CompletedWithWarning) => {
-                self.time = end;
-                Status::Warning
-            }
+            Ok(StepOutcome::Completed) => Status::Ok,
+            Ok(StepOutcome::CompletedWithWarning) => Status::Warning,
             Ok(StepOutcome::Discarded {
                 last_successful_time,
             }) => self.discard(current_time, end, last_successful_time, false),
@@ -783,7 +778,10 @@ impl<M: CoSimModel> Instance<M> {
                 last_successful_time,
             }) => self.discard(current_time, end, last_successful_time, true),
             // fmi2Error: the gate puts the instance in its error state.
-            Err(e) => self.error(function, format_args!("at t = {current_time}: {e}")),
+            Err(e) => {
+                self.time = current_time;
+                self.error(function, format_args!("at t = {current_time}: {e}"))
+            }
         }
     }
 
@@ -816,7 +814,7 @@ impl<M: CoSimModel> Instance<M> {
         self.time = last_successful_time;
         self.state = FmiState::StepFailed;
         self.terminate_requested = terminate;
-        self.logger.log_in(
+        self.env.logger.log_in(
             function.name(),
             Status::Discard,
             LogCategory::StatusDiscard,
@@ -882,7 +880,7 @@ impl<M: CoSimModel> Instance<M> {
             model: self.model.clone(),
             time: self.time,
             start_time: self.start_time,
-            interface: self.interface,
+            interface: self.env.interface,
             state: self.state,
             terminate_requested: self.terminate_requested,
         }
@@ -995,10 +993,8 @@ impl<M: CoSimModel> Instance<M> {
             )));
         }
         let mut ctx = Context {
-            logger: &self.logger,
+            env: &self.env,
             function,
-            resource_dir: &self.resource_dir,
-            interface: data.interface,
         };
         data.model
             .validate_restored(&mut ctx, data.state)
@@ -1013,25 +1009,25 @@ impl<M: CoSimModel> Instance<M> {
     /// §2.1.3). Refused: a snapshot of the other interface, or one claiming a
     /// state no instance of this interface can be saved in (forged bytes).
     pub(crate) fn restore(&mut self, function: FmiFunction, data: &SnapshotData<M>) -> Status {
-        if data.interface != self.interface {
+        if data.interface != self.env.interface {
             return self.error(
                 function,
                 format_args!(
                     "the state was taken from a {} instance and this instance is {}; \
                      restore it into an instance of the same interface",
                     data.interface.name(),
-                    self.interface.name()
+                    self.env.interface.name()
                 ),
             );
         }
-        if !can_be_saved_in(self.interface, data.state) {
+        if !can_be_saved_in(self.env.interface, data.state) {
             return self.error(
                 function,
                 format_args!(
                     "the state claims the machine state {}, which a {} instance is never \
                      saved in",
                     data.state.name(),
-                    self.interface.name()
+                    self.env.interface.name()
                 ),
             );
         }
@@ -1055,13 +1051,11 @@ impl<M: CoSimModel> Instance<M> {
 /// The states `fmi2GetFMUstate` can be called in (every live state) that an
 /// instance of `interface` can reach.
 fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
-    use FmiState::*;
-    match state {
-        Instantiated | InitializationMode | Terminated | Error => true,
-        StepComplete | StepFailed => interface == Interface::CoSimulation,
-        EventMode | ContinuousTimeMode => interface == Interface::ModelExchange,
-        Fatal => false,
-    }
+    let other = match interface {
+        Interface::CoSimulation => Interface::ModelExchange,
+        Interface::ModelExchange => Interface::CoSimulation,
+    };
+    state != FmiState::Fatal && !other.own_states().contains(state)
 }
 
 /// Why the parameter `var` of `model` is outside its declared range, if it

@@ -198,14 +198,22 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
 
 /// What a model may use of its instance while the layer runs it: logging
 /// through the importer's callback, and the resources folder.
+///
+/// Building one is on every step's path, so it is two words: the instance's
+/// [`Environment`] by reference and the function by one byte (its name is
+/// looked up only when a line is logged).
 pub struct Context<'a> {
-    pub(crate) logger: &'a Logger,
-    /// The FMI function being served (one byte: building a context is on
-    /// every step's path; the name is looked up only when a line is logged).
+    pub(crate) env: &'a Environment,
+    /// The FMI function being served.
     pub(crate) function: FmiFunction,
-    /// The instance's own field, dereferenced only when asked for: building a
-    /// context is on every step's path.
-    pub(crate) resource_dir: &'a Option<std::path::PathBuf>,
+}
+
+/// What an instance lends its model through a [`Context`]: its logger, its
+/// resources folder and its interface, kept together so that a context
+/// refers to them with one pointer.
+pub(crate) struct Environment {
+    pub(crate) logger: Logger,
+    pub(crate) resource_dir: Option<std::path::PathBuf>,
     pub(crate) interface: Interface,
 }
 
@@ -213,7 +221,8 @@ impl Context<'_> {
     /// Logs `args`, prefixed with the FMI function being served. Formats into a
     /// stack buffer: no allocation.
     pub fn log(&self, status: Status, category: LogCategory, args: fmt::Arguments<'_>) {
-        self.logger
+        self.env
+            .logger
             .log_in(self.function.name(), status, category, args);
     }
 
@@ -227,11 +236,11 @@ impl Context<'_> {
 
     /// The FMU's `resources` folder, when the importer gave its location.
     pub fn resource_dir(&self) -> Option<&Path> {
-        self.resource_dir.as_deref()
+        self.env.resource_dir.as_deref()
     }
 
     /// The interface the instance was instantiated for.
     pub fn interface(&self) -> Interface {
-        self.interface
+        self.env.interface
     }
 }

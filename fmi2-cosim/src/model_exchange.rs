@@ -142,10 +142,8 @@ impl<M: ModelExchange> Instance<M> {
         let function = FmiFunction::NewDiscreteStates;
         let time = self.time;
         let mut ctx = Context {
-            logger: &self.logger,
+            env: &self.env,
             function,
-            resource_dir: &self.resource_dir,
-            interface: self.interface,
         };
         match self.model.update_discrete_states(&mut ctx, time) {
             Ok(update) => Ok(EventInfo {
@@ -160,10 +158,8 @@ impl<M: ModelExchange> Instance<M> {
         let function = FmiFunction::CompletedIntegratorStep;
         let time = self.time;
         let mut ctx = Context {
-            logger: &self.logger,
+            env: &self.env,
             function,
-            resource_dir: &self.resource_dir,
-            interface: self.interface,
         };
         match self.model.completed_integrator_step(&mut ctx, time) {
             Ok(status) => status,

@@ -67,6 +67,20 @@ impl Interface {
             Interface::CoSimulation => "Co-Simulation",
         }
     }
+
+    /// The states only an instance of this interface is ever in
+    /// (co-simulation's step states, model exchange's event and
+    /// continuous-time modes). The layer keeps every instance in a state of
+    /// its own interface or a common one (a restored state of the other
+    /// interface is refused), so a state of this set also names the
+    /// interface.
+    #[inline(always)]
+    pub const fn own_states(self) -> StateMask {
+        match self {
+            Interface::ModelExchange => StateMask::of(&[EventMode, ContinuousTimeMode]),
+            Interface::CoSimulation => StateMask::of(&[StepComplete, StepFailed]),
+        }
+    }
 }
 
 /// States of a co-simulation slave (FMI 2.0.4 Fig. 10) and of a model-exchange
@@ -161,6 +175,12 @@ impl StateMask {
     #[inline(always)]
     pub const fn contains(self, state: FmiState) -> bool {
         self.0 & state.bit() != 0
+    }
+
+    /// Whether every state of this mask is in `other`.
+    #[inline(always)]
+    pub const fn within(self, other: StateMask) -> bool {
+        self.0 & !other.0 == 0
     }
 }
 
@@ -323,12 +343,16 @@ impl FmiFunction {
 
     /// Whether the function may be called on an instance of `interface` in
     /// `state`. Inlined into every entry point, where the function is a
-    /// constant: the check folds to one mask test and one compare.
+    /// constant: the check folds to one mask test and one compare. A
+    /// function allowed only in its own interface's states (`fmi2DoStep`:
+    /// stepComplete) needs no compare of the interface: an instance in one of
+    /// those states is of that interface ([`Interface::own_states`]).
     #[inline(always)]
     pub fn allowed(self, interface: Interface, state: FmiState) -> bool {
         self.allowed_states().contains(state)
             && match self.interface() {
                 None => true,
+                Some(own) if self.allowed_states().within(own.own_states()) => true,
                 Some(own) => own == interface,
             }
     }
@@ -426,6 +450,41 @@ mod tests {
         assert!(!SetInteger.allowed(Interface::ModelExchange, ContinuousTimeMode));
         assert!(SetReal.allowed(Interface::ModelExchange, ContinuousTimeMode));
         assert!(!DoStep.allowed(Interface::ModelExchange, EventMode));
+    }
+
+    /// `allowed` leaves out the interface compare where the state names the
+    /// interface: on every state an instance of each interface can be in
+    /// (its own states and the common ones, never the other's), it answers
+    /// as the full rule, state and interface, does.
+    #[test]
+    fn allowed_is_the_full_rule_on_every_reachable_state() {
+        let interfaces = [Interface::ModelExchange, Interface::CoSimulation];
+        let [me, cs] = interfaces.map(Interface::own_states);
+        assert_eq!(me.0 & cs.0, 0, "no state is of both interfaces");
+        for interface in interfaces {
+            let other = interfaces.into_iter().find(|&i| i != interface).unwrap();
+            for state in FmiState::ALL {
+                if other.own_states().contains(state) {
+                    continue;
+                }
+                for function in FmiFunction::ALL {
+                    let full = function.allowed_states().contains(state)
+                        && function.interface().is_none_or(|own| own == interface);
+                    assert_eq!(
+                        function.allowed(interface, state),
+                        full,
+                        "{function:?} on {interface:?} in {state:?}"
+                    );
+                }
+            }
+        }
+        // The shortcut is taken where it matters: fmi2DoStep's states are
+        // Co-Simulation's own.
+        assert!(
+            FmiFunction::DoStep
+                .allowed_states()
+                .within(Interface::CoSimulation.own_states())
+        );
     }
 
     /// `FmiState::ALL` lists every state once (the match forgets none:

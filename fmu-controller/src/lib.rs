@@ -693,7 +693,8 @@ impl CoSimModel for PiezoControllerFmu {
         // slightly negative voltage; anti-windup handles it), so it is an
         // event, logged once per channel, not a warning. Most samples limit
         // nothing: one test of the three flags.
-        if self.controller.limited() != [0; 3] {
+        let [l1, l2, l3] = self.controller.limited();
+        if l1 | l2 | l3 != 0 {
             self.report_limiting(ctx, current_time);
         }
         Ok(StepOutcome::Completed)

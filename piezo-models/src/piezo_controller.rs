@@ -302,18 +302,23 @@ impl ControllerOutput {
     /// summed in two lanes (one vector register, one addition per pair), and
     /// a sum with an infinity or a NaN in it is not finite. A finite sum
     /// proves every value finite; a sum that is not finite is checked value
-    /// by value, since finite values of opposite huge magnitudes can overflow
-    /// it (a sample that is that far gone is rare and need not be fast).
+    /// by value, since finite values huge enough can overflow it (a sample
+    /// that is that far gone is rare and need not be fast).
     #[inline]
+    #[expect(clippy::eq_op, reason = "x − x is the finiteness test")]
     pub fn is_finite(&self) -> bool {
-        let mut lanes = [0.0f64; 2];
-        for pair in self.values().chunks_exact(2) {
+        let values = self.values();
+        // The lanes start at the first pair, not at zero: 0.0 + x is not x
+        // for x = −0.0, so an addition of zero would be kept.
+        let mut lanes = [values[0], values[1]];
+        for pair in values[2..].chunks_exact(2) {
             lanes[0] += pair[0];
             lanes[1] += pair[1];
         }
-        // x·0 is ±0 for a finite x and NaN otherwise: one multiplication
-        // and one compare for the whole sample.
-        (lanes[0] + lanes[1]) * 0.0 == 0.0 || self.each_is_finite()
+        // x − x is +0 for a finite x and NaN otherwise (∞ − ∞, NaN − NaN):
+        // a test of its bits for zero is one compare for the whole sample.
+        let sum = lanes[0] + lanes[1];
+        (sum - sum).to_bits() == 0 || self.each_is_finite()
     }
 
     #[cold]
