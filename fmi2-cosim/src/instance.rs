@@ -763,12 +763,25 @@ impl<M: CoSimModel> Instance<M> {
         if !sound && let Err(status) = self.check_step(current_time, step_size) {
             return status;
         }
+        // The time moves to the end before the model's step, so that the end
+        // need not be kept across it; a step that does not complete (an
+        // error, a discard, a panic) puts it back to the start on the way.
         self.time = end;
+        let rewind = Rewind {
+            time: &mut self.time,
+            start: current_time,
+        };
         let mut ctx = Context {
             env: &self.env,
             function,
         };
-        match self.model.do_step(&mut ctx, current_time, step_size) {
+        let outcome = self.model.do_step(&mut ctx, current_time, step_size);
+        if let Ok(StepOutcome::Completed | StepOutcome::CompletedWithWarning) = outcome {
+            std::mem::forget(rewind);
+        } else {
+            drop(rewind);
+        }
+        match outcome {
             Ok(StepOutcome::Completed) => Status::Ok,
             Ok(StepOutcome::CompletedWithWarning) => Status::Warning,
             Ok(StepOutcome::Discarded {
@@ -778,10 +791,7 @@ impl<M: CoSimModel> Instance<M> {
                 last_successful_time,
             }) => self.discard(current_time, end, last_successful_time, true),
             // fmi2Error: the gate puts the instance in its error state.
-            Err(e) => {
-                self.time = current_time;
-                self.error(function, format_args!("at t = {current_time}: {e}"))
-            }
+            Err(e) => self.error(function, format_args!("at t = {current_time}: {e}")),
         }
     }
 
@@ -1045,6 +1055,19 @@ impl<M: CoSimModel> Instance<M> {
             ),
         );
         Status::Ok
+    }
+}
+
+/// Puts an instance's time back to the start of a step when dropped: what
+/// a step that does not complete leaves (a completed step forgets it).
+struct Rewind<'a> {
+    time: &'a mut f64,
+    start: f64,
+}
+
+impl Drop for Rewind<'_> {
+    fn drop(&mut self) {
+        *self.time = self.start;
     }
 }
 

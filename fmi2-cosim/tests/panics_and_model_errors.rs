@@ -30,6 +30,7 @@ static VARIABLES: &[Variable<Faulty>] = &[
         |m| m.mode,
         |m, v| m.mode = v,
     ),
+    Variable::independent("time", "the simulation time", "s"),
 ];
 
 impl CoSimModel for Faulty {
@@ -46,11 +47,21 @@ impl CoSimModel for Faulty {
             step_size: 0.1,
         },
     };
-    const UNITS: &'static [UnitDefinition] = &[UnitDefinition {
-        name: "1",
-        base: BaseUnit::NONE,
-        display_units: &[],
-    }];
+    const UNITS: &'static [UnitDefinition] = &[
+        UnitDefinition {
+            name: "1",
+            base: BaseUnit::NONE,
+            display_units: &[],
+        },
+        UnitDefinition {
+            name: "s",
+            base: BaseUnit {
+                s: 1,
+                ..BaseUnit::NONE
+            },
+            display_units: &[],
+        },
+    ];
 
     fn variables() -> &'static [Variable<Self>] {
         VARIABLES
@@ -110,6 +121,25 @@ fn a_panic_in_the_model_returns_error_instead_of_unwinding_into_c() {
     assert_eq!(inst.reset(), OK);
     assert_eq!(initialize(&inst), OK);
     assert_eq!(inst.step(0.0, 0.1), OK);
+}
+
+/// A step that fails, by a panic or an error, leaves the instance at the
+/// time it started from (the layer advances the time before the model's
+/// step and puts it back when the step does not complete).
+#[test]
+fn a_failed_step_leaves_the_time_where_the_step_started() {
+    for mode in [1, 2] {
+        let inst = instance(0);
+        assert_eq!(initialize(&inst), OK);
+        for k in 0..3 {
+            assert_eq!(inst.step(k as f64 * 0.1, 0.1), OK);
+        }
+        let start = 3.0 * 0.1;
+        assert_eq!(inst.get_real(3), (OK, start), "mode {mode}");
+        assert_eq!(inst.set_integer(2, mode), OK);
+        assert_eq!(inst.step(start, 0.1), ERROR, "mode {mode}");
+        assert_eq!(inst.get_real(3), (OK, start), "mode {mode}");
+    }
 }
 
 #[test]
