@@ -253,6 +253,47 @@ pub fn assert_documented_within(
     );
 }
 
+/// `text` with every run of white space (a line break included) as one
+/// space, so that a phrase can be found across the lines it is wrapped over.
+fn one_line(text: &str) -> String {
+    text.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// The prose of `docs/<document>` between the first `after` and the last
+/// `before` ahead of it, read as one line (see [`one_line`]); `None` when the
+/// document does not say them.
+pub fn text_between(document: &str, before: &str, after: &str) -> Option<String> {
+    let path = document_path(document);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let text = one_line(&text);
+    let (before, after) = (one_line(before), one_line(after));
+    let end = text.find(&after)?;
+    let start = text[..end].rfind(&before)? + before.len();
+    Some(text[start..end].trim().to_owned())
+}
+
+/// Panics, naming the document, the figure printed and the one measured,
+/// unless the text between `before` and `after` in `docs/<document>` holds
+/// exactly the numbers of `measured`: for counts, which a run makes exactly
+/// (a case more or less is a change, not a rounding).
+pub fn assert_count_documented(document: &str, before: &str, after: &str, measured: &str) {
+    let Some(printed) = text_between(document, before, after) else {
+        panic!("docs/{document} no longer says {before:?} ... {after:?}; measured: {measured:?}")
+    };
+    let values = |text: &str| {
+        numbers(text)
+            .into_iter()
+            .map(|(value, _)| value)
+            .collect::<Vec<_>>()
+    };
+    assert!(
+        values(&printed) == values(measured),
+        "docs/{document} prints {printed:?} (between {before:?} and {after:?}), the run \
+         counted {measured:?}: measure it again with the command the document gives and print \
+         it with the commit"
+    );
+}
+
 #[cfg(test)]
 mod rule {
     use super::*;

@@ -15,12 +15,16 @@ table of docs/fmi.md in test_model_exchange.py; the Rust table of docs/fmi.md
 in fmu-plant/tests/model_exchange.rs, the fuzz and memory tables of
 docs/robustness.md in the fmi_fuzz tests and fmi2-conformance/tests/memory.rs,
 the P-885 rows of docs/identification.md in
-piezo-identify/tests/quality_bars.rs)."""
+piezo-identify/tests/quality_bars.rs, the FMU-state restores of docs/fmi.md
+in the FMU crates' abi_conformance tests, the table of docs/presets.md in
+test_presets.py); the counts of tests/test_parameter_ranges.py that
+docs/robustness.md prints are checked here."""
 
 from __future__ import annotations
 
 import re
 import subprocess
+import sys
 
 import pytest
 
@@ -175,3 +179,87 @@ def test_a_table_without_its_commit_is_found():
     assert unmeasured_tables("x.md", "\n".join(stale))
     elsewhere = ["# Figures", "", "## Other", "Measured at `abc1234`.", "## Speed", "", *table]
     assert unmeasured_tables("x.md", "\n".join(elsewhere))
+
+
+def section_text(document: str, heading: str) -> str:
+    """The prose of the `## heading` section of docs/<document>, as one line."""
+    lines = prose((REPO_ROOT / "docs" / document).read_text(encoding="utf-8"))
+    start = lines.index(f"## {heading}") + 1
+    end = next((i for i in range(start, len(lines)) if lines[i].startswith("## ")), len(lines))
+    return " ".join(" ".join(lines[start:end]).split())
+
+
+#: What docs/robustness.md says tests/test_parameter_ranges.py checks: the
+#: phrase holding each count, by what is counted.
+PARAMETER_RANGE_COUNTS = {
+    "values outside a declared range": r"sets (\d+) values outside a declared range",
+    "parameters that declare a range": r"on the (\d+) parameters of both FMUs that declare one",
+    "physical-range cases": r"(\d+) physical-range cases",
+    "sample periods": r"(\d+) sample periods that are not a positive finite number",
+    "diverging Bouc-Wen states": r"(\d+) diverging Bouc-Wen states",
+    "overflowing controller outputs": r"(\d+) controller outputs? that overflows?",
+    "tests": r"tests/test_parameter_ranges\.py`: (\d+) tests",
+}
+
+
+def printed_number(text: str) -> float:
+    """A value as the documents print it: `0`, `−1e-4`, `NaN`, `∞`."""
+    return float(text.strip().replace("−", "-").replace("∞", "inf"))
+
+
+def test_parameter_range_counts_are_the_ones_the_tests_run():
+    """docs/robustness.md counts what tests/test_parameter_ranges.py checks;
+    the counts are taken again from what pytest collects in that module and
+    from the declared ranges of dist/*.fmu, through the module's own
+    functions, so a case added or a range declared there without the text
+    following fails here."""
+    from types import SimpleNamespace
+
+    import fmpy
+
+    from tests import test_parameter_ranges as ranges
+
+    collected = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+         "tests/test_parameter_ranges.py"], cwd=REPO_ROOT, capture_output=True, text=True)
+    assert collected.returncode == 0, collected.stdout + collected.stderr
+    tests = [line.partition("::")[2] for line in collected.stdout.splitlines()
+             if line.startswith("tests/test_parameter_ranges.py::")]
+
+    def run(prefix: str) -> int:
+        return sum(1 for test in tests if test.startswith(prefix))
+
+    declared = []
+    for name in ranges.MODELS:
+        path = REPO_ROOT / "dist" / f"{name}.fmu"
+        if not path.is_file():
+            pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
+        declared += ranges.declared_ranges(SimpleNamespace(md=fmpy.read_model_description(str(path))))
+    measured = {
+        "values outside a declared range": sum(len(ranges.outside(v)) for v in declared),
+        "parameters that declare a range": len(declared),
+        "physical-range cases": run("test_parameters_out_of_physical_range_are_refused["),
+        "sample periods": run("test_controller_sample_period_must_be_positive["),
+        "diverging Bouc-Wen states": run("test_diverging_hysteresis_"),
+        "overflowing controller outputs": run("test_overflowing_controller_output"),
+        "tests": len(tests),
+    }
+    heading = "Parameters out of range and diverging states"
+    text = section_text("robustness.md", heading)
+    problems = []
+    for what, phrase in PARAMETER_RANGE_COUNTS.items():
+        printed = re.search(phrase, text)
+        if not printed:
+            problems.append(f"no longer says /{phrase}/ (measured: {measured[what]} {what})")
+        elif int(printed.group(1)) != measured[what]:
+            problems.append(f"prints {printed.group(0)!r}; tests/test_parameter_ranges.py has "
+                            f"{measured[what]} {what}")
+    periods = re.search(r"not a positive finite number \(([^)]*)\)", text)
+    if not periods or [repr(printed_number(p)) for p in periods.group(1).split(",")] != [
+            repr(float(p)) for p in ranges.SAMPLE_PERIODS]:
+        problems.append(f"prints the sample periods {periods and periods.group(1)!r}; the test "
+                        f"sets {ranges.SAMPLE_PERIODS}")
+    assert not problems, (
+        f"docs/robustness.md ({heading!r}) does not count what tests/test_parameter_ranges.py "
+        "runs: count again with the commands it gives and print the counts with the commit\n"
+        + "\n".join(problems))

@@ -180,7 +180,11 @@ def test_parameters_out_of_physical_range_are_refused(envs, model_name, values, 
     assert rule in text, text
 
 
-@pytest.mark.parametrize("step", [0.0, -1e-4, math.nan, math.inf])
+#: Sample periods that are not a positive finite number.
+SAMPLE_PERIODS = [0.0, -1e-4, math.nan, math.inf]
+
+
+@pytest.mark.parametrize("step", SAMPLE_PERIODS)
 def test_controller_sample_period_must_be_positive(envs, step):
     """The controller samples once per communication step (its sample period
     is the step size), so a period that is not positive is a refused step."""

@@ -1,17 +1,23 @@
 """Parameter sets by FMI name (dist/presets/*.json, written by `make fmus` from
 the Rust variable tables): each loads into its FMU through fmpy, the default
 sets equal the FMUs' start values, and the XY200S set turns FlexureStage into
-seed 001's stage (its strokes, seed 001 §5.1)."""
+seed 001's stage (its strokes, seed 001 §5.1). docs/presets.md's script runs
+as printed and its tables are the ones the document shows."""
 
 from __future__ import annotations
 
 import json
+import os
+import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from demo.cosim import Fmu
 from tests.conftest import REPO_ROOT
+from tests.docs_figures import DOCS, doc_rows, stale_rows, table_rows
 
 DIST = REPO_ROOT / "dist"
 PRESETS = DIST / "presets"
@@ -82,3 +88,29 @@ def test_the_xy200s_set_gives_the_printed_strokes():
     print(f"XY200S through FlexureStage.fmu: x stroke {x:.3f} um (144.37), y stroke {y:.3f} um (149.27)")
     assert x == pytest.approx(144.37, rel=0.005)
     assert y == pytest.approx(149.27, rel=0.005)
+
+
+def test_the_presets_document_prints_what_its_script_measures():
+    """docs/presets.md's one Python block, run from the repository's root as
+    the document says, prints the tables of the `paper` and `stage` presets on
+    the plant; every figure of them must be the one the document prints
+    (tests/docs_figures.py says within what), and every row the document
+    prints must be one the script prints."""
+    blocks = re.findall(r"^```python\n(.*?)^```$", (DOCS / "presets.md").read_text(encoding="utf-8"),
+                        re.MULTILINE | re.DOTALL)
+    assert len(blocks) == 1, f"docs/presets.md: {len(blocks)} python blocks, one expected"
+    for fmu in ("FlexureStage", "PiezoController"):
+        if not (DIST / f"{fmu}.fmu").is_file():
+            pytest.fail(f"dist/{fmu}.fmu is missing: run `make fmus` first", pytrace=False)
+    done = subprocess.run([sys.executable, "-c", blocks[0]], cwd=REPO_ROOT, capture_output=True,
+                          text=True, timeout=600, env={**os.environ, "PYTHONPATH": str(REPO_ROOT)})
+    assert done.returncode == 0, f"docs/presets.md's script failed:\n{done.stdout}\n{done.stderr}"
+    print(done.stdout)
+    measured, documented = table_rows(done.stdout.splitlines()), doc_rows("presets.md")
+    problems = stale_rows(documented, measured, 2, "docs/presets.md")
+    measured_keys = {tuple(row[:2]) for row in measured}
+    problems += [f"docs/presets.md: {' | '.join(row[:2])!r} is printed but not measured"
+                 for row in documented if tuple(row[:2]) not in measured_keys]
+    assert not problems, (
+        "docs/presets.md does not print what its script measures: run it again, as the document "
+        "says, and print its tables with the commit\n" + "\n".join(problems))

@@ -213,25 +213,33 @@ pub fn allowed_in(function: &str, state: State) -> bool {
 /// `model_exchange`, the Model Exchange checks as well; with
 /// `strings_time_constants`, the checks of settable String variables, the
 /// independent variable and constants, for an FMU that declares them; or the
-/// checks named.
+/// checks named. A trailing `restore_cases => path` hands the cases
+/// [`checks::fmu_state_restores_every_machine_state`] ran to the function
+/// `path(&[checks::RestoreCases])`, for a test that compares them with the
+/// number a document prints.
 #[macro_export]
 macro_rules! conformance_tests {
-    ($fmu:expr, model_exchange) => {
-        $crate::conformance_tests!($fmu; @co_simulation
+    ($fmu:expr, model_exchange $(, restore_cases => $restore_cases:path)?) => {
+        $crate::conformance_tests!($fmu; @co_simulation [$($restore_cases)?]
             model_exchange_vectors_match_the_variables,
             model_exchange_arguments_are_checked,
             non_finite_derivatives_are_refused,
             derivative_dependencies_hold,
         );
     };
-    ($fmu:expr, strings_time_constants) => {
-        $crate::conformance_tests!($fmu; @co_simulation
+    ($fmu:expr, strings_time_constants $(, restore_cases => $restore_cases:path)?) => {
+        $crate::conformance_tests!($fmu; @co_simulation [$($restore_cases)?]
             string_arguments_are_checked,
             independent_variable_is_the_time,
             constants_hold_their_start_values,
         );
     };
-    ($fmu:expr; @co_simulation $($more:ident),* $(,)?) => {
+    ($fmu:expr; @co_simulation [$($restore_cases:path)?] $($more:ident),* $(,)?) => {
+        #[test]
+        fn fmu_state_restores_every_machine_state() {
+            let _cases = $crate::checks::fmu_state_restores_every_machine_state(__conformance_fmu());
+            $($restore_cases(&_cases);)?
+        }
         $crate::conformance_tests!($fmu;
             exports_every_function_and_nothing_else,
             reports_platform_and_version,
@@ -254,7 +262,6 @@ macro_rules! conformance_tests {
             communication_points_must_continue,
             fmu_state_restores_bit_for_bit,
             corrupted_states_are_refused,
-            fmu_state_restores_every_machine_state,
             status_queries,
             reset_restores_start_values,
             logging_follows_debug_logging,
@@ -275,8 +282,8 @@ macro_rules! conformance_tests {
             }
         )*
     };
-    ($fmu:expr) => {
-        $crate::conformance_tests!($fmu; @co_simulation);
+    ($fmu:expr $(, restore_cases => $restore_cases:path)?) => {
+        $crate::conformance_tests!($fmu; @co_simulation [$($restore_cases)?]);
     };
 }
 

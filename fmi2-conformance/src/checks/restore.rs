@@ -204,16 +204,60 @@ fn restore_and_compare(
     })
 }
 
+/// The restores [`fmu_state_restores_every_machine_state`] ran for one
+/// interface, counted as they ran (so that a document giving their number
+/// can be checked against the run): `taken` machine states a state was taken
+/// in, times `restored_into` machine states it was restored into, times the
+/// ways of restoring (in memory, deserialized), is `cases`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RestoreCases {
+    pub interface: Interface,
+    pub taken: usize,
+    pub restored_into: usize,
+    pub cases: usize,
+}
+
+impl RestoreCases {
+    /// Ways of restoring each state into each machine state.
+    pub fn ways(&self) -> usize {
+        self.cases / (self.taken * self.restored_into).max(1)
+    }
+}
+
+impl std::fmt::Display for RestoreCases {
+    /// `5 × 5 × 2 = 50`, as a document prints the product.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} × {} × {} = {}",
+            self.taken,
+            self.restored_into,
+            self.ways(),
+            self.cases
+        )
+    }
+}
+
 /// Every combination, for every interface the FMU offers: a state taken in
 /// each machine state (after a changed parameter, set inputs and some
 /// simulated time), restored into an instance in each machine state (the
 /// error state included), in memory into the same instance and deserialized
 /// into another, continues as the original, bit for bit, state machine
 /// included. A state of one interface is refused by an instance of the other.
-pub fn fmu_state_restores_every_machine_state(fmu: &Fmu) {
+/// Returns the cases run, per interface.
+pub fn fmu_state_restores_every_machine_state(fmu: &Fmu) -> Vec<RestoreCases> {
     let mut failures = Vec::new();
+    let mut counted = Vec::new();
     for interface in interfaces(fmu) {
+        let mut count = RestoreCases {
+            interface,
+            taken: 0,
+            restored_into: 0,
+            cases: 0,
+        };
         for &taken in interface.states() {
+            count.taken += 1;
+            let mut restored_into = 0;
             let mut source = prepared(fmu, interface, taken, 0.0);
             let time = source.time;
             let bytes = serialized(&source);
@@ -221,6 +265,7 @@ pub fn fmu_state_restores_every_machine_state(fmu: &Fmu) {
             assert_eq!(status, OK);
             let reference = continuation(&mut source, taken);
             for &target in interface.states() {
+                restored_into += 1;
                 let case = |how: &str| {
                     format!("{interface:?}: taken in {taken:?}, restored into {target:?} ({how})")
                 };
@@ -232,6 +277,7 @@ pub fn fmu_state_restores_every_machine_state(fmu: &Fmu) {
                 {
                     failures.push(format!("{}: {problem}", case("in memory")));
                 }
+                count.cases += 1;
                 // Deserialized, into another instance.
                 let mut other = prepared(fmu, interface, target, 2.0);
                 let (status, mut restored) = other.deserialize(&bytes);
@@ -241,10 +287,14 @@ pub fn fmu_state_restores_every_machine_state(fmu: &Fmu) {
                 {
                     failures.push(format!("{}: {problem}", case("deserialized")));
                 }
+                count.cases += 1;
                 assert_eq!(other.free_state(&mut restored), OK);
             }
             assert_eq!(source.free_state(&mut state), OK);
+            // Every taken state is restored into the same machine states.
+            count.restored_into = restored_into;
         }
+        counted.push(count);
     }
     // Across interfaces: refused, with the reason.
     if fmu.offers_model_exchange() {
@@ -269,4 +319,5 @@ pub fn fmu_state_restores_every_machine_state(fmu: &Fmu) {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+    counted
 }
