@@ -775,23 +775,32 @@ impl<M: CoSimModel> Instance<M> {
             env: &self.env,
             function,
         };
-        let outcome = self.model.do_step(&mut ctx, current_time, step_size);
-        if let Ok(StepOutcome::Completed | StepOutcome::CompletedWithWarning) = outcome {
-            std::mem::forget(rewind);
-        } else {
-            drop(rewind);
-        }
-        match outcome {
-            Ok(StepOutcome::Completed) => Status::Ok,
-            Ok(StepOutcome::CompletedWithWarning) => Status::Warning,
+        match self.model.do_step(&mut ctx, current_time, step_size) {
+            Ok(StepOutcome::Completed) => {
+                std::mem::forget(rewind);
+                Status::Ok
+            }
+            Ok(StepOutcome::CompletedWithWarning) => {
+                std::mem::forget(rewind);
+                Status::Warning
+            }
             Ok(StepOutcome::Discarded {
                 last_successful_time,
-            }) => self.discard(current_time, end, last_successful_time, false),
+            }) => {
+                drop(rewind);
+                self.discard(current_time, end, last_successful_time, false)
+            }
             Ok(StepOutcome::Terminate {
                 last_successful_time,
-            }) => self.discard(current_time, end, last_successful_time, true),
+            }) => {
+                drop(rewind);
+                self.discard(current_time, end, last_successful_time, true)
+            }
             // fmi2Error: the gate puts the instance in its error state.
-            Err(e) => self.error(function, format_args!("at t = {current_time}: {e}")),
+            Err(e) => {
+                drop(rewind);
+                self.error(function, format_args!("at t = {current_time}: {e}"))
+            }
         }
     }
 
