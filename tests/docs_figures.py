@@ -88,3 +88,35 @@ def stale_rows(documented: list[list[str]], measured: list[list[str]], key_cells
             if index >= key_cells and not same_numbers(p, m):
                 problems.append(f"{document}: {' | '.join(key)}: printed {p!r}, measured {m!r}")
     return problems
+
+
+#: Powers of ten as the documents print them in prose (`2.1·10⁻¹⁵`).
+SUPERSCRIPTS = str.maketrans("⁻⁰¹²³⁴⁵⁶⁷⁸⁹", "-0123456789")
+POWER_OF_TEN = re.compile(r"\s*[·×]\s*10([⁻⁰¹²³⁴⁵⁶⁷⁸⁹]+)")
+
+
+def plain_powers(text: str) -> str:
+    """`2.1·10⁻¹⁵` as `2.1e-15`, so that numbers() reads it as one number."""
+    return POWER_OF_TEN.sub(lambda m: "e" + m.group(1).translate(SUPERSCRIPTS), text)
+
+
+def stale_prose(document: str, pattern: str, measured: str, figure: str,
+                exact: bool = False) -> list[str]:
+    """What differs between a figure a document prints in its text and the
+    one measured: `pattern` (a regular expression with one group, the
+    printed figure) is searched in docs/<document> with its line breaks read
+    as spaces, and every occurrence must hold the measured numbers (the rule
+    above; `exact`: the same text, for a list of names). A pattern that no
+    longer matches is a problem too: the sentence was rewritten without its
+    figure."""
+    text = " ".join((DOCS / document).read_text(encoding="utf-8").split())
+    printed = re.findall(pattern, text)
+    if not printed:
+        return [f"docs/{document}: {figure}: not found (pattern {pattern!r}); measured: {measured}"]
+    problems = []
+    for figure_text in printed:
+        same = (figure_text == measured if exact
+                else same_numbers(plain_powers(figure_text), plain_powers(measured)))
+        if not same:
+            problems.append(f"docs/{document}: {figure}: printed {figure_text!r}, measured {measured!r}")
+    return problems

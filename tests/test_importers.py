@@ -16,7 +16,7 @@ signals in the same order (Jacobi: both FMUs get the other's outputs at t_k,
 then both step; neither FMU has direct feedthrough), and both FMUs output 0
 until their first step; the floating-point operations are then the same, in
 the same order. A different exchange order would delay one signal by a step
-and move the sensors by 0.15 um on the test trajectory: any difference is a
+and move the sensors by 0.17 um on the test trajectory: any difference is a
 finding.
 libcosim keeps time in integer nanoseconds and hands the FMUs
 h_k = t_k+1 - t_k of its double time points, which differs from 1e-4 s in
@@ -58,6 +58,7 @@ from demo.cosim import (
     simulate,
 )
 from demo.experiments import MID_STROKE
+from tests.docs_figures import stale_prose
 from demo.systems import (
     LOOP_NAME,
     SYSTEM_NAME,
@@ -290,14 +291,21 @@ def test_libcosim_closed_loop_equals_the_fmpy_closed_loop(fmus, members):
     assert np.array_equal(rows, on_its_grid[1:]), np.abs(rows - on_its_grid[1:]).max()
     # Beside the demo's k·1e-4 s grid: step sizes that differ in the last
     # bits (relative 1e-15) move a stable loop by ULPs of its 10 um signals;
-    # measured 1.7e-13 um, bound 1e-9 um (eight decades under the 0.15 um
-    # of a one-step shift of the exchange order, checked below).
+    # measured 5.9e-14 um (docs/platforms.md, compared below), bound 1e-9 um
+    # (eight decades under the 0.17 um of a one-step shift of the exchange
+    # order, checked below).
     on_demo_grid = sensors_of(direct(fmus, members, trajectory, DURATION))
     beside = np.abs(rows - on_demo_grid[1:]).max()
     shifted = np.abs(rows[1:] - on_demo_grid[1:-1]).max()
     print(f"libcosim beside the k·1e-4 s grid: {beside:.2g} um; a one-step shift: {shifted:.2g} um")
     assert beside < 1e-9
     assert shifted > 1e-3, "the trajectory must tell a one-step shift apart"
+    # docs/platforms.md's libcosim row prints both.
+    problems = stale_prose("platforms.md", r"(\S+) µm from it on the k·10⁻⁴ s grid", f"{beside:.2g}",
+                           "libcosim beside the k·1e-4 s grid")
+    problems += stale_prose("platforms.md", r"a one-step shift of the exchange would be (\S+) µm",
+                            f"{shifted:.2g}", "libcosim against a one-step shift")
+    assert not problems, "\n".join(problems)
 
 
 # --------------------------------------------------------------------------
@@ -389,6 +397,9 @@ def test_libcosim_runs_the_ssp_as_the_direct_loop(fmus, members):
     noise_rms = np.std(rows[:, PLANT_OUTPUTS.index("s1")] - rows[:, PLANT_OUTPUTS.index("y")])
     print(f"libcosim from the SSP: sensor noise {noise_rms:.4f} um RMS")
     assert noise_rms == pytest.approx(members[PLANT_INSTANCE].parameters["noise.rms"], rel=0.1)
+    problems = stale_prose("platforms.md", r"sensor noise (\S+) µm RMS for the preset's", f"{noise_rms:.4f}",
+                           "libcosim from the SSP: sensor noise")
+    assert not problems, "\n".join(problems)
     reference = sensors_of(
         direct(fmus, members, hold_home, SSP_STEPS * SAMPLE_PERIOD, nanosecond_points(SSP_STEPS))
     )
@@ -501,6 +512,11 @@ def test_container_default_experiment_holds_home_as_the_direct_loop(fmus, member
     print(f"container, DefaultExperiment: {len(result)} output points equal to the direct loop; "
           f"x, y within {max(off_home):.1g} um of home over the last 0.1 s")
     assert max(off_home) < 0.02
+    problems = stale_prose("platforms.md", r"equal to the direct loop at all (\d+) output points",
+                           str(len(result)), "container, DefaultExperiment: output points", exact=True)
+    problems += stale_prose("platforms.md", r"x, y within (\S+) µm of home over the last 0\.1 s",
+                            f"{max(off_home):.1g}", "container, DefaultExperiment: off home")
+    assert not problems, "\n".join(problems)
 
 
 def test_container_tracks_a_trajectory_as_the_direct_loop(fmus, members):

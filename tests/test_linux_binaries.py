@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.docs_figures import stale_prose
 from tests.platform_binaries import MODELS, expected_functions, extract_binary, require_tool
 
 #: The oldest glibc the binaries must load with (released 2012; RHEL 7).
@@ -91,6 +92,10 @@ def test_depends_on_glibc_libraries_only(linux_binary):
     needed = needed_libraries(library)
     print(f"{model}.so NEEDED: {', '.join(needed)}")
     assert needed, f"{model}: readelf lists no NEEDED entry"
+    # docs/platforms.md prints the list (the same for both FMUs).
+    problems = stale_prose("platforms.md", r"NEEDED: `([^`]*)`", ", ".join(needed),
+                           f"{model}.so's NEEDED libraries", exact=True)
+    assert not problems, "\n".join(problems)
     assert set(needed) <= GLIBC_LIBRARIES, (
         f"{model}: depends on {sorted(set(needed) - GLIBC_LIBRARIES)}, which is not part of "
         f"glibc")
@@ -108,3 +113,18 @@ def test_exports_the_fmi_functions_and_nothing_else(linux_binary):
     expected = expected_functions(model)
     assert expected - defined == set(), f"{model}: missing {sorted(expected - defined)}"
     assert defined - expected == set(), f"{model}: also exports {sorted(defined - expected)}"
+    problems = stale_prose("platforms.md", rf"the exports are exactly the FMI functions: .*?\b(\d+) of {model}",
+                           str(len(defined)), f"{model}.so's exports", exact=True)
+    assert not problems, "\n".join(problems)
+
+
+def test_docs_platforms_prints_the_highest_glibc_version(tmp_path):
+    """docs/platforms.md prints the highest glibc symbol version either
+    linux64 binary needs: a build that needs another fails here until the
+    document says so."""
+    highest = max(max(glibc_versions_needed(extract_binary(model, "linux64", "so", tmp_path)))
+                  for model in MODELS)
+    problems = stale_prose("platforms.md", r"the highest glibc symbol version either `\.so` needs is \*\*GLIBC_([0-9.]+)\*\*",
+                           ".".join(map(str, highest)), "highest glibc version of the linux64 binaries",
+                           exact=True)
+    assert not problems, "\n".join(problems)

@@ -32,6 +32,7 @@ import pytest
 from fmpy import read_model_description
 
 from tests.conftest import REPO_ROOT
+from tests.docs_figures import stale_prose
 from tests.platform_binaries import (
     C_FLAGS,
     C_IMPORTER,
@@ -129,6 +130,15 @@ def test_exports_every_fmi_function_unprefixed(dll):
     assert expected - exports == set(), f"{model}: missing {sorted(expected - exports)}"
     assert exports - expected <= TOLERATED_EXPORTS, (
         f"{model}: unexpected exports {sorted(exports - expected - TOLERATED_EXPORTS)}")
+    # docs/platforms.md: "the same 44 and 34 FMI functions exported
+    # unprefixed, and `callback_log`" (FlexureStage's, then PiezoController's).
+    counts = [r"the same (\d+) and \d+ FMI functions", r"the same \d+ and (\d+) FMI functions"]
+    problems = stale_prose("platforms.md", counts[MODELS.index(model)], str(len(exports & expected)),
+                           f"{model}.dll's FMI exports", exact=True)
+    problems += stale_prose("platforms.md", r"FMI functions exported unprefixed, and `([^`]*)`",
+                            ", ".join(sorted(exports - expected)), f"{model}.dll's other exports",
+                            exact=True)
+    assert not problems, "\n".join(problems)
 
 
 def test_imports_windows_system_dlls_only(dll):
@@ -139,6 +149,12 @@ def test_imports_windows_system_dlls_only(dll):
         f"{model}: objdump's import list was not understood: {imports}")
     foreign = [i for i in imports if i.lower() not in SYSTEM_DLLS and not API_SET.match(i.lower())]
     assert not foreign, f"{model}: imports DLLs that Windows does not ship: {foreign}"
+    # docs/platforms.md lists them (the same for both FMUs), sorted by name
+    # regardless of case, the lower-case spelling first.
+    problems = stale_prose("platforms.md", r"imports `([^`]*)`",
+                           ", ".join(sorted(imports, key=lambda i: (i.lower(), not i.islower()))),
+                           f"{model}.dll's imports", exact=True)
+    assert not problems, "\n".join(problems)
 
 
 # --- running under wine -------------------------------------------------------
@@ -257,6 +273,14 @@ def test_a_c_importer_runs_the_dll_under_wine(wine, windows_programs, linux_prog
           f"linux64 {on_linux!r}, difference {on_windows - on_linux:.3g}")
     # See RELATIVE_TOLERANCE: the same code, two C libraries' exp and pow.
     assert on_windows == pytest.approx(on_linux, rel=RELATIVE_TOLERANCE)
+    # docs/platforms.md prints the value under wine and how it compares.
+    problems = stale_prose("platforms.md", rf"{model} {output_name} = ([0-9.]+)", repr(on_windows),
+                           f"{model}'s {output_name} under wine")
+    problems += stale_prose(
+        "platforms.md", r"under wine, (identical to the bit|differing by \S+) to linux64",
+        "identical to the bit" if on_windows == on_linux else f"differing by {on_windows - on_linux:.2g}",
+        f"{model}'s {output_name}, win64 against linux64", exact=True)
+    assert not problems, "\n".join(problems)
 
 
 def closed_loop_wiring(controller: Path, plant: Path, to_path) -> tuple[str, list[str]]:
@@ -327,3 +351,21 @@ def test_the_closed_loop_under_wine_matches_linux(wine, windows_programs, linux_
         print(f"  {name}: {d:.3g} ({r:.3g})")
     print(f"  identical samples: {np.mean(on_windows[:, 1:] == on_linux[:, 1:]):.1%}")
     assert relative.max() <= RELATIVE_TOLERANCE, dict(zip(columns, relative))
+    # docs/platforms.md prints these figures: the largest relative
+    # difference (in the text and in the importers' table), the signal it
+    # is on, s1's in um, and the share of identical samples.
+    worst = int(np.argmax(relative))
+    s1_difference = difference[columns.index("s1")]
+    identical = 100 * np.mean(on_windows[:, 1:] == on_linux[:, 1:])
+    figure = "closed loop under wine against linux64"
+    problems = stale_prose("platforms.md", r"relative to its range: \*\*([^*]+)\*\*",
+                           f"{relative[worst]:.2g}", f"{figure}: largest relative difference")
+    problems += stale_prose("platforms.md", r"C master: largest difference (\S+) of each signal's range",
+                            f"{relative[worst]:.2g}", f"{figure}: largest relative difference (table)")
+    problems += stale_prose("platforms.md", r"relative to its range: \*\*[^*]+\*\* \((\w+);",
+                            columns[worst], f"{figure}: the signal of the largest difference", exact=True)
+    problems += stale_prose("platforms.md", r"; s1 (\S+) µm\)", f"{s1_difference:.2g}",
+                            f"{figure}: largest difference of s1")
+    problems += stale_prose("platforms.md", r"(\d+) % of the samples identical to the bit",
+                            f"{identical:.0f}", f"{figure}: identical samples")
+    assert not problems, "\n".join(problems)
