@@ -23,7 +23,7 @@ from demo import experiments as ex
 from demo.cosim import Fmu, simulate
 from demo.paper import CIRCLE, TABLE_3, TRACKING, Y_THETA, rows
 from tests.conftest import REPO_ROOT
-from tests.docs_figures import doc_rows, stale_rows, table_rows
+from tests.docs_figures import doc_rows, stale_prose, stale_rows, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -82,6 +82,11 @@ def test_docs_seed000_prints_these_figures(results):
         f"| {r.what} | {r.paper} | {r.simulated} | {r.rule} | {'met' if r.met else 'missed'} "
         f"| {r.where} |" for r in rows(results))
     problems = stale_rows(doc_rows("seed000.md"), measured, 1, "docs/seed000.md")
+    # The runs it counts: the table's, and every run of `make demo`.
+    problems += stale_prose("seed000.md", r"\(the (\d+) runs the table needs", str(len(RUNS)),
+                            "runs behind the table", exact=True)
+    problems += stale_prose("seed000.md", r"`python -m demo --out out/demo`, (\d+) runs",
+                            str(len(ex.experiments())), "runs of make demo", exact=True)
     assert not problems, "\n".join(problems)
 
 

@@ -17,7 +17,7 @@ import pytest
 from demo.cosim import Fmu, simulate
 from demo.experiments import ABW_XY_HOME, ABW_XY_HZ, pose, trajectory
 from tests.conftest import REPO_ROOT
-from tests.docs_figures import doc_rows, stale_rows, table_rows
+from tests.docs_figures import doc_rows, stale_prose, stale_rows, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -135,7 +135,15 @@ def test_docs_seed001_prints_these_figures(feedforward_xy_results):
     demo`'s report prints): a figure left stale fails here."""
     from demo.report import feedforward_xy_section
 
+    from demo.experiments import feedforward_xy_experiments
+
     measured = table_rows(feedforward_xy_section(feedforward_xy_results))
     assert len(measured) == 16
     problems = stale_rows(doc_rows("seed001.md"), measured, 2, "docs/seed001.md")
+    # The runs behind them: how many, and the time they simulate.
+    simulated = sum(experiment.duration for experiment in feedforward_xy_experiments())
+    problems += stale_prose("seed001.md", r"\((\d+) runs, [0-9.]+ s simulated", str(len(feedforward_xy_results)),
+                            "seed 001's runs", exact=True)
+    problems += stale_prose("seed001.md", r"\(\d+ runs, ([0-9.]+) s simulated", f"{simulated:g}",
+                            "time seed 001's runs simulate")
     assert not problems, "\n".join(problems)
