@@ -124,7 +124,8 @@ def test_docs_platforms_prints_the_highest_glibc_version(tmp_path):
     document says so."""
     highest = max(max(glibc_versions_needed(extract_binary(model, "linux64", "so", tmp_path)))
                   for model in MODELS)
-    problems = stale_prose("platforms.md", r"the highest glibc symbol version either `\.so` needs is \*\*GLIBC_([0-9.]+)\*\*",
+    problems = stale_prose("platforms.md",
+                           r"the highest glibc symbol version either `\.so` needs is \*\*GLIBC_([0-9.]+)\*\*",
                            ".".join(map(str, highest)), "highest glibc version of the linux64 binaries",
                            exact=True)
     assert not problems, "\n".join(problems)
