@@ -17,7 +17,8 @@ docs/robustness.md in the fmi_fuzz tests and fmi2-conformance/tests/memory.rs,
 the P-885 rows of docs/identification.md in
 piezo-identify/tests/quality_bars.rs, the FMU-state restores of docs/fmi.md
 in the FMU crates' abi_conformance tests, the table of docs/presets.md in
-test_presets.py); the counts of tests/test_parameter_ranges.py that
+test_presets.py, the binaries' and importers' figures of docs/platforms.md in
+test_linux_binaries.py, test_windows_binaries.py and test_importers.py); the counts of tests/test_parameter_ranges.py that
 docs/robustness.md prints are checked here."""
 
 from __future__ import annotations
