@@ -141,19 +141,6 @@ pub fn same_numbers_within(printed: &str, measured: &str, relative: f64) -> bool
         })
 }
 
-/// `n` with its thousands separated by commas, as the documents print counts.
-pub fn thousands(n: u64) -> String {
-    let digits = n.to_string();
-    let mut out = String::new();
-    for (i, c) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i).is_multiple_of(3) {
-            out.push(',');
-        }
-        out.push(c);
-    }
-    out
-}
-
 /// A measured row: `label`, then `cells`, those at the indices `uncompared`
 /// (of `cells`) left out of the comparison.
 pub fn row(label: &str, cells: Vec<String>, uncompared: &[usize]) -> Vec<Option<String>> {

@@ -18,6 +18,21 @@ pub mod model_exchange;
 pub mod table;
 pub mod workspace;
 
+/// `n` with its thousands separated by commas, as the documents in docs/
+/// print counts (the fuzz report's table row, and the tests that compare
+/// their counts with a document).
+pub fn thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::new();
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
 /// The states the harness drives an instance into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum State {

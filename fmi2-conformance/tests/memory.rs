@@ -202,8 +202,8 @@ fn lifetimes_under_valgrind(index: usize) {
                 HEAP_COLUMN,
                 format!(
                     "{} allocs, {} frees",
-                    docs_figures::thousands(allocs),
-                    docs_figures::thousands(frees)
+                    fmi2_conformance::thousands(allocs),
+                    fmi2_conformance::thousands(frees)
                 ),
             ),
         ],
@@ -265,8 +265,8 @@ fn resident_memory_stays_flat(index: usize) {
             RSS_COLUMN,
             format!(
                 "{} / {} kB",
-                docs_figures::thousands(hwm_base),
-                docs_figures::thousands(hwm_end)
+                fmi2_conformance::thousands(hwm_base),
+                fmi2_conformance::thousands(hwm_end)
             ),
         )],
         RSS_RELATIVE,

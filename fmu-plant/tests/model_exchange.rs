@@ -375,7 +375,7 @@ fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
         };
         rows.push(vec![
             Some(name.to_owned()),
-            Some(docs_figures::thousands(procedure.len() as u64)),
+            Some(fmi2_conformance::thousands(procedure.len() as u64)),
             Some(format!("{worst:.1e} µm")),
             Some(fingerprints),
         ]);

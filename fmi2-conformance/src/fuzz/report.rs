@@ -2,6 +2,7 @@
 //! failure prints.
 
 use super::*;
+use crate::thousands;
 
 pub(super) const STATUS_NAMES: [&str; 5] = ["OK", "Warning", "Discard", "Error", "Fatal"];
 
@@ -41,19 +42,6 @@ pub struct FuzzReport {
     pub bad_strings_refused: u64,
     pub by_function: BTreeMap<&'static str, [u64; 5]>,
     pub elapsed: Duration,
-}
-
-/// `n` with its thousands separated by commas, as docs/ prints counts.
-fn thousands(n: u64) -> String {
-    let digits = n.to_string();
-    let mut out = String::new();
-    for (i, c) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i).is_multiple_of(3) {
-            out.push(',');
-        }
-        out.push(c);
-    }
-    out
 }
 
 impl FuzzReport {
