@@ -58,6 +58,7 @@ use crate::gapso::GaPsoOptions;
 use crate::plant::{
     PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record, exercise_samples, sine_records,
 };
+use crate::protocol::LINEAR_RSS_INCREASE;
 
 /// The experiment conditions this procedure shares with the demo's
 /// single-axis runs (`demo/experiments.py`), which measure what the fitted
@@ -478,8 +479,19 @@ pub fn identify_stage(
             EXERCISE_TIME,
         )?;
         let warm_up = exercise_samples(EXERCISE_TIME, sample_rate);
+        // The final linear solve is regularised as the identification
+        // protocol's is (`protocol::LINEAR_RSS_INCREASE`). After the exercise
+        // cycle, eq. (6)'s record barely moves the two widest backlash
+        // operators (r_9, r_10 near u1max/2), so their columns are nearly
+        // each other and G's constant, and the plain solve's weights along
+        // that direction are set by rounding: centring the constant
+        // (`least_squares::solve_least_squares_with_intercept`) turned
+        // b_9, b_10, a_4 = 0.017, -0.012, 0.48 into 96, -96, -187 with the
+        // same fitted voltages (RMS 0.019674 V). Such weights cancel on the
+        // record and nowhere else.
         let options = FitOptions {
             warm_up_samples: options.warm_up_samples.max(warm_up),
+            rss_increase: options.rss_increase.max(LINEAR_RSS_INCREASE),
             ..options.clone()
         };
         let mut fit = fit_modified_inverse_pi_with_progress(
