@@ -1,0 +1,74 @@
+"""The shipped controller presets identified by seed 000's procedure are what
+their Makefile targets make: `make stage-preset` and `make
+xy200s-controller-preset` run `piezo-identify stage` on dist/FlexureStage.fmu,
+and that command, run again with the target's arguments, gives the committed
+JSON again. A plant change not followed by re-identification, or an
+identification that no longer reproduces what was shipped, fails here.
+
+Tolerance: each value within 1e-6 of the largest magnitude in its group (an
+array, or the value itself), with 1e-12 as a floor for all-zero groups. The
+identification is deterministic (the search is bit-identical for any number
+of threads; the noise is seeded), so only rounding that differs between
+processors may move it; a stale preset moves by 1e-3 or more, and an
+ill-conditioned linear solve by orders of magnitude (b_9 = 96 V/um where
+0.004 is shipped)."""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import re
+import subprocess
+
+import pytest
+
+from tests.conftest import REPO_ROOT
+
+BINARY = REPO_ROOT / "target" / "release" / "piezo-identify"
+DIST = REPO_ROOT / "dist"
+RELATIVE_TOLERANCE = 1e-6
+
+
+def makefile_command(target: str) -> tuple[list[str], pathlib.Path]:
+    """The arguments target `target` gives `piezo-identify stage` before
+    `--out` ($(DIST) read as dist/), and the preset it writes; read from the
+    Makefile so the test runs what the target runs."""
+    text = (REPO_ROOT / "Makefile").read_text(encoding="utf-8").replace("\\\n", " ")
+    recipe = re.search(rf"^{re.escape(target)}:.*\n((?:\t.*\n)+)", text, re.MULTILINE)
+    assert recipe, f"Makefile: no {target} target"
+    command = re.search(r"piezo-identify stage (.*?) --out (\S+)", recipe.group(1))
+    assert command, f"Makefile: {target} does not run `piezo-identify stage ... --out PRESET`"
+    arguments = [word.replace("$(DIST)", str(DIST)) for word in command.group(1).split()]
+    return arguments, REPO_ROOT / command.group(2)
+
+
+def differences(shipped, made, path="") -> list[str]:
+    """Every value of `made` off `shipped` beyond the tolerance, by path."""
+    if isinstance(shipped, dict):
+        assert set(shipped) == set(made), f"{path}: keys {sorted(shipped)} vs {sorted(made)}"
+        return [d for key in shipped for d in differences(shipped[key], made[key], f"{path}.{key}")]
+    values = shipped if isinstance(shipped, list) else [shipped]
+    others = made if isinstance(made, list) else [made]
+    assert len(values) == len(others), f"{path}: {len(values)} values vs {len(others)}"
+    if all(isinstance(v, bool) or isinstance(v, str) for v in values):
+        return [] if values == others else [f"{path}: {shipped} shipped, {made} made"]
+    scale = max(max(abs(v) for v in values), 1e-12)
+    return [f"{path}[{i}]: {a!r} shipped, {b!r} made" for i, (a, b) in enumerate(zip(values, others))
+            if abs(a - b) > RELATIVE_TOLERANCE * scale]
+
+
+@pytest.mark.parametrize("target", ["stage-preset", "xy200s-controller-preset"])
+def test_the_preset_target_makes_the_shipped_preset(tmp_path, target):
+    arguments, shipped = makefile_command(target)
+    plant = pathlib.Path(arguments[arguments.index("--plant") + 1])
+    for path in (BINARY, plant):
+        if not path.is_file():
+            pytest.fail(f"{path} is missing: run `make fmus` and build the workspace",
+                        pytrace=False)
+    made = tmp_path / "preset.json"
+    subprocess.run([str(BINARY), "stage", *arguments, "--out", str(made)],
+                   check=True, capture_output=True, text=True)
+    problems = differences(json.loads(shipped.read_text()), json.loads(made.read_text()))
+    assert not problems, (
+        f"`piezo-identify stage` as `make {target}` runs it no longer makes {shipped.name} "
+        f"(run `make {target}` after a plant or identification change):\n" + "\n".join(problems))
