@@ -17,8 +17,9 @@ from .experiments import (  # noqa: E402
     ABW_XY_STAGES,
     START,
     Experiment,
-    errors,
     abw_xy_key,
+    errors,
+    preset,
 )
 
 DEG = 180.0 / math.pi
@@ -183,14 +184,17 @@ def feedforward_xy_section(results: dict) -> list[str]:
                 cells.append(f"{a:.4f} -> {b:.4f} um ({-reduction:+.1f} %)")
             lines.append(f"| coupling span {name}, without -> with decoupling "
                          f"| {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
+    xy200s = preset(ABW_XY_STAGES["xy200s"]["controller"])
     lines += [
         "",
         "Seed 000's method on the XY200S is identified by seed 000's own procedure "
         "(`make xy200s-controller-preset`: eq. (6) records, P-I fits, D1..D4 from single-axis "
         "runs about the scaled home with scaled PI gains). Its x inverse P-I model fits the "
-        "XY200S's eq. (6) record with 0.088 V RMS (about 1.3 um) against 0.023 V on FlexureStage, "
-        "and its compensations D1, D2 run into their +-10 um cutoffs on the static offset of the "
-        "open x axis, so on that stage it neither linearizes nor decouples: shown as measured.",
+        "XY200S's eq. (6) record far worse than FlexureStage's (docs/seed001.md has the figures "
+        "and the command), and its compensations D1, D2 are mostly a constant offset "
+        f"(db = {xy200s['decoupling.db[1]']:.2f} um against a slope dk = "
+        f"{xy200s['decoupling.dk[1]']:.4f}): the static offset of the open x axis. On that "
+        "stage it neither linearizes nor decouples: shown as measured.",
     ]
     return lines
 
