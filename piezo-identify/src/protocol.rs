@@ -506,18 +506,25 @@ pub struct InversePiIdentification {
     pub seconds: f64,
 }
 
+/// Each model's voltage for a record's displacement, sample by sample, run
+/// from rest at its first sample [V].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct InversePiPredictions {
+    pub proposed: Vec<f64>,
+    pub classical: Vec<f64>,
+    pub line: Vec<f64>,
+}
+
 impl InversePiIdentification {
-    /// The models' errors on a record (`y` measured displacement, `u`
-    /// voltage) run from its first sample; `steps` its voltage steps (the
-    /// smoothing stops at them), `scored` the samples scored.
-    pub fn errors_on(
+    /// Each model's voltage for the measured displacement `y` of a record
+    /// run from its first sample; `steps` its voltage steps (the smoothing
+    /// stops at them).
+    pub fn predictions_on(
         &self,
         y: &[f64],
-        u: &[f64],
         sample_period: f64,
         steps: &[usize],
-        scored: &[bool],
-    ) -> InversePiErrors {
+    ) -> InversePiPredictions {
         let prepared = |half_width: usize, offset: f64| -> Vec<f64> {
             smoothed_between_steps(y, half_width, steps)
                 .iter()
@@ -536,15 +543,34 @@ impl InversePiIdentification {
             &y_classical,
             sample_period,
         );
-        let line: Vec<f64> = y_proposed
+        let line = y_proposed
             .iter()
             .map(|v| self.line[0] * v + self.line[1])
             .collect();
+        InversePiPredictions {
+            proposed,
+            classical,
+            line,
+        }
+    }
+
+    /// The models' errors on a record (`y` measured displacement, `u`
+    /// voltage) run from its first sample; `steps` its voltage steps (the
+    /// smoothing stops at them), `scored` the samples scored.
+    pub fn errors_on(
+        &self,
+        y: &[f64],
+        u: &[f64],
+        sample_period: f64,
+        steps: &[usize],
+        scored: &[bool],
+    ) -> InversePiErrors {
+        let predictions = self.predictions_on(y, sample_period, steps);
         let span = self.input_span;
         InversePiErrors {
-            proposed: ErrorFigures::of(&proposed, u, scored, span),
-            classical: ErrorFigures::of(&classical, u, scored, span),
-            line: ErrorFigures::of(&line, u, scored, span),
+            proposed: ErrorFigures::of(&predictions.proposed, u, scored, span),
+            classical: ErrorFigures::of(&predictions.classical, u, scored, span),
+            line: ErrorFigures::of(&predictions.line, u, scored, span),
         }
     }
 }
@@ -887,7 +913,28 @@ pub struct BoucWenProtocolFit {
     pub seconds: f64,
 }
 
+/// Each model's displacement for a record's voltage, sample by sample, run
+/// from rest at its first sample [µm].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ForwardPredictions {
+    /// The kept fit (Levenberg-Marquardt's when it was kept, else GA-PSO's).
+    pub bouc_wen: Vec<f64>,
+    pub classical: Vec<f64>,
+    pub line: Vec<f64>,
+}
+
 impl BoucWenProtocolFit {
+    /// Each model's displacement for the voltage `u` of a record run from
+    /// rest at its first sample.
+    pub fn predictions_on(&self, u: &[f64], sample_period: f64) -> ForwardPredictions {
+        let best = self.identification.best();
+        ForwardPredictions {
+            bouc_wen: predict_bouc_wen(best.params, best.offset, u),
+            classical: predict(&mut ClassicalPi::new(self.classical), u, sample_period),
+            line: u.iter().map(|v| self.line[0] * v + self.line[1]).collect(),
+        }
+    }
+
     /// The models' errors on a record (input `u`, measured output `y`) run
     /// from rest at its first sample, on the samples `scored`.
     pub fn errors_on(
@@ -897,10 +944,8 @@ impl BoucWenProtocolFit {
         sample_period: f64,
         scored: &[bool],
     ) -> ForwardErrors {
-        let best = self.identification.best();
+        let predictions = self.predictions_on(u, sample_period);
         let gapso = &self.identification.gapso;
-        let classical = predict(&mut ClassicalPi::new(self.classical), u, sample_period);
-        let line: Vec<f64> = u.iter().map(|v| self.line[0] * v + self.line[1]).collect();
         let rows_u = selected(u, scored);
         let best_line = solve_least_squares(
             DMatrix::from_fn(rows_u.len(), 2, |i, j| if j == 0 { rows_u[i] } else { 1.0 }),
@@ -910,20 +955,15 @@ impl BoucWenProtocolFit {
         let best_line: Vec<f64> = u.iter().map(|v| best_line[0] * v + best_line[1]).collect();
         let span = self.stroke;
         ForwardErrors {
-            bouc_wen: ErrorFigures::of(
-                &predict_bouc_wen(best.params, best.offset, u),
-                y,
-                scored,
-                span,
-            ),
+            bouc_wen: ErrorFigures::of(&predictions.bouc_wen, y, scored, span),
             gapso: ErrorFigures::of(
                 &predict_bouc_wen(gapso.params, gapso.offset, u),
                 y,
                 scored,
                 span,
             ),
-            classical: ErrorFigures::of(&classical, y, scored, span),
-            line: ErrorFigures::of(&line, y, scored, span),
+            classical: ErrorFigures::of(&predictions.classical, y, scored, span),
+            line: ErrorFigures::of(&predictions.line, y, scored, span),
             best_line: ErrorFigures::of(&best_line, y, scored, span),
         }
     }

@@ -187,6 +187,7 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
     let data = data.to_str().unwrap();
     let json = dir.path().join("bw.json");
     let report = dir.path().join("bw_report.json");
+    let predictions = dir.path().join("bw_predictions.csv");
     let output = run(&[
         "bouc-wen",
         data,
@@ -205,6 +206,8 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
         json.to_str().unwrap(),
         "--report",
         report.to_str().unwrap(),
+        "--predictions",
+        predictions.to_str().unwrap(),
     ]);
     assert!(output.status.success(), "{}", stderr(&output));
     let printed = stdout(&output);
@@ -226,7 +229,39 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
     assert!((fitted.p - truth.p).abs() < 0.01 * truth.p, "{fitted:?}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    assert!(report["identification"]["refined"]["rms"].as_f64().unwrap() < 1e-3);
+    let refined_rms = report["identification"]["refined"]["rms"].as_f64().unwrap();
+    assert!(refined_rms < 1e-3);
+    // --predictions: every sample with the record's own values, the kept
+    // model's displacement from the record's start (its error on the fitted
+    // samples is the refined fit's RMS), and the part each sample is in.
+    let text = std::fs::read_to_string(&predictions).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("time_s,voltage_v,displacement_um,bouc_wen_um,classical_um,line_um,part")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), u.len());
+    let (mut sum, mut fitted) = (0.0, 0);
+    for (n, row) in rows.iter().enumerate() {
+        let value = |i: usize| row[i].parse::<f64>().unwrap();
+        assert_eq!((value(1), value(2)), (u[n], y[n]), "sample {n}");
+        assert!(["fit", "scored", "left out"].contains(&row[6]), "{row:?}");
+        if row[6] == "fit" {
+            sum += (value(3) - value(2)).powi(2);
+            fitted += 1;
+        }
+    }
+    assert_eq!(
+        fitted,
+        u.len(),
+        "--warm-up 0 and no split: every sample is fitted"
+    );
+    let rms = (sum / fitted as f64).sqrt();
+    assert!(
+        (rms - refined_rms).abs() <= 1e-9 + 1e-6 * refined_rms,
+        "{rms} vs {refined_rms}"
+    );
 
     let output = run(&["bouc-wen", data, "--time", "time", "--bounds", "n=3:1"]);
     // (refused before any fit)

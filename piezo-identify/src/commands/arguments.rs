@@ -48,6 +48,11 @@ pub(crate) struct ProtocolArgs {
     /// Write everything (plan, choices, fits, errors) as JSON.
     #[arg(long)]
     pub(crate) report: Option<PathBuf>,
+    /// Write FILE's samples as CSV: time, the measured voltage and
+    /// displacement, each model's prediction run from the record's start, and
+    /// the part each sample is in (fit, scored, left out).
+    #[arg(long)]
+    pub(crate) predictions: Option<PathBuf>,
 }
 
 /// A number of seconds: finite and not negative.

@@ -16,7 +16,7 @@ use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, open_plant};
 use super::progress::Reporter;
 use super::report::{
     describe, describe_columns, pad, print_extrapolation, print_figure, print_plan, range_excess,
-    write_json,
+    write_json, write_predictions,
 };
 
 #[derive(Args)]
@@ -309,6 +309,22 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
     }
     println!("time: {:.2} s", fit.seconds);
 
+    if let Some(path) = &args.protocol.predictions {
+        let predictions = fit.predictions_on(&record.input, dt);
+        write_predictions(
+            path,
+            dt,
+            &[
+                ("voltage_v", &record.input),
+                ("displacement_um", &record.output),
+                ("bouc_wen_um", &predictions.bouc_wen),
+                ("classical_um", &predictions.classical),
+                ("line_um", &predictions.line),
+            ],
+            &plan,
+        )?;
+        println!("predictions written to {}", path.display());
+    }
     let best = fit.identification.best();
     if let Some(out) = &args.out {
         write_json(

@@ -14,7 +14,7 @@ use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load};
 use super::progress::Reporter;
 use super::report::{
     describe, describe_columns, pad, print_extrapolation, print_figure, print_plan, range_excess,
-    write_json,
+    write_json, write_predictions,
 };
 
 #[derive(Args)]
@@ -151,6 +151,22 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
     }
     println!("time: {:.2} s", fit.seconds);
 
+    if let Some(path) = &args.protocol.predictions {
+        let predictions = fit.predictions_on(&record.output, dt, &plan.segments.steps);
+        write_predictions(
+            path,
+            dt,
+            &[
+                ("voltage_v", &record.input),
+                ("displacement_um", &record.output),
+                ("proposed_v", &predictions.proposed),
+                ("classical_v", &predictions.classical),
+                ("line_v", &predictions.line),
+            ],
+            &plan,
+        )?;
+        println!("predictions written to {}", path.display());
+    }
     if let Some(out) = &args.out {
         write_json(
             out,

@@ -161,6 +161,42 @@ pub(crate) fn print_starts(starts: &[StartResult], max_iterations: u64) {
     );
 }
 
+/// Writes a record's samples as CSV: `time_s`, then each named column, then
+/// the part of `plan` each sample is in (`fit`, `scored`, `left out`: the
+/// warm-up, rests and the settling after steps).
+pub(crate) fn write_predictions(
+    path: &Path,
+    sample_period: f64,
+    columns: &[(&str, &[f64])],
+    plan: &Plan,
+) -> Result<(), String> {
+    let fitted = pad(&plan.fitted(), plan.samples);
+    let scored = plan.scored();
+    let mut text = String::from("time_s");
+    for (name, _) in columns {
+        text.push(',');
+        text.push_str(name);
+    }
+    text.push_str(",part\n");
+    for n in 0..plan.samples {
+        text.push_str(&format!("{}", n as f64 * sample_period));
+        for (_, values) in columns {
+            text.push_str(&format!(",{}", values[n]));
+        }
+        let part = if fitted[n] {
+            "fit"
+        } else if scored[n] {
+            "scored"
+        } else {
+            "left out"
+        };
+        text.push(',');
+        text.push_str(part);
+        text.push('\n');
+    }
+    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
 pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), String> {
     let json = serde_json::to_string_pretty(value)
         .map_err(|e| format!("cannot serialise {}: {e}", path.display()))?;
