@@ -63,7 +63,7 @@ venv: $(VENV)/.installed
 # a platform whose toolchain is missing is reported loudly, here and again
 # at the end.
 fmus: system-deps
-	$(CARGO) build --release --locked -p fmu-plant -p fmu-controller -p packaging
+	$(CARGO) build --release --locked $(or $(BUILD_SCOPE),-p fmu-plant -p fmu-controller -p packaging)
 	CARGO=$(CARGO) PYTHON3=$(PYTHON3) packaging/platform-binaries.sh $(PLATFORM_BINARIES) \
 	  $(foreach spec,$(FMU_SPECS),$(word 2,$(subst :, ,$(spec))))
 	@for spec in $(FMU_SPECS); do \
@@ -120,6 +120,13 @@ systems: fmus venv
 python-test: fmus venv systems wine master fingerprints-tool
 	$(PY) -m pytest tests -q -rP
 
+# Under `make test` the builds of fmus, master and fingerprints-tool take the
+# whole workspace, as rust-test's does: cargo unifies dependency features over
+# the packages it builds, so a package subset gets other features (rand's,
+# nalgebra's) and compiles piezo-models and what depends on it again, three
+# times over; with the same scope they are already built. Alone, each builds
+# only its packages.
+test: BUILD_SCOPE = --workspace
 test: lint rust-test python-test
 
 # The main job: seed 000's experiments in closed loop (CSV, PNG, report.md in
@@ -180,13 +187,13 @@ identify: system-deps
 # tests/test_plant_fingerprints.py run it.
 .PHONY: fingerprints-tool
 fingerprints-tool: system-deps
-	$(CARGO) build --release --locked -p piezo-identify --bin plant-fingerprints
+	$(CARGO) build --release --locked $(or $(BUILD_SCOPE),-p piezo-identify --bin plant-fingerprints)
 
 # The co-simulation master (piezo-cosim/), shipped inside the Python package
 # as demo/bin/piezo-cosim: `python -m demo.master` and the sweeps' dask
 # workers run it from there.
 master: system-deps
-	$(CARGO) build --release --locked -p piezo-cosim
+	$(CARGO) build --release --locked $(or $(BUILD_SCOPE),-p piezo-cosim)
 	install -D -m 755 $(RELEASE)/piezo-cosim demo/bin/piezo-cosim
 
 # The default studies (demo/sweeps/*.toml) on a LocalCluster of this
