@@ -378,7 +378,11 @@ impl AsymmetricBoucWen {
         let ratio = du_total.abs() / max_du;
         // `ratio` is NaN or infinite only for a degenerate max_du or input; one
         // substep then (and never an unbounded loop).
-        let substeps = if ratio.is_finite() {
+        // A path no longer than max_du (the usual case inside a stage step) is
+        // one substep without the ceil, which is a libm call on baseline x86-64.
+        let substeps = if ratio <= 1.0 {
+            1
+        } else if ratio.is_finite() {
             ratio.ceil().clamp(1.0, MAX_SUBSTEPS as f64) as usize
         } else {
             1
@@ -414,6 +418,25 @@ impl AsymmetricBoucWen {
 /// time-domain reading of eq. (3) with it (u standing for time).
 #[inline(always)]
 pub fn rk4_path(
+    u0: f64,
+    h0: f64,
+    du_total: f64,
+    substeps: usize,
+    f: impl Fn(f64, f64) -> f64,
+) -> f64 {
+    // One substep is what a stage step asks for almost always: the same
+    // arithmetic with the count a constant, so the compiler drops the loop and
+    // the integer conversions.
+    if substeps == 1 {
+        rk4_substeps(u0, h0, du_total, 1, &f)
+    } else {
+        rk4_substeps(u0, h0, du_total, substeps, &f)
+    }
+}
+
+/// The body of [`rk4_path`].
+#[inline(always)]
+fn rk4_substeps(
     u0: f64,
     h0: f64,
     du_total: f64,

@@ -547,18 +547,20 @@ impl FlexureStage {
         // Every voltage moves along V_t + (V_0 − V_t)·E(s), E = e^{−s/τ} falling
         // from 1 to e^{−h/τ}; equal increments of E are equal voltage increments.
         let whole = self.piece_decays(h);
-        let pieces =
-            (distance * whole.amplifier_travel / self.params.solver.max_voltage_step).ceil();
-        // For any state the stage produced, D ≤ v_max − v_min; the cap only keeps a
-        // corrupted (e.g. deserialised) state from looping for ages. MAX_PIECES
-        // bounds it where the parameters themselves ask for ages (a range of
-        // 1e10 V in 1e-4 V pieces).
-        let cap = (((self.params.amplifier.v_max - self.params.amplifier.v_min)
-            / self.params.solver.max_voltage_step)
-            .ceil()
-            + 1.0)
-            .min(MAX_PIECES);
-        if pieces.is_finite() && pieces > 1.0 {
+        let travel = distance * whole.amplifier_travel / self.params.solver.max_voltage_step;
+        // ceil(travel) > 1 exactly when travel > 1: the usual single piece then
+        // costs no ceil (a libm call on baseline x86-64), nor does the cap.
+        if travel > 1.0 && travel.is_finite() {
+            let pieces = travel.ceil();
+            // For any state the stage produced, D ≤ v_max − v_min; the cap only
+            // keeps a corrupted (e.g. deserialised) state from looping for ages.
+            // MAX_PIECES bounds it where the parameters themselves ask for ages
+            // (a range of 1e10 V in 1e-4 V pieces).
+            let cap = (((self.params.amplifier.v_max - self.params.amplifier.v_min)
+                / self.params.solver.max_voltage_step)
+                .ceil()
+                + 1.0)
+                .min(MAX_PIECES);
             let count = pieces.min(cap) as usize;
             // Capped pieces are longer than max_voltage_step: one RK4 substep
             // each, or the hysteresis would split them again.
