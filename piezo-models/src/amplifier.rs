@@ -48,6 +48,7 @@ impl AmplifierParams {
     /// of one channel and whether a limit cut it. A NaN command gives a NaN
     /// target (not clipped): nothing is rejected here, the stage reports a
     /// non-finite state instead.
+    #[inline]
     pub fn target(&self, command: f64) -> (f64, bool) {
         let wanted = self.gain * command;
         let target = (self.gain * command.clamp(self.input_min, self.input_max))

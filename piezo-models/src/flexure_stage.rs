@@ -694,12 +694,42 @@ impl FlexureStage {
     /// The first state variable that is non-finite or beyond the divergence
     /// bounds, in the order amplifier, actuators, couplings, creep, modes.
     fn state_fault(&self) -> Option<StateFault> {
+        // Every step asks, and the answer is almost always "sound": one pass
+        // without early exits first (|v| <= bound is false for NaN, and
+        // |v| <= f64::MAX is finiteness), the named search below only when it
+        // fails.
+        let voltages = self.amplifier.voltages();
+        let mut sound = true;
+        for v in voltages {
+            sound &= v.abs() <= f64::MAX;
+        }
+        for model in &self.actuators {
+            sound &= model.hysteretic_state().abs() <= DIVERGED_DISPLACEMENT_UM;
+        }
+        for model in &self.couplings {
+            sound &= model.hysteretic_state().abs() <= DIVERGED_DISPLACEMENT_UM;
+        }
+        for creep in &self.creep {
+            sound &= creep.value().abs() <= DIVERGED_DISPLACEMENT_UM;
+        }
+        for (i, mode) in self.modes.iter().enumerate() {
+            let state = mode.state();
+            let bound = if i == 2 {
+                DIVERGED_ROTATION_RAD
+            } else {
+                DIVERGED_DISPLACEMENT_UM
+            };
+            sound &= state.position.abs() <= bound;
+            sound &= state.velocity.abs() <= f64::MAX;
+        }
+        if sound {
+            return None;
+        }
         let finite =
             |variable, value: f64| (!value.is_finite()).then_some(StateFault { variable, value });
         let bounded = |variable, value: f64, bound: f64| {
             (value.is_nan() || value.abs() > bound).then_some(StateFault { variable, value })
         };
-        let voltages = self.amplifier.voltages();
         (0..3)
             .find_map(|i| finite(AMPLIFIER_STATES[i], voltages[i]))
             .or_else(|| {
