@@ -36,8 +36,10 @@ def test_the_documented_drift_is_what_the_commands_print(tmp_path):
     if not BINARY.is_file():
         pytest.fail(f"{BINARY} is missing: build the workspace", pytrace=False)
     text = section()
-    command = block(text, "sh").splitlines()[0:3]
-    identification = " ".join(line.rstrip("\\").strip() for line in command)
+    lines = block(text, "sh").splitlines()
+    assert lines[0] == "mkdir -p out/identify", lines[0]
+    (REPO_ROOT / "out" / "identify").mkdir(parents=True, exist_ok=True)
+    identification = " ".join(line.rstrip("\\").strip() for line in lines[1:4])
     assert identification.startswith("target/release/piezo-identify inverse-pi "), identification
     done = subprocess.run(identification.split(), cwd=REPO_ROOT, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
