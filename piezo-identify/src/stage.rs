@@ -489,9 +489,21 @@ pub fn identify_stage(
         // b_9, b_10, a_4 = 0.017, -0.012, 0.48 into 96, -96, -187 with the
         // same fitted voltages (RMS 0.019674 V). Such weights cancel on the
         // record and nowhere else.
+        //
+        // Backlash operators that do not reverse over the fitted samples get
+        // no weight, as in the identification protocol
+        // (`regressors::reversing_operators` says why). Regularising cannot
+        // do it: on the XY200S's x record eq. (5)'s r_9 = u1max/2 moves by
+        // 4e-4 of z's span, only when a peak of the record passes the
+        // highest before, and least squares made it a tracker of the stage's
+        // Bouc-Wen drift (b_9 = b_10 = -382 V/um against a_4 = +6915 V). That
+        // direction carried two thirds of F, so no 0.1 % of RSS removed it;
+        // the controller, whose memories start at its own rest, was then off
+        // by 0.4 V (6.8 um at 90 um) where the record was not.
         let options = FitOptions {
             warm_up_samples: options.warm_up_samples.max(warm_up),
             rss_increase: options.rss_increase.max(LINEAR_RSS_INCREASE),
+            reversing_operators_only: true,
             ..options.clone()
         };
         let mut fit = fit_modified_inverse_pi_with_progress(
