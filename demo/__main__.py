@@ -16,7 +16,7 @@ import fmpy
 from tqdm import tqdm
 
 from .cosim import SAMPLE_PERIOD, Fmu, simulate
-from .experiments import CONDITIONS, experiments, metrics
+from .experiments import CONDITIONS, experiments, report_figures
 from .report import figure, write_report
 
 def main(argv=None) -> int:
@@ -53,7 +53,7 @@ def main(argv=None) -> int:
                 )
                 run.write_csv(args.out / f"{experiment.key}.csv")
                 figure(experiment, run, spacing_um, args.out / f"{experiment.key}.png")
-                results[experiment.key] = metrics(experiment, run, spacing_um)
+                results[experiment.key] = report_figures(experiment, run, spacing_um)
     wall = time.perf_counter() - started
     (args.out / "metrics.json").write_text(json.dumps(results, indent=2))
     if not args.only:

@@ -427,6 +427,43 @@ def span(v) -> float:
     return float(np.max(v) - np.min(v))
 
 
+def straight_line_floor(coupling: np.ndarray, demand: np.ndarray) -> float:
+    """The smallest span of `coupling` minus any straight line in `demand`,
+    min over k of span(coupling - k * demand) (an offset does not change a
+    span): what the best law D = dk * demand + db leaves of a coupling if
+    the held axis answered the correction exactly. span(coupling - k *
+    demand) is convex in k (a maximum minus a minimum of affine functions),
+    so a ternary search finds its minimum; the bracket holds every slope a
+    coupling of this stage has (under 10 um per um)."""
+    low, high = -10.0, 10.0
+    for _ in range(200):
+        a, b = low + (high - low) / 3, high - (high - low) / 3
+        if span(coupling - a * demand) <= span(coupling - b * demand):
+            high = b
+        else:
+            low = a
+    return span(coupling - 0.5 * (low + high) * demand)
+
+
+def coupling_analysis(experiment: Experiment, run, spacing_um: float) -> dict:
+    """Beyond the paper's figures, for seed 001's coupling runs: the span the
+    best straight-line law in the driving demand would leave of the coupling
+    (`straight_line_floor`), the bound on any piecewise-linear law of seed
+    000's form (eq. 11) that the cutoffs do not clip."""
+    if not experiment.figure.startswith("seed 001 §5.3") or experiment.driven not in ("x", "y"):
+        return {}
+    e = errors(run, spacing_um, experiment.measure_from)
+    window = run.t >= START + experiment.measure_from - 1e-12
+    if experiment.driven == "y":
+        return {"coupling_x_line_floor": straight_line_floor(e.e_x, run["y_ref"][window])}
+    return {"coupling_y_line_floor": straight_line_floor(e.e_y, run["x_ref"][window])}
+
+
+def report_figures(experiment: Experiment, run, spacing_um: float) -> dict:
+    """`metrics` and `coupling_analysis` of a run: what the demo reports."""
+    return {**metrics(experiment, run, spacing_um), **coupling_analysis(experiment, run, spacing_um)}
+
+
 def metrics(experiment: Experiment, run, spacing_um: float) -> dict:
     """The figures the paper reports for this kind of run."""
     e = errors(run, spacing_um, experiment.measure_from)

@@ -124,6 +124,16 @@ def _coupling(results: dict, stage: str, method: str, driven: str) -> tuple[floa
     return a, b, 100.0 * (1.0 - b / a)
 
 
+def _line_floor(results: dict, stage: str, method: str, driven: str) -> tuple[float, float, float]:
+    """Coupled span without decoupling, the span the best straight-line law
+    would leave of it (experiments.straight_line_floor), and that reduction
+    in %."""
+    axis = "x" if driven == "y" else "y"
+    m = results[abw_xy_key(stage, method, f"coupling_{driven}_coupled")]
+    a, floor = m[f"coupling_{axis}_span"], m[f"coupling_{axis}_line_floor"]
+    return a, floor, 100.0 * (1.0 - floor / a)
+
+
 def feedforward_xy_section(results: dict) -> list[str]:
     """Seed 001's experiments beside its figures, and both methods side by
     side on both stages."""
@@ -184,17 +194,38 @@ def feedforward_xy_section(results: dict) -> list[str]:
                 cells.append(f"{a:.4f} -> {b:.4f} um ({-reduction:+.1f} %)")
             lines.append(f"| coupling span {name}, without -> with decoupling "
                          f"| {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
+            cells = []
+            for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
+                a, floor, reduction = _line_floor(results, stage, method, driven)
+                cells.append(f"{floor:.4f} um ({-reduction:+.1f} %)")
+            lines.append(f"| coupling span {name}, left by the best straight line in the "
+                         f"driving demand | {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
     xy200s = preset(ABW_XY_STAGES["xy200s"]["controller"])
+    _, x_floor, x_best = _line_floor(results, "xy200s", "inverse_pi_piecewise", "y")
+    _, y_floor, y_best = _line_floor(results, "xy200s", "inverse_pi_piecewise", "x")
+    x_error = results[abw_xy_key("xy200s", "inverse_pi_piecewise", "linearity_x")]["tracking_max"]
+    x_model_based = _coupling(results, "xy200s", "inverse_bouc_wen_model_based", "y")[1]
     lines += [
+        "",
+        "The rows \"left by the best straight line\" take each method's run without "
+        "decoupling and give the smallest span the coupling keeps after subtracting any "
+        "straight line dk * f + db in the driving demand f: what seed 000's law (eq. 11, a "
+        "straight line that the cutoffs p, q only clip) could leave if the held axis answered "
+        "its correction exactly.",
         "",
         "Seed 000's method on the XY200S is identified by seed 000's own procedure "
         "(`make xy200s-controller-preset`: eq. (6) records, P-I fits, D1..D4 from single-axis "
-        "runs about the scaled home with scaled PI gains). Its x inverse P-I model fits the "
-        "XY200S's eq. (6) record far worse than FlexureStage's (docs/seed001.md has the figures "
-        "and the command), and its compensations D1, D2 are mostly a constant offset "
-        f"(db = {xy200s['decoupling.db[1]']:.2f} um against a slope dk = "
-        f"{xy200s['decoupling.dk[1]']:.4f}): the static offset of the open x axis. On that "
-        "stage it neither linearizes nor decouples: shown as measured.",
+        "runs about the scaled home with scaled PI gains). It neither linearizes nor decouples "
+        "there. Two of the reasons lie in the form of its models, one in where its law is "
+        "identified. Its inverse P-I models fit their own eq. (6) records several times worse than on "
+        "FlexureStage, with errors of about ten times the 0.1 um that seed 001's 8 % allows at "
+        f"1.25 um (docs/seed001.md has the figures and the command); x errs by {x_error:.2f} um "
+        "at the home. The coupling of x from y is a hysteresis loop: the best straight line "
+        f"leaves {x_floor:.4f} um of it ({x_best:.1f} % off), where seed 001's model of the "
+        f"loop (eq. 7-16) leaves {x_model_based:.4f} um. A line would take {y_best:.1f} % off "
+        f"the coupling of y from x ({y_floor:.4f} um left), but the identified D3 does not: it "
+        "is fitted on seed 000's single-axis runs scaled to 0-113 um, where that coupling "
+        f"flattens at the top, and its cutoff q3 = {xy200s['decoupling.q[3]']:.2f} um clips it to a constant at the home.",
     ]
     return lines
 

@@ -85,7 +85,7 @@ def test_model_based_decoupling_shrinks_the_coupling_seed_001_measured(fmus):
 @pytest.fixture(scope="module")
 def feedforward_xy_results(fmus):
     """The demo's seed 001 runs (both methods, same trajectories)."""
-    from demo.experiments import metrics, feedforward_xy_experiments
+    from demo.experiments import feedforward_xy_experiments, report_figures
 
     plant, controller = fmus
     spacing_um = float(controller.variables["L"].start) * 1e3
@@ -94,7 +94,7 @@ def feedforward_xy_results(fmus):
         run = simulate(plant, controller, experiment.reference(), experiment.duration,
                        plant_parameters=experiment.plant,
                        controller_parameters=experiment.controller)
-        results[experiment.key] = metrics(experiment, run, spacing_um)
+        results[experiment.key] = report_figures(experiment, run, spacing_um)
     return results
 
 
@@ -138,7 +138,7 @@ def test_docs_seed001_prints_these_figures(feedforward_xy_results):
     from demo.experiments import feedforward_xy_experiments
 
     measured = table_rows(feedforward_xy_section(feedforward_xy_results))
-    assert len(measured) == 16
+    assert len(measured) == 20
     problems = stale_rows(doc_rows("seed001.md"), measured, 2, "docs/seed001.md")
     # The runs behind them: how many, and the time they simulate.
     simulated = sum(experiment.duration for experiment in feedforward_xy_experiments())
