@@ -13,7 +13,9 @@ same kind of run at other operating points:
 
 Each case runs twice, without and with decoupling, feedback on the driven
 axis only (as the paper's Table 3), over MEASURED_CYCLES after
-SETTLING_CYCLES (the demo's single-axis timing). The bounds:
+SETTLING_CYCLES (the demo's single-axis timing), through the compiled
+master (demo.master; `scenario` writes a case's run as its scenario, and
+`evaluate` gives the same row from demo.cosim's time series). The bounds:
 
 - tracking RMS of the driven axis within 3x of the paper's Fig. 7 figure
   (y 0.0134 um, x 0.0171 um, theta 3.3e-5 deg), on the sensors, noise on;
@@ -33,12 +35,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from .experiments import (
+    APPROACH_TIME,
     MEASURED_CYCLES,
+    PLANT_PARAMETERS,
     ROTATION_AMPLITUDE_RAD,
+    ROTATION_X_UM,
     SETTLING_CYCLES,
     START,
     TRANSLATION_SPAN_UM,
@@ -144,12 +150,16 @@ def tracking_rms(axis: str, run, spacing_um: float, measure_from: float) -> floa
 
 
 def evaluate(case: Case, coupled_run, decoupled_run, spacing_um: float) -> dict:
-    """One row of the matrix: figures, bounds and whether they hold."""
+    """One row of the matrix from the two runs' time series (demo.cosim)."""
     _, measure_from = single_axis_timing(case.frequency)
     rms = {tag: tracking_rms(case.axis, run, spacing_um, measure_from)
            for tag, run in (("coupled", coupled_run), ("decoupled", decoupled_run))}
-    without = couplings(case.axis, coupled_run, spacing_um, measure_from)
-    with_ = couplings(case.axis, decoupled_run, spacing_um, measure_from)
+    return judge(case, rms, couplings(case.axis, coupled_run, spacing_um, measure_from),
+                 couplings(case.axis, decoupled_run, spacing_um, measure_from))
+
+
+def judge(case: Case, rms: dict, without: dict, with_: dict) -> dict:
+    """One row of the matrix: figures, bounds and whether they hold."""
     reductions = {name: without[name] / max(with_[name], 1e-12) for name in without}
     reachable, why = case.reachable()
     rms_bound = RMS_FACTOR * PAPER_RMS[case.axis]
@@ -184,34 +194,80 @@ def describe(row: dict) -> str:
 __all__ = [
     "AMPLITUDES_UM", "AXES", "BOUNDED_HZ", "COUPLING_REDUCTION", "HELD_UM", "MEASURED_CYCLES",
     "PAPER_RMS", "REACHABLE", "REPORTED_HZ", "RMS_FACTOR", "SETTLING_CYCLES", "Case", "cases",
-    "couplings", "describe", "evaluate", "tracking_rms",
+    "couplings", "describe", "evaluate", "judge", "scenario", "tracking_rms",
 ]
 
 
+def scenario(case: Case, decoupling: bool, plant_path, controller_path) -> dict:
+    """`case.experiment(decoupling)` as a scenario of the compiled master
+    (demo.master): the same demands as data (each a raised-cosine approach
+    from rest to the path's first value over APPROACH_TIME, held until
+    START, then the path), the same parameters, and the metrics with the
+    couplings on the plant's noise-free pose (`pose`). tests/test_master.py
+    holds the master to the fmpy master of demo.cosim within 1e-12 um."""
+    experiment = case.experiment(decoupling)
+    duration, measure_from = single_axis_timing(case.frequency)
+
+    def held(value: float) -> dict:
+        return {"offset": value, "start": START, "approach": APPROACH_TIME}
+
+    def from_rest(span: float) -> dict:  # span/2 (1 - cos 2 pi f tau), from the bottom
+        return {**held(span / 2), "sines": [
+            {"amplitude": span / 2, "frequency": case.frequency, "phase": -math.pi / 2}]}
+
+    if case.axis == "theta":
+        rotation = ROTATION_AMPLITUDE_RAD * case.amplitude / TRANSLATION_SPAN_UM
+        signals = {"x_ref": held(ROTATION_X_UM), "y_ref": held(case.held),
+                   "theta_ref": {**held(0.0), "sines": [
+                       {"amplitude": rotation, "frequency": case.frequency}]}}
+    else:
+        other = "x" if case.axis == "y" else "y"
+        signals = {f"{case.axis}_ref": from_rest(case.amplitude), f"{other}_ref": held(case.held),
+                   "theta_ref": held(0.0)}
+    return {
+        "step": 1e-4,
+        "preview": 2,
+        "duration": START + duration,
+        "fmu": {
+            "plant": {"path": str(plant_path), "parameters": dict(PLANT_PARAMETERS)},
+            "controller": {"path": str(controller_path), "parameters": experiment.controller},
+        },
+        "signal": {f"controller.{name}": signal for name, signal in signals.items()},
+        "metrics": {"driven": case.axis, "from": START + measure_from, "pose": True},
+    }
+
+
+def evaluate_metrics(case: Case, coupled: dict, decoupled: dict) -> dict:
+    """`evaluate` on the master's metrics of the two runs."""
+    names = ({"x2 from y": "pose_coupling_x2_span", "x3 from y": "pose_coupling_x3_span"}
+             if case.axis == "y" else
+             {("y from x" if case.axis == "x" else "y from rotation"): "pose_coupling_y_span"})
+    return judge(case,
+                 {"coupled": coupled["tracking_rms"], "decoupled": decoupled["tracking_rms"]},
+                 {name: coupled[key] for name, key in names.items()},
+                 {name: decoupled[key] for name, key in names.items()})
+
+
 def _run_case(args) -> dict:
-    """Both runs of one case in a fresh pair of FMUs (a worker process)."""
-    from .cosim import Fmu, simulate
+    """Both runs of one case through the compiled master (a worker thread:
+    each run is its own process)."""
+    from . import master
 
     case, plant_path, controller_path = args
-    with Fmu(plant_path) as plant, Fmu(controller_path) as controller:
-        spacing_um = float(controller.variables["L"].start) * 1e3
-        runs = []
-        for decoupling in (False, True):
-            experiment = case.experiment(decoupling)
-            runs.append(simulate(plant, controller, experiment.reference(), experiment.duration,
-                                 plant_parameters=experiment.plant,
-                                 controller_parameters=experiment.controller))
-    return evaluate(case, runs[0], runs[1], spacing_um)
+    results = [master.run(scenario(case, decoupling, plant_path, controller_path))["metrics"]
+               for decoupling in (False, True)]
+    return evaluate_metrics(case, *results)
 
 
 def run(plant_path, controller_path, selected=None, workers=2, progress=None) -> list[dict]:
-    """Every case (or `selected`), in case order, on `workers` processes."""
-    from concurrent.futures import ProcessPoolExecutor
+    """Every case (or `selected`), in case order, `workers` runs at a time."""
+    from concurrent.futures import ThreadPoolExecutor
 
     chosen = list(selected) if selected is not None else cases()
-    jobs = [(case, str(plant_path), str(controller_path)) for case in chosen]
+    plant_path, controller_path = Path(plant_path).resolve(), Path(controller_path).resolve()
+    jobs = [(case, plant_path, controller_path) for case in chosen]
     rows = []
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with ThreadPoolExecutor(max_workers=workers) as pool:
         for row in pool.map(_run_case, jobs):
             rows.append(row)
             if progress is not None:
@@ -249,7 +305,6 @@ def main(argv=None) -> int:
     import argparse
     import sys
     import time
-    from pathlib import Path
 
     parser = argparse.ArgumentParser(description="seed 000's single-axis runs off the paper's point")
     parser.add_argument("--out", type=Path, required=True, help="output folder (matrix.md)")

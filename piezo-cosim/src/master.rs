@@ -213,9 +213,10 @@ pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunErr
         want_output(&connection.from, &mut read)?;
     }
     let metric_ports = match &scenario.metrics {
-        Some(_) => metrics::sensor_ports()
+        Some(spec) => metrics::sensor_ports()
             .into_iter()
             .chain(metrics::command_ports())
+            .chain(spec.pose.then(metrics::pose_ports).into_iter().flatten())
             .collect(),
         None => Vec::new(),
     };

@@ -23,9 +23,16 @@ const REFERENCES: [&str; 3] = ["x_ref", "y_ref", "theta_ref"];
 const SENSORS: [&str; 3] = ["s1", "s2", "s3"];
 /// The controller's commands (saturation).
 const COMMANDS: [&str; 3] = ["u1", "u2", "u3"];
+/// The plant's platform pose, free of sensor noise (`MetricsSpec::pose`):
+/// x, y [µm] and θ_z [rad].
+const POSE: [&str; 3] = ["x", "y", "theta_z"];
 
 pub(crate) fn sensor_ports() -> Vec<String> {
     SENSORS.iter().map(|s| format!("{PLANT}.{s}")).collect()
+}
+
+pub(crate) fn pose_ports() -> Vec<String> {
+    POSE.iter().map(|p| format!("{PLANT}.{p}")).collect()
 }
 
 pub(crate) fn command_ports() -> Vec<String> {
@@ -157,6 +164,28 @@ pub(crate) fn compute(
             m.insert("y_error_max".into(), json!(max_abs(&e_y)));
         }
     }
+    if spec.pose {
+        // The Table 3 couplings of a single-axis run on the pose: the held
+        // demands are constant over the window, so the span of the pose is
+        // the span of its error. x2, x3: the pose at the two x sensors.
+        let [x, y, theta] = POSE.map(|p| windowed(format!("{PLANT}.{p}")));
+        match spec.driven {
+            Driven::Y => {
+                let at = |sign: f64| -> Vec<f64> {
+                    (0..samples)
+                        .map(|i| x[i] + sign * theta[i] * spacing / 2.0)
+                        .collect()
+                };
+                m.insert("pose_coupling_x_span".into(), json!(span(&x)));
+                m.insert("pose_coupling_x2_span".into(), json!(span(&at(1.0))));
+                m.insert("pose_coupling_x3_span".into(), json!(span(&at(-1.0))));
+            }
+            Driven::X | Driven::Theta => {
+                m.insert("pose_coupling_y_span".into(), json!(span(&y)));
+            }
+            Driven::Xy | Driven::Ytheta => {}
+        }
+    }
     // Share of the window in which a command sits at a limit of the
     // controller's range: where tracking or decoupling runs out of authority.
     let (low, high) = (
@@ -192,6 +221,7 @@ mod tests {
                 centre: [6.0, 6.0],
                 radius: 5.0,
             }),
+            pose: false,
         }
     }
 
@@ -265,5 +295,39 @@ mod tests {
         );
         assert!((m["contour_2norm"].as_f64().unwrap() - 0.1).abs() < 1e-12);
         assert_eq!(m["contour_samples"], json!(2));
+    }
+
+    #[test]
+    fn pose_couplings_are_the_spans_of_the_pose_at_the_sensors() {
+        let times = [0.0, 0.5, 1.0, 1.5];
+        let zeros = [0.0; 4];
+        let x = [9.0, 9.0, 1.0, 1.5];
+        let y = [9.0, 9.0, 2.0, 2.25];
+        let theta = [9.0, 9.0, 0.25, 0.0];
+        let columns: BTreeMap<&str, &[f64]> = BTreeMap::from([
+            ("plant.s1", &zeros[..]),
+            ("plant.s2", &zeros[..]),
+            ("plant.s3", &zeros[..]),
+            ("plant.x", &x[..]),
+            ("plant.y", &y[..]),
+            ("plant.theta_z", &theta[..]),
+        ]);
+        let constant = |_: &str| 0.0;
+        let with_pose = |driven| MetricsSpec {
+            pose: true,
+            ..spec(driven)
+        };
+        // L = 2: x2 = x + theta = 1.25, 1.5 and x3 = x - theta = 0.75, 1.5
+        // over the window t >= 1.
+        let m = compute(&with_pose(Driven::Y), &times, 2.0, &columns, &constant);
+        assert_eq!(m["pose_coupling_x_span"], json!(0.5));
+        assert_eq!(m["pose_coupling_x2_span"], json!(0.25));
+        assert_eq!(m["pose_coupling_x3_span"], json!(0.75));
+        assert!(m.get("pose_coupling_y_span").is_none());
+        let m = compute(&with_pose(Driven::Theta), &times, 2.0, &columns, &constant);
+        assert_eq!(m["pose_coupling_y_span"], json!(0.25));
+        // Without `pose`, no pose figures (and no pose outputs needed).
+        let m = compute(&spec(Driven::X), &times, 2.0, &columns, &constant);
+        assert!(m.keys().all(|k| !k.starts_with("pose_")));
     }
 }
