@@ -180,26 +180,37 @@ def feedforward_xy_section(results: dict) -> list[str]:
         "|---|---|---|---|",
     ]
     for stage in ABW_XY_STAGES:
-        for axis in ("x", "y"):
-            cells = []
-            for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
+        def row(label: str, cell) -> str:
+            """One row: `cell(method)` for seed 000's method, then seed 001's."""
+            cells = " | ".join(cell(method) for method in ("inverse_pi_piecewise",
+                                                           "inverse_bouc_wen_model_based"))
+            return f"| {label} | {STAGE_NAMES[stage]} | {cells} |"
+
+        def linearity(axis: str):
+            def cell(method: str) -> str:
                 m = results[abw_xy_key(stage, method, f"linearity_{axis}")]
-                cells.append(f"{m['tracking_max']:.4f} / {m['tracking_rms']:.4f} um")
-            lines.append(f"| {axis} 2 Hz sine of {ABW_XY_LINEARITY_UM[axis]} um: max / RMS error "
-                         f"| {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
-        for name, driven in (("x from a y sine", "y"), ("y from an x sine", "x")):
-            cells = []
-            for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
+                return f"{m['tracking_max']:.4f} / {m['tracking_rms']:.4f} um"
+            return cell
+
+        def coupling(driven: str):
+            def cell(method: str) -> str:
                 a, b, reduction = _coupling(results, stage, method, driven)
-                cells.append(f"{a:.4f} -> {b:.4f} um ({-reduction:+.1f} %)")
-            lines.append(f"| coupling span {name}, without -> with decoupling "
-                         f"| {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
-            cells = []
-            for method in ("inverse_pi_piecewise", "inverse_bouc_wen_model_based"):
-                a, floor, reduction = _line_floor(results, stage, method, driven)
-                cells.append(f"{floor:.4f} um ({-reduction:+.1f} %)")
-            lines.append(f"| coupling span {name}, left by the best straight line in the "
-                         f"driving demand | {STAGE_NAMES[stage]} | {cells[0]} | {cells[1]} |")
+                return f"{a:.4f} -> {b:.4f} um ({-reduction:+.1f} %)"
+            return cell
+
+        def line_floor(driven: str):
+            def cell(method: str) -> str:
+                _, floor, reduction = _line_floor(results, stage, method, driven)
+                return f"{floor:.4f} um ({-reduction:+.1f} %)"
+            return cell
+
+        for axis in ("x", "y"):
+            lines.append(row(f"{axis} 2 Hz sine of {ABW_XY_LINEARITY_UM[axis]} um: max / RMS error",
+                             linearity(axis)))
+        for name, driven in (("x from a y sine", "y"), ("y from an x sine", "x")):
+            lines.append(row(f"coupling span {name}, without -> with decoupling", coupling(driven)))
+            lines.append(row(f"coupling span {name}, left by the best straight line in the "
+                             "driving demand", line_floor(driven)))
     xy200s = preset(ABW_XY_STAGES["xy200s"]["controller"])
     _, x_floor, x_best = _line_floor(results, "xy200s", "inverse_pi_piecewise", "y")
     _, y_floor, y_best = _line_floor(results, "xy200s", "inverse_pi_piecewise", "x")
