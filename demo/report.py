@@ -215,6 +215,7 @@ def feedforward_xy_section(results: dict) -> list[str]:
     _, x_floor, x_best = _line_floor(results, "xy200s", "inverse_pi_piecewise", "y")
     _, y_floor, y_best = _line_floor(results, "xy200s", "inverse_pi_piecewise", "x")
     x_error = results[abw_xy_key("xy200s", "inverse_pi_piecewise", "linearity_x")]["tracking_max"]
+    y_error = results[abw_xy_key("xy200s", "inverse_pi_piecewise", "linearity_y")]["tracking_max"]
     x_model_based = _coupling(results, "xy200s", "inverse_bouc_wen_model_based", "y")[1]
     lines += [
         "",
@@ -227,16 +228,17 @@ def feedforward_xy_section(results: dict) -> list[str]:
         "Seed 000's method on the XY200S is identified by seed 000's own procedure "
         "(`make xy200s-controller-preset`: eq. (6) records, P-I fits, D1..D4 from single-axis "
         "runs about the scaled home with scaled PI gains). It neither linearizes nor decouples "
-        "there. Two of the reasons lie in the form of its models, one in where its law is "
-        "identified. Its inverse P-I models fit their own eq. (6) records several times worse than on "
+        "there, for the reasons that follow. Its inverse P-I models fit their own eq. (6) records several times worse than on "
         "FlexureStage, with errors of about ten times the 0.1 um that seed 001's 8 % allows at "
         f"1.25 um (docs/seed001.md has the figures and the command); x errs by {x_error:.2f} um "
         "at the home. The coupling of x from y is a hysteresis loop: the best straight line "
         f"leaves {x_floor:.4f} um of it ({x_best:.1f} % off), where seed 001's model of the "
         f"loop (eq. 7-16) leaves {x_model_based:.4f} um. A line would take {y_best:.1f} % off "
-        f"the coupling of y from x ({y_floor:.4f} um left), but the identified D3 does not: it "
-        "is fitted on seed 000's single-axis runs scaled to 0-113 um, where that coupling "
-        f"flattens at the top, and its cutoff q3 = {xy200s['decoupling.q[3]']:.2f} um clips it to a constant at the home.",
+        f"the coupling of y from x ({y_floor:.4f} um left) if the held axis answered exactly; "
+        "at the home it does not: the identified D3 is clipped to a constant there by its "
+        f"cutoff q3 = {xy200s['decoupling.q[3]']:.2f} um (fitted on seed 000's single-axis runs "
+        "scaled to 0-113 um, where that coupling flattens at the top), and the y inverse model "
+        f"that would carry a correction errs by {y_error:.2f} um at the home.",
     ]
     return lines
 
