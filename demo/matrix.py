@@ -42,7 +42,6 @@ import numpy as np
 from .experiments import (
     APPROACH_TIME,
     MEASURED_CYCLES,
-    PLANT_PARAMETERS,
     ROTATION_AMPLITUDE_RAD,
     ROTATION_X_UM,
     SETTLING_CYCLES,
@@ -205,8 +204,9 @@ def scenario(case: Case, decoupling: bool, plant_path, controller_path) -> dict:
     START, then the path), the same parameters, and the metrics with the
     couplings on the plant's noise-free pose (`pose`). tests/test_master.py
     holds the master to the fmpy master of demo.cosim within 1e-12 um."""
+    from . import cosim, master
+
     experiment = case.experiment(decoupling)
-    duration, measure_from = single_axis_timing(case.frequency)
 
     def held(value: float) -> dict:
         return {"offset": value, "start": START, "approach": APPROACH_TIME}
@@ -225,15 +225,16 @@ def scenario(case: Case, decoupling: bool, plant_path, controller_path) -> dict:
         signals = {f"{case.axis}_ref": from_rest(case.amplitude), f"{other}_ref": held(case.held),
                    "theta_ref": held(0.0)}
     return {
-        "step": 1e-4,
-        "preview": 2,
-        "duration": START + duration,
+        "step": cosim.SAMPLE_PERIOD,
+        "preview": 2,  # demo.cosim.simulate's default, as every demo run
+        "duration": experiment.duration,
         "fmu": {
-            "plant": {"path": str(plant_path), "parameters": dict(PLANT_PARAMETERS)},
-            "controller": {"path": str(controller_path), "parameters": experiment.controller},
+            cosim.PLANT_INSTANCE: {"path": str(plant_path), "parameters": experiment.plant},
+            cosim.CONTROLLER_INSTANCE: {"path": str(controller_path),
+                                        "parameters": experiment.controller},
         },
-        "signal": {f"controller.{name}": signal for name, signal in signals.items()},
-        "metrics": {"driven": case.axis, "from": START + measure_from, "pose": True},
+        "signal": {master.reference_port(name): signal for name, signal in signals.items()},
+        "metrics": {"driven": case.axis, "from": START + experiment.measure_from, "pose": True},
     }
 
 
