@@ -406,7 +406,10 @@ unsafe fn instantiate_checked<M: CoSimModel>(
             return ptr::null_mut();
         }
     };
-    let guid = match model_description::cached_guid::<M>() {
+    // The instance's model, built before the GUID check: the GUID's start
+    // values are read from it (one construction, not two).
+    let model = M::new();
+    let guid = match model_description::cached_guid(&model) {
         Ok(guid) => guid,
         Err(e) => {
             logger.error(
@@ -443,7 +446,7 @@ unsafe fn instantiate_checked<M: CoSimModel>(
             None
         }
     };
-    let instance = Instance::<M>::new(logger, interface, resource_dir, guid);
+    let instance = Instance::new(logger, interface, resource_dir, guid, model);
     if instance.env.logger.is_enabled(LogCategory::FmiCalls) {
         instance.env.logger.log_in(
             NAME,

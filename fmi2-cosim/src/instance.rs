@@ -291,6 +291,7 @@ impl<M: CoSimModel> Instance<M> {
         interface: Interface,
         resource_dir: Option<PathBuf>,
         guid: String,
+        model: M,
     ) -> Self {
         Instance {
             magic: Magic::<M>::INSTANCE,
@@ -303,7 +304,7 @@ impl<M: CoSimModel> Instance<M> {
             time: 0.0,
             start_time: 0.0,
             terminate_requested: false,
-            model: M::new(),
+            model,
             guid,
             fmu_states: Vec::new(),
             strings: Vec::new(),

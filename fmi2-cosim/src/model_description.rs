@@ -145,7 +145,9 @@ fn check_model_exchange<M: CoSimModel>() -> Result<(), String> {
     }
 }
 
-fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
+/// The description with `guid`, its start values read from `start_model`, a
+/// model as [`CoSimModel::new`] builds it.
+fn render<M: CoSimModel>(guid: &str, start_model: &M) -> Result<String, String> {
     let table = M::variables();
     check_table(table, M::UNITS)?;
     check_model_exchange::<M>()?;
@@ -153,7 +155,6 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
         .map_or(0, |me| me.number_of_event_indicators)
         .to_string();
     let info = M::INFO;
-    let start_model = M::new();
     let mut xml = Xml::new();
 
     xml.event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))?;
@@ -307,7 +308,7 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
             attributes.push(("initial", initial.as_str()));
         }
         xml.open("ScalarVariable", &attributes)?;
-        let start = start_value(var, &start_model);
+        let start = start_value(var, start_model);
         if let Some(bad) = start
             .as_deref()
             .and_then(|s| s.chars().find(|c| !xml_char(*c)))
@@ -429,13 +430,20 @@ fn render<M: CoSimModel>(guid: &str) -> Result<String, String> {
 
 /// The GUID of model `M`: `{` + a UUID v5 of its description + `}`.
 pub fn guid<M: CoSimModel>() -> Result<String, String> {
-    Ok(guid_of_description(&description_without_guid::<M>()?))
+    guid_with(&M::new())
+}
+
+/// [`guid`] with the start values read from `start_model`, a model as
+/// [`CoSimModel::new`] builds it (for a caller that holds one already: a
+/// model's construction can cost more than the rendering).
+fn guid_with<M: CoSimModel>(start_model: &M) -> Result<String, String> {
+    Ok(guid_of_description(&render(GUID_PLACEHOLDER, start_model)?))
 }
 
 /// Model `M`'s description with a placeholder where the GUID goes: what the
 /// GUID is a hash of.
 pub fn description_without_guid<M: CoSimModel>() -> Result<String, String> {
-    render::<M>(GUID_PLACEHOLDER)
+    render(GUID_PLACEHOLDER, &M::new())
 }
 
 /// `{` + a UUID v5 of `description` + `}`: any change of the description
@@ -455,8 +463,11 @@ static GUIDS: Mutex<GuidTable> = Mutex::new([None; 8]);
 
 /// [`guid`], computed once per process and model: rendering and hashing the
 /// description takes about 0.25 ms for PiezoController's 144 variables, which
-/// every `fmi2Instantiate` paid.
-pub fn cached_guid<M: CoSimModel>() -> Result<String, String> {
+/// every `fmi2Instantiate` paid. `start_model` is a model as
+/// [`CoSimModel::new`] builds it, read for the start values (the instance's
+/// own, before anything is set: FlexureStage's construction costs more than
+/// the rendering).
+pub fn cached_guid<M: CoSimModel>(start_model: &M) -> Result<String, String> {
     let id = TypeId::of::<M>();
     let known = |table: &GuidTable| {
         table
@@ -468,7 +479,7 @@ pub fn cached_guid<M: CoSimModel>() -> Result<String, String> {
     if let Some(guid) = known(&GUIDS.lock().unwrap_or_else(|e| e.into_inner())) {
         return Ok(guid);
     }
-    let guid = guid::<M>()?;
+    let guid = guid_with(start_model)?;
     let mut table = GUIDS.lock().unwrap_or_else(|e| e.into_inner());
     if let (Ok(bytes), None) = (<[u8; GUID_LEN]>::try_from(guid.as_bytes()), known(&table))
         && let Some(free) = table.iter_mut().find(|entry| entry.is_none())
@@ -480,7 +491,8 @@ pub fn cached_guid<M: CoSimModel>() -> Result<String, String> {
 
 /// The complete `modelDescription.xml` of model `M`.
 pub fn model_description<M: CoSimModel>() -> Result<String, String> {
-    render::<M>(&guid::<M>()?)
+    let start_model = M::new();
+    render(&guid_with(&start_model)?, &start_model)
 }
 
 fn html_escape(text: &str) -> String {

@@ -788,8 +788,13 @@ impl CoSimModel for FlexureStageFmu {
             ));
         }
         // The stage starts de-energized and at rest, whatever the inputs: the
-        // actuators have no history before t0.
-        self.stage = FlexureStage::new(self.params.clone()).map_err(refused_parameter)?;
+        // actuators have no history before t0. The hysteresis models' rests
+        // settled at instantiation are kept where their parameters did not
+        // change (settling is most of fmi2Instantiate's cost).
+        self.stage = self
+            .stage
+            .at_rest_with(self.params.clone())
+            .map_err(refused_parameter)?;
         self.clip_reported = [false; 3];
         ctx.event(format_args!("stage built from the parameters, at rest"));
         Ok(())

@@ -17,5 +17,5 @@ pub mod scenario;
 pub mod series;
 pub mod trajectory;
 
-pub use master::{RunError, RunOptions, RunOutput, Series, run};
+pub use master::{OpenFmus, RunError, RunOptions, RunOutput, Series, run, run_with};
 pub use scenario::Scenario;

@@ -1,15 +1,18 @@
 //! `piezo-cosim run SCENARIO`: runs one co-simulation scenario (TOML or JSON,
 //! see `piezo_cosim::scenario`) and prints its result as JSON.
+//! `piezo-cosim batch RUNS.jsonl`: runs one scenario per line, each FMU
+//! opened once, and prints one result per line as it completes.
 //!
-//! Exit status: 0 the run completed; 1 an FMU refused a call or failed a
-//! step; 2 the scenario is malformed or does not fit the FMUs.
+//! Exit status: 0 the run completed (batch: every line was answered); 1 an
+//! FMU refused a call or failed a step; 2 the scenario is malformed or does
+//! not fit the FMUs.
 
-use std::io::Read;
+use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use piezo_cosim::{RunError, RunOptions, Scenario, run, series};
+use piezo_cosim::{OpenFmus, RunError, RunOptions, RunOutput, Scenario, run, run_with, series};
 use serde_json::json;
 
 #[derive(Parser)]
@@ -38,6 +41,19 @@ enum Command {
         out: Option<PathBuf>,
         /// Ends with the process PID that started it (Linux): a run whose
         /// caller was killed (a dask worker) does not run on as an orphan.
+        #[arg(long, value_name = "PID")]
+        parent: Option<u32>,
+    },
+    /// Runs many scenarios in one process: one JSON scenario per line (as
+    /// `run -` takes it); prints one JSON result per line, in order, each as
+    /// its run completes: `run`'s result with the line number, or
+    /// {status: "error", exit, error, line} for a run that failed (the
+    /// others still run). Each FMU is opened once and instantiated per run.
+    Batch {
+        /// JSON Lines file of scenarios (paths relative to its folder), or
+        /// `-` for stdin (paths relative to the working directory).
+        scenarios: PathBuf,
+        /// As for `run`.
         #[arg(long, value_name = "PID")]
         parent: Option<u32>,
     },
@@ -77,6 +93,84 @@ fn load(path: &Path) -> Result<Scenario, String> {
     }
 }
 
+/// The exit status of a run that did not complete.
+fn exit_code(e: &RunError) -> u8 {
+    match e {
+        RunError::Scenario(_) => 2,
+        RunError::Fmu(_) => 1,
+    }
+}
+
+/// A completed run's result, as `run` prints it.
+fn result_json(scenario: &Scenario, output: &RunOutput) -> serde_json::Value {
+    let simulated = output.steps as f64 * scenario.step;
+    json!({
+        "status": "ok",
+        "steps": output.steps,
+        "simulated_s": simulated,
+        "wall_s": output.wall_s,
+        "loop_s": output.loop_s,
+        "realtime_factor": simulated / output.wall_s,
+        "metrics": output.metrics,
+        "warnings": output.warnings,
+    })
+}
+
+/// `piezo-cosim batch`: every line of `source` run in turn, one result line
+/// each, flushed as it is written (a caller reads them as they come and
+/// knows which run a stall belongs to).
+fn batch(source: &Path) -> ExitCode {
+    let (reader, origin, base): (Box<dyn BufRead>, String, Option<&Path>) =
+        if source.as_os_str() == "-" {
+            (Box::new(std::io::stdin().lock()), "<stdin>".to_owned(), None)
+        } else {
+            match std::fs::File::open(source) {
+                Ok(file) => (
+                    Box::new(std::io::BufReader::new(file)),
+                    source.display().to_string(),
+                    Some(source.parent().unwrap_or(Path::new(""))),
+                ),
+                Err(e) => {
+                    eprintln!("{}: {e}", source.display());
+                    return ExitCode::from(2);
+                }
+            }
+        };
+    let mut open = OpenFmus::default();
+    let mut stdout = std::io::stdout().lock();
+    for (index, line) in reader.lines().enumerate() {
+        let number = index + 1;
+        let line = match line {
+            Ok(line) => line,
+            Err(e) => {
+                eprintln!("{origin}:{number}: {e}");
+                return ExitCode::from(2);
+            }
+        };
+        if line.trim().is_empty() {
+            continue;
+        }
+        let outcome = Scenario::parse_json_line(&line, &origin, number)
+            .map_err(RunError::from)
+            .and_then(|mut scenario| {
+                if let Some(base) = base {
+                    scenario.resolve_paths(base);
+                }
+                run_with(&scenario, RunOptions::default(), &mut open)
+                    .map(|output| result_json(&scenario, &output))
+            });
+        let mut result = outcome.unwrap_or_else(|e| {
+            json!({"status": "error", "exit": exit_code(&e), "error": e.to_string()})
+        });
+        result["line"] = json!(number);
+        if writeln!(stdout, "{result}").and_then(|()| stdout.flush()).is_err() {
+            // The reader has gone: nobody wants the remaining runs.
+            return ExitCode::from(1);
+        }
+    }
+    ExitCode::SUCCESS
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let (scenario, series_path, out, check_only) = match cli.command {
@@ -90,6 +184,12 @@ fn main() -> ExitCode {
                 exit_with_parent(pid);
             }
             (scenario, series, out, false)
+        }
+        Command::Batch { scenarios, parent } => {
+            if let Some(pid) = parent {
+                exit_with_parent(pid);
+            }
+            return batch(&scenarios);
         }
         Command::Check { scenario } => (scenario, None, None, true),
     };
@@ -117,10 +217,7 @@ fn main() -> ExitCode {
         Ok(output) => output,
         Err(e) => {
             eprintln!("{e}");
-            return ExitCode::from(match e {
-                RunError::Scenario(_) => 2,
-                RunError::Fmu(_) => 1,
-            });
+            return ExitCode::from(exit_code(&e));
         }
     };
     if let (Some(path), Some(series)) = (&series_path, &output.series)
@@ -133,17 +230,7 @@ fn main() -> ExitCode {
         println!("{}", json!({"status": "ok", "warnings": output.warnings}));
         return ExitCode::SUCCESS;
     }
-    let simulated = output.steps as f64 * scenario.step;
-    let result = json!({
-        "status": "ok",
-        "steps": output.steps,
-        "simulated_s": simulated,
-        "wall_s": output.wall_s,
-        "loop_s": output.loop_s,
-        "realtime_factor": simulated / output.wall_s,
-        "metrics": output.metrics,
-        "warnings": output.warnings,
-    });
+    let result = result_json(&scenario, &output);
     let text = result.to_string();
     match out {
         Some(path) => {

@@ -15,6 +15,7 @@
 //! indices before the first step, and the loop allocates nothing.
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 use std::time::Instant;
 
 use fmi2_import::{Causality, FmuArchive, Instance, LogRecord, OK, VariableInfo, WARNING};
@@ -127,12 +128,46 @@ struct Slot<'a> {
 }
 
 /// A loaded FMU of the scenario.
-struct Loaded {
+struct Loaded<'a> {
     name: String,
-    archive: FmuArchive,
+    archive: &'a FmuArchive,
 }
 
-impl Loaded {
+/// The FMUs a process has opened, by the path a scenario names them with:
+/// runs of one process (`piezo-cosim batch`, a sweep task's runs) open,
+/// unpack, parse and load each FMU once, and instantiate it per run. An
+/// instance holds nothing of the runs before it; the FMU's binary may keep
+/// what its instances share (FMI 2.0.4 §2.1.5), which for this project's
+/// FMUs is their GUID.
+#[derive(Default)]
+pub struct OpenFmus {
+    by_path: BTreeMap<PathBuf, FmuArchive>,
+}
+
+impl OpenFmus {
+    /// Opens every FMU of `scenario` not open yet.
+    fn open_all(&mut self, scenario: &Scenario) -> Result<(), RunError> {
+        for spec in scenario.fmu.values() {
+            if !self.by_path.contains_key(&spec.path) {
+                let archive =
+                    FmuArchive::open(&spec.path).map_err(|e| RunError::Scenario(e.to_string()))?;
+                self.by_path.insert(spec.path.clone(), archive);
+            }
+        }
+        Ok(())
+    }
+
+    /// How many FMUs are open.
+    pub fn len(&self) -> usize {
+        self.by_path.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.by_path.is_empty()
+    }
+}
+
+impl Loaded<'_> {
     fn variable(&self, variable: &str, port: &str) -> Result<&VariableInfo, RunError> {
         self.archive.fmu.find(variable).ok_or_else(|| {
             RunError::Scenario(format!(
@@ -154,21 +189,29 @@ fn log_text(log: &[LogRecord]) -> String {
         .join("; ")
 }
 
-/// Runs `scenario` once.
+/// Runs `scenario` once, opening its FMUs for this run alone.
 pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunError> {
+    run_with(scenario, options, &mut OpenFmus::default())
+}
+
+/// Runs `scenario` once with the FMUs `open` holds, opening those it does
+/// not (kept for the next run). The result equals [`run`]'s: each run has
+/// its own instances.
+pub fn run_with(
+    scenario: &Scenario,
+    options: RunOptions,
+    open: &mut OpenFmus,
+) -> Result<RunOutput, RunError> {
     let started = Instant::now();
+    open.open_all(scenario)?;
     let loaded: Vec<Loaded> = scenario
         .fmu
         .iter()
-        .map(|(name, spec)| {
-            FmuArchive::open(&spec.path)
-                .map(|archive| Loaded {
-                    name: name.clone(),
-                    archive,
-                })
-                .map_err(|e| RunError::Scenario(e.to_string()))
+        .map(|(name, spec)| Loaded {
+            name: name.clone(),
+            archive: &open.by_path[&spec.path],
         })
-        .collect::<Result<_, _>>()?;
+        .collect();
     let index_of: BTreeMap<&str, usize> = loaded
         .iter()
         .enumerate()
@@ -246,23 +289,23 @@ pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunErr
         }
     }
 
-    // Signals, sampled before the loop at t_k (recorded, and the metrics'
-    // demands) and at t_k + preview·h (what the inputs get).
+    // Signals, sampled once before the loop on the grid t_k = k·h, k = 0 ..
+    // steps + preview: t_k's sample is recorded (and is the metrics'
+    // demand), t_(k + preview)'s is what the inputs get at t_k.
     let steps = scenario.steps();
     let h = scenario.step;
-    let ahead = f64::from(scenario.preview) * h;
-    let times: Vec<f64> = (0..=steps).map(|k| k as f64 * h).collect();
-    let times_ahead: Vec<f64> = times[..steps].iter().map(|t| t + ahead).collect();
+    let preview = scenario.preview as usize;
+    let grid: Vec<f64> = (0..=steps + preview).map(|k| k as f64 * h).collect();
+    let times: Vec<f64> = grid[..=steps].to_vec();
     let mut signal_names = Vec::new();
-    let mut signal_now = Vec::new();
-    let mut signal_ahead = Vec::new();
+    let mut signal_samples = Vec::new();
     for (port, trajectory) in &scenario.signal {
         resolve(port)?;
         let fail = |e: String| RunError::Scenario(format!("signal {port}: {e}"));
-        signal_now.push(trajectory.sample(&times).map_err(fail)?);
-        signal_ahead.push(trajectory.sample(&times_ahead).map_err(fail)?);
+        signal_samples.push(trajectory.sample(&grid).map_err(fail)?);
         signal_names.push(port.clone());
     }
+    let signal_now = |s: usize| &signal_samples[s][..=steps];
 
     // Inputs per FMU.
     let mut inputs: Vec<Vec<(u32, Source)>> = vec![Vec::new(); loaded.len()];
@@ -425,7 +468,7 @@ pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunErr
             for (value, source) in slot.input_values.iter_mut().zip(&slot.input_sources) {
                 *value = match *source {
                     Source::Output(i) => outputs[i],
-                    Source::Signal(s) => signal_ahead[s][k],
+                    Source::Signal(s) => signal_samples[s][k + preview],
                 };
             }
             if !slot.input_vrs.is_empty() {
@@ -462,8 +505,8 @@ pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunErr
             for ((port, _), column) in recorded.iter().zip(&columns) {
                 available.insert(port.as_str(), column.as_slice());
             }
-            for (port, values) in signal_names.iter().zip(&signal_now) {
-                available.insert(port.as_str(), values.as_slice());
+            for (s, port) in signal_names.iter().enumerate() {
+                available.insert(port.as_str(), signal_now(s));
             }
             let constant = |port: &str| value_of(port).unwrap_or(0.0);
             Some(metrics::compute(
@@ -474,7 +517,9 @@ pub fn run(scenario: &Scenario, options: RunOptions) -> Result<RunOutput, RunErr
     };
     let series = if options.series {
         let mut names: Vec<String> = signal_names.clone();
-        let mut data: Vec<Vec<f64>> = signal_now.clone();
+        let mut data: Vec<Vec<f64>> = (0..signal_names.len())
+            .map(|s| signal_now(s).to_vec())
+            .collect();
         for ((port, _), column) in recorded.iter().zip(columns) {
             names.push(port.clone());
             data.push(column);

@@ -238,6 +238,24 @@ impl Scenario {
         Ok(scenario)
     }
 
+    /// Parses line `line` of a JSON Lines file of scenarios (`piezo-cosim
+    /// batch`): one scenario as JSON on one line; errors name `origin`, the
+    /// line and the column.
+    pub fn parse_json_line(text: &str, origin: &str, line: usize) -> Result<Scenario, ScenarioError> {
+        let scenario: Scenario = serde_json::from_str(text).map_err(|e| {
+            // serde_json's message ends with the position within the text,
+            // which is always line 1 here: the file's line replaces it.
+            let message = e.to_string();
+            let position = format!(" at line {} column {}", e.line(), e.column());
+            let message = message.strip_suffix(&position).unwrap_or(&message);
+            ScenarioError(format!("{origin}:{line}:{}: {message}", e.column()))
+        })?;
+        scenario
+            .validate()
+            .map_err(|e| ScenarioError(format!("{origin}:{line}: {e}")))?;
+        Ok(scenario)
+    }
+
     /// Makes every relative path relative to `base`.
     pub fn resolve_paths(&mut self, base: &Path) {
         let resolve = |p: &mut PathBuf| {
@@ -284,6 +302,15 @@ impl Scenario {
             return Err(format!(
                 "{} s at {} s per step is more than 1e9 steps",
                 self.duration, self.step
+            ));
+        }
+        // The signals are sampled up to t_(steps + preview): a preview past
+        // the run's end previews nothing the run uses.
+        if self.preview as usize > self.steps() {
+            return Err(format!(
+                "preview ({} samples) must not exceed the run's {} steps",
+                self.preview,
+                self.steps()
             ));
         }
         if self.fmu.is_empty() {
@@ -415,6 +442,28 @@ path = "c.fmu"
         let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
         assert!(e.starts_with("s.toml:11:"), "{e}");
         assert!(e.contains("unknown field `form`"), "{e}");
+    }
+
+    #[test]
+    fn a_json_line_names_its_line_and_column() {
+        let e = Scenario::parse_json_line(r#"{"duration": 1.0, "fmu": 3}"#, "runs.jsonl", 7)
+            .unwrap_err()
+            .0;
+        assert!(e.starts_with("runs.jsonl:7:26: invalid type: integer `3`"), "{e}");
+        assert!(!e.contains("at line 1"), "{e}");
+        let e = Scenario::parse_json_line(r#"{"duration": 1.0, "fmu": {}}"#, "runs.jsonl", 8)
+            .unwrap_err()
+            .0;
+        assert_eq!(e, "runs.jsonl:8: no [fmu.<instance>] table");
+    }
+
+    #[test]
+    fn a_preview_longer_than_the_run_is_refused() {
+        let text = MINIMAL.replace("duration = 1.0", "duration = 1.0\npreview = 10001");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(e.contains("preview (10001 samples) must not exceed the run's 10000 steps"), "{e}");
+        let text = MINIMAL.replace("duration = 1.0", "duration = 1.0\npreview = 10000");
+        assert!(Scenario::parse(&text, false, "s.toml").is_ok());
     }
 
     #[test]

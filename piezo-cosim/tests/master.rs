@@ -2,12 +2,14 @@
 //! from the release cdylibs and the committed modelDescriptions (so that
 //! `cargo test` needs no `make fmus`): the closed loop tracks, a check
 //! stops before the first step, a scenario that does not fit the FMUs is
-//! refused by name, and the step loop allocates nothing.
+//! refused by name, runs that share their opened FMUs (a batch) equal runs
+//! that open their own, and the step loop allocates nothing.
 
 use counting_allocator::{CountingAllocator, allocations_of};
 use std::path::{Path, PathBuf};
 
-use piezo_cosim::{RunError, RunOptions, Scenario, run};
+use piezo_cosim::scenario::ParameterValue;
+use piezo_cosim::{OpenFmus, RunError, RunOptions, Scenario, run, run_with};
 
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
@@ -105,6 +107,42 @@ fn the_closed_loop_tracks_a_y_sine() {
     // Without decoupling, y drags the x sensors (Table 3: ~2 um spans).
     assert!(m["coupling_x2_span"].as_f64().unwrap() > 0.5);
     assert_eq!(m["samples"], 10_001);
+}
+
+/// A batch opens each FMU once and instantiates it per run: every run's
+/// metrics equal, bit for bit, those of a run that opened the FMUs itself,
+/// whatever ran before it in the process (another noise seed, a run that
+/// an FMU refused, the same scenario again).
+#[test]
+fn runs_that_share_their_fmus_equal_runs_that_open_their_own() {
+    let fmus = fmus();
+    let first = y_sine(&fmus, 0.5, "");
+    let mut other_seed = first.clone();
+    other_seed
+        .fmu
+        .get_mut("plant")
+        .unwrap()
+        .parameters
+        .insert("noise.seed".to_owned(), ParameterValue::Number(7.0));
+    let mut refused = first.clone();
+    refused
+        .fmu
+        .get_mut("plant")
+        .unwrap()
+        .parameters
+        .insert("mode.theta.damping".to_owned(), ParameterValue::Number(-1.0));
+    let alone = |scenario: &Scenario| run(scenario, RunOptions::default()).unwrap().metrics;
+    let mut open = OpenFmus::default();
+    let mut shared = |scenario: &Scenario| run_with(scenario, RunOptions::default(), &mut open);
+    let a = shared(&first).unwrap().metrics;
+    let b = shared(&other_seed).unwrap().metrics;
+    assert!(matches!(shared(&refused), Err(RunError::Fmu(_))));
+    let a_again = shared(&first).unwrap().metrics;
+    assert_eq!(open.len(), 2, "each FMU opened once");
+    assert_eq!(a, alone(&first));
+    assert_eq!(b, alone(&other_seed));
+    assert_ne!(a, b, "the seed moves the noise");
+    assert_eq!(a_again, a);
 }
 
 #[test]

@@ -403,26 +403,45 @@ impl FlexureStage {
     /// exercised rest (`rest_cycle_voltage`), creep 0, modes at rest, every
     /// reading 0, sensors noise-free until the first step.
     pub fn new(params: FlexureStageParams) -> Result<Self, ParamError> {
+        Self::settled(params, None)
+    }
+
+    /// The stage [`FlexureStage::new`] builds from `params`, at rest, taking
+    /// from this stage every Bouc-Wen model whose parameters and rest cycle
+    /// did not change, returned to its rest instead of settled again (a
+    /// model's rest depends on those alone). Settling the seven models is
+    /// most of a build's cost: an FMU that built its stage at instantiation
+    /// and is initialized with other parameters (a noise seed, a mode, a
+    /// gain) builds the rest of it only.
+    pub fn at_rest_with(&self, params: FlexureStageParams) -> Result<Self, ParamError> {
+        Self::settled(params, Some(self))
+    }
+
+    /// Validates `params` and builds the stage at rest, each Bouc-Wen model
+    /// taken from `reuse` when it has the same parameters and rest cycle.
+    fn settled(params: FlexureStageParams, reuse: Option<&Self>) -> Result<Self, ParamError> {
         params.validate()?;
-        let tau = params.amplifier.time_constant();
-        let rates = [
-            1.0 / tau,
-            1.0 / params.actuators[0].creep_time,
-            1.0 / params.actuators[1].creep_time,
-            1.0 / params.actuators[2].creep_time,
-        ];
-        let modes = [
-            Oscillator::new(&params.modes.x),
-            Oscillator::new(&params.modes.y),
-            Oscillator::new(&params.modes.theta),
-        ];
-        let gains = [0, 1, 2].map(|m| rates.map(|rate| modes[m].exponential_gain(rate)));
+        let cycle = params.rest_cycle_voltage;
+        let same_cycle = reuse.filter(|old| old.params.rest_cycle_voltage.to_bits() == cycle.to_bits());
+        let at_rest = |hysteresis: BoucWenParams, old: Option<&AsymmetricBoucWen>| match old {
+            Some(old) if old.params() == &hysteresis => {
+                let mut model = old.clone();
+                model.reset();
+                model
+            }
+            _ => AsymmetricBoucWen::at_exercised_rest(hysteresis, cycle),
+        };
         let c = &params.coupling;
-        let actuators = params
-            .actuators
-            .map(|a| AsymmetricBoucWen::at_exercised_rest(a.hysteresis, params.rest_cycle_voltage));
-        let couplings = [c.x_from_pzt1, c.rot_from_pzt1, c.y_from_pzt2, c.y_from_pzt3]
-            .map(|h| AsymmetricBoucWen::at_exercised_rest(h, params.rest_cycle_voltage));
+        let actuators: [AsymmetricBoucWen; 3] = std::array::from_fn(|i| {
+            at_rest(
+                params.actuators[i].hysteresis,
+                same_cycle.map(|old| &old.actuators[i]),
+            )
+        });
+        let couplings_params = [c.x_from_pzt1, c.rot_from_pzt1, c.y_from_pzt2, c.y_from_pzt3];
+        let couplings: [AsymmetricBoucWen; 4] = std::array::from_fn(|i| {
+            at_rest(couplings_params[i], same_cycle.map(|old| &old.couplings[i]))
+        });
         // Parameters each inside its range can still make a Bouc-Wen model
         // diverge on the exercised rest cycle (the fuzzer's restored states
         // found such sets): a stage built on a non-finite rest would hand
@@ -452,7 +471,30 @@ impl FlexureStage {
                 ),
             });
         }
-        Ok(Self {
+        Ok(Self::assemble(params, actuators, couplings))
+    }
+
+    /// Everything but the hysteresis models, built at rest from `params`
+    /// (validated), around the given models.
+    fn assemble(
+        params: FlexureStageParams,
+        actuators: [AsymmetricBoucWen; 3],
+        couplings: [AsymmetricBoucWen; 4],
+    ) -> Self {
+        let tau = params.amplifier.time_constant();
+        let rates = [
+            1.0 / tau,
+            1.0 / params.actuators[0].creep_time,
+            1.0 / params.actuators[1].creep_time,
+            1.0 / params.actuators[2].creep_time,
+        ];
+        let modes = [
+            Oscillator::new(&params.modes.x),
+            Oscillator::new(&params.modes.y),
+            Oscillator::new(&params.modes.theta),
+        ];
+        let gains = [0, 1, 2].map(|m| rates.map(|rate| modes[m].exponential_gain(rate)));
+        Self {
             amplifier: Amplifier::new(params.amplifier),
             actuators,
             creep: params
@@ -472,7 +514,7 @@ impl FlexureStage {
                 amplifier_travel: 0.0,
             },
             params,
-        })
+        }
     }
 
     pub fn params(&self) -> &FlexureStageParams {
@@ -826,6 +868,41 @@ mod tests {
         assert_eq!(stage.pose(), Pose::default());
         assert_eq!(stage.sensors(), [0.0; 3]);
         assert_eq!(stage.amplifier_voltages(), [0.0; 3]);
+    }
+
+    /// `at_rest_with` is the stage `new` builds, field for field, from any
+    /// state (a driven stage with noise on, its generator moved, every
+    /// Bouc-Wen model off its rest, the piece cache filled) and for
+    /// parameters that keep, change some or change all of the rests.
+    #[test]
+    fn at_rest_with_equals_a_stage_built_from_the_same_parameters() {
+        let mut params = FlexureStageParams::default();
+        params.noise.enabled = true;
+        let mut stage = FlexureStage::new(params.clone()).unwrap();
+        for k in 0..2000 {
+            let t = k as f64 * 1e-4;
+            let wave = (2.0 * std::f64::consts::PI * 5.0 * t).sin();
+            stage.step([4.0 + 3.0 * wave, 5.0 - 4.0 * wave, 2.0 * wave], 1e-4);
+        }
+        assert_ne!(stage, FlexureStage::new(params.clone()).unwrap());
+        let same = params.clone();
+        let mut other_mode_and_seed = params.clone();
+        other_mode_and_seed.modes.theta.frequency_hz *= 1.05;
+        other_mode_and_seed.noise.seed += 1;
+        let mut one_rest_moves = params.clone();
+        one_rest_moves.coupling.y_from_pzt3.a *= 1.1;
+        one_rest_moves.actuators[1].hysteresis.q *= 0.9;
+        let mut every_rest_moves = params.clone();
+        every_rest_moves.rest_cycle_voltage *= 0.8;
+        for wanted in [same, other_mode_and_seed, one_rest_moves, every_rest_moves] {
+            assert_eq!(
+                stage.at_rest_with(wanted.clone()).unwrap(),
+                FlexureStage::new(wanted).unwrap()
+            );
+        }
+        let mut invalid = params;
+        invalid.modes.theta.damping_ratio = -1.0;
+        assert!(stage.at_rest_with(invalid).is_err(), "parameters are validated");
     }
 
     /// Zero commands from rest keep everything exactly at rest.
