@@ -4,18 +4,22 @@
 
 The master is a Rust program (piezo-cosim/) shipped inside this package as
 demo/bin/piezo-cosim (`make master` builds and copies it; $PIEZO_COSIM
-overrides the path). Python runs it as a child process, one process per run:
-- a run is then isolated: an FMU that crashes or hangs (any FMU can be loaded)
-  ends its own process, reported as a failed run with its message, never the
-  dask worker that ran it; a timeout can stop it;
-- every run starts from a fresh process, so no global state of an FMU binary
-  can leak from one run into the next: a run is a pure function of its
-  scenario;
+overrides the path). Python runs it as a child process: `run` one process per
+run, `run_batch` one process for many runs (`piezo-cosim batch`: each FMU
+opened once, instantiated per run):
+- a run is isolated from the dask worker that asked for it: an FMU that
+  crashes or hangs (any FMU can be loaded) ends its own process, reported as
+  a failed run with its message (in a batch, that run; the runs after it go
+  on in a new process); a timeout stops it;
+- each run has its own FMU instances, so it is a pure function of its
+  scenario for any FMU that keeps its state in its instances, as FMI 2.0
+  asks (these FMUs do: runs that share their process equal runs that do not,
+  bit for bit, piezo-cosim/tests/master.rs); for an FMU that keeps global
+  state, one process per run (`run`, or a sweep's `runs_per_task = 1`);
 - the CLI users run and the sweeps run are the same binary, with no Python
   ABI to build against.
-What it costs per run, about 8 ms (the process started from Python, both FMUs
-loaded, initialized and terminated; docs/sweeps.md), is small beside a run of a
-second or more of the loop at 10 kHz (6-10 ms per simulated second).
+What a process costs, about 3 ms started from Python, and what opening the two
+FMUs costs, about 1.4 ms, are paid once per batch (docs/sweeps.md).
 
 A scenario is a dict (or a TOML/JSON file) in the format of
 piezo-cosim/src/scenario.rs; `run` hands it to the master as JSON on stdin
@@ -27,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import selectors
 import subprocess
 import sys
 import tempfile
@@ -113,6 +118,72 @@ def run(scenario: dict | str | Path, series: str | Path | None = None,
         if series is not None and csv != series:
             write_parquet(read_series(csv), series)
     return result
+
+
+def run_batch(scenarios: list[dict], timeout: float | None = None,
+              cwd: str | Path | None = None) -> list:
+    """Runs `scenarios` (dicts, paths relative to `cwd`) in one piezo-cosim
+    process, or more when one fails hard; returns, for each scenario in
+    order, what `run` would: its JSON result, or the MasterError or
+    subprocess.TimeoutExpired that `run` would have raised (returned, not
+    raised: the other runs have results).
+
+    `timeout` bounds each run, counted from the previous result: a run past
+    it is killed with its process, and the runs after it go on in a new one;
+    so does every run after one whose process died (an FMU that crashed)."""
+    outcomes: list = []
+    while len(outcomes) < len(scenarios):
+        outcomes += _batch_process(scenarios[len(outcomes):], timeout, cwd)
+    return outcomes
+
+
+def _batch_process(scenarios: list[dict], timeout: float | None, cwd) -> list:
+    """One `piezo-cosim batch` process over `scenarios`: the outcomes of the
+    runs it answered, then (when it stopped early) the outcome of the run it
+    stopped at."""
+    args = [str(binary()), "batch", "--parent", str(os.getpid()), "-"]
+    with tempfile.TemporaryFile("w+") as lines, tempfile.TemporaryFile("w+") as errors:
+        # Files, not pipes, for the input and the error stream: nothing
+        # blocks on a full pipe whatever the batch's size.
+        lines.write("".join(json.dumps(scenario) + "\n" for scenario in scenarios))
+        lines.seek(0)
+        process = subprocess.Popen(args, stdin=lines, stdout=subprocess.PIPE, stderr=errors,
+                                   cwd=cwd)
+        outcomes: list = []
+        pending = b""
+        with selectors.DefaultSelector() as selector:
+            selector.register(process.stdout, selectors.EVENT_READ)
+            deadline = None if timeout is None else time.monotonic() + timeout
+            while len(outcomes) < len(scenarios):
+                wait = None if deadline is None else max(deadline - time.monotonic(), 0.0)
+                if not selector.select(wait):
+                    process.kill()
+                    process.wait()
+                    outcomes.append(subprocess.TimeoutExpired(args, timeout))
+                    return outcomes
+                chunk = os.read(process.stdout.fileno(), 1 << 16)
+                if not chunk:
+                    break
+                pending += chunk
+                *complete, pending = pending.split(b"\n")
+                for line in complete:
+                    result = json.loads(line)
+                    result.pop("line", None)
+                    if result["status"] == "error":
+                        outcomes.append(MasterError(result["error"], result["exit"]))
+                    else:
+                        outcomes.append(result)
+                if complete and timeout is not None:
+                    deadline = time.monotonic() + timeout
+        returncode = process.wait()
+        process.stdout.close()
+        if len(outcomes) < len(scenarios):
+            errors.seek(0)
+            why = (f"was killed by signal {-returncode}" if returncode < 0
+                   else f"exited with {returncode}")
+            message = errors.read().strip() or f"piezo-cosim {why} during this run"
+            outcomes.append(MasterError(message, returncode))
+    return outcomes
 
 
 def check(scenario: dict, cwd: str | Path | None = None) -> dict:

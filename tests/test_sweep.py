@@ -301,10 +301,14 @@ def test_a_run_that_timed_out_is_run_again(spec_path, reference_table, tmp_path)
     runs, fmus = sweep.expand(spec)
     data = {digest: path.read_bytes() for digest, path in fmus.items()}
     slow = copy.deepcopy(runs[3])
-    slow.scenario["duration"] = 60.0  # about 0.3 s of the master at least
-    row = sweep.execute_run(slow, data, timeout=0.05)
+    slow.scenario["duration"] = 600.0  # 3 s of the master at least
+    # In a task of three runs: the slow one times out alone (the others take
+    # about 15 ms each), the next one runs on in a new master process.
+    before, row, after = sweep.execute_runs([runs[2], slow, runs[4]], data, timeout=0.5)
     assert row["status"] == "timeout" and row["key"] == runs[3].key, row
-    assert row["error"] == "no result within 0.05 s"
+    assert row["error"] == "no result within 0.5 s"
+    assert (before["status"], after["status"]) == ("ok", "ok"), (before, after)
+    assert results([before, after]) == results([reference_table[2], reference_table[4]])
     table = [dict(r) for r in reference_table]
     table[3] = row
     pq.write_table(sweep._rows_to_table(table, spec), sweep.table_path(tmp_path, "small"))
@@ -342,6 +346,24 @@ def test_spec_errors_name_the_file_and_line(tmp_path):
                    "valuess = [1.0]\n")
     with pytest.raises(sweep.SpecError, match=rf"^{bad}:6: variable 'f': unknown key 'valuess'"):
         sweep.load_spec(bad)
+
+
+def test_runs_go_to_tasks_in_order_and_keep_every_worker_busy(tmp_path):
+    runs = list(range(1000))
+    tasks = sweep.batches(runs, workers=2, runs_per_task=10)
+    assert [len(t) for t in tasks] == [10] * 100
+    assert [r for t in tasks for r in t] == runs
+    # Few runs: at least four tasks a worker, down to one run a task.
+    assert [len(t) for t in sweep.batches(runs[:8], workers=2, runs_per_task=10)] == [1] * 8
+    assert [len(t) for t in sweep.batches(runs[:50], workers=2, runs_per_task=10)] == [7] * 7 + [1]
+    assert [len(t) for t in sweep.batches(runs[:30], workers=1, runs_per_task=1)] == [1] * 30
+    assert sweep.batches([], workers=2, runs_per_task=10) == []
+    spec = tmp_path / "s.toml"
+    spec.write_text("study = 'x'\nruns_per_task = 0\n[template]\nduration = 1.0\n")
+    with pytest.raises(sweep.SpecError, match=rf"^{spec}:2: runs_per_task 0: a whole number"):
+        sweep.load_spec(spec)
+    spec.write_text("study = 'x'\nruns_per_task = 3\n[template]\nduration = 1.0\n")
+    assert sweep.load_spec(spec).runs_per_task == 3
 
 
 def test_expressions_accept_arithmetic_only():
