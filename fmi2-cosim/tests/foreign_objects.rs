@@ -227,7 +227,10 @@ fn cached_guids_are_per_model() {
     use fmi2_cosim::model_description::{cached_guid, guid};
     for _ in 0..2 {
         assert_eq!(cached_guid(&Left::new()).unwrap(), guid::<Left>().unwrap());
-        assert_eq!(cached_guid(&Right::new()).unwrap(), guid::<Right>().unwrap());
+        assert_eq!(
+            cached_guid(&Right::new()).unwrap(),
+            guid::<Right>().unwrap()
+        );
     }
     assert_ne!(guid::<Left>().unwrap(), guid::<Right>().unwrap());
 }

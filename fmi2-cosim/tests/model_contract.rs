@@ -363,3 +363,38 @@ fn a_tunable_parameter_is_held_in_its_range_while_running() {
     assert_eq!(other.set_state(state), OK);
     assert_eq!(other.last_successful_time(), (OK, 0.05));
 }
+
+/// The call that carries a loop's inputs between steps takes a short path
+/// (`Instance::set_values`): what it accepts and refuses is the full rule's.
+/// Several inputs in one call are taken (the last of one reference wins);
+/// a call with one value that is not a valid input value (NaN, an output,
+/// an unknown reference, a fixed parameter) is refused whole and leaves the
+/// input as it was.
+#[test]
+fn inputs_between_steps_are_taken_whole_or_refused_whole() {
+    let set = |slave: &Slave, vrs: &[u32], values: &[f64]| {
+        // SAFETY: both arrays hold `vrs.len()` elements.
+        unsafe { abi::set_real::<Stepper>(slave.0, vrs.as_ptr(), vrs.len(), values.as_ptr()) }
+    };
+    let slave = Slave::initialized();
+    assert_eq!(slave.step(0.0, 0.1), OK);
+    assert_eq!(set(&slave, &[U, U], &[3.0, 4.0]), OK);
+    assert_eq!(slave.real(U), 4.0);
+    assert_eq!(slave.step(0.1, 0.1), OK);
+    assert!(
+        (slave.real(Y) - (0.2 + 0.4)).abs() < 1e-12,
+        "{}",
+        slave.real(Y)
+    );
+    for (vrs, values) in [
+        (&[U, U][..], &[5.0, f64::NAN][..]),
+        (&[U, Y], &[5.0, 1.0]),
+        (&[U, 99], &[5.0, 1.0]),
+        (&[U, GAIN], &[5.0, 2.0]),
+    ] {
+        let slave = Slave::initialized();
+        assert_eq!(slave.step(0.0, 0.1), OK);
+        assert_eq!(set(&slave, vrs, values), ERROR, "{vrs:?}");
+        assert_eq!(slave.real(U), 2.0, "{vrs:?}: the input is unchanged");
+    }
+}

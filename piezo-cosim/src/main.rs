@@ -122,7 +122,11 @@ fn result_json(scenario: &Scenario, output: &RunOutput) -> serde_json::Value {
 fn batch(source: &Path) -> ExitCode {
     let (reader, origin, base): (Box<dyn BufRead>, String, Option<&Path>) =
         if source.as_os_str() == "-" {
-            (Box::new(std::io::stdin().lock()), "<stdin>".to_owned(), None)
+            (
+                Box::new(std::io::stdin().lock()),
+                "<stdin>".to_owned(),
+                None,
+            )
         } else {
             match std::fs::File::open(source) {
                 Ok(file) => (
@@ -159,11 +163,14 @@ fn batch(source: &Path) -> ExitCode {
                 run_with(&scenario, RunOptions::default(), &mut open)
                     .map(|output| result_json(&scenario, &output))
             });
-        let mut result = outcome.unwrap_or_else(|e| {
-            json!({"status": "error", "exit": exit_code(&e), "error": e.to_string()})
-        });
+        let mut result = outcome.unwrap_or_else(
+            |e| json!({"status": "error", "exit": exit_code(&e), "error": e.to_string()}),
+        );
         result["line"] = json!(number);
-        if writeln!(stdout, "{result}").and_then(|()| stdout.flush()).is_err() {
+        if writeln!(stdout, "{result}")
+            .and_then(|()| stdout.flush())
+            .is_err()
+        {
             // The reader has gone: nobody wants the remaining runs.
             return ExitCode::from(1);
         }

@@ -442,9 +442,15 @@ pub fn run_with(
         .filter(|(port, _)| options.series || metric_ports.contains(port))
         .map(|(port, &i)| (port.clone(), i))
         .collect();
+    // Without a series only the metrics' window is kept: the samples before
+    // it are neither written nor paged in.
+    let record_from = match (&scenario.metrics, options.series) {
+        (Some(spec), false) => metrics::first_sample(spec, &times),
+        _ => 0,
+    };
     let mut columns: Vec<Vec<f64>> = recorded
         .iter()
-        .map(|_| Vec::with_capacity(steps + 1))
+        .map(|_| Vec::with_capacity(steps + 1 - record_from))
         .collect();
     let mut outputs = vec![0.0; total_outputs];
 
@@ -458,8 +464,10 @@ pub fn run_with(
                 .get_real_into(&slot.output_vrs, &mut outputs[range]);
             check(slot, "fmi2GetReal", status, t, &mut warnings)?;
         }
-        for (column, (_, i)) in columns.iter_mut().zip(&recorded) {
-            column.push(outputs[*i]);
+        if k >= record_from {
+            for (column, (_, i)) in columns.iter_mut().zip(&recorded) {
+                column.push(outputs[*i]);
+            }
         }
         if k == steps {
             break;
@@ -506,11 +514,15 @@ pub fn run_with(
                 available.insert(port.as_str(), column.as_slice());
             }
             for (s, port) in signal_names.iter().enumerate() {
-                available.insert(port.as_str(), signal_now(s));
+                available.insert(port.as_str(), &signal_now(s)[record_from..]);
             }
             let constant = |port: &str| value_of(port).unwrap_or(0.0);
             Some(metrics::compute(
-                spec, &times, spacing, &available, &constant,
+                spec,
+                &times[record_from..],
+                spacing,
+                &available,
+                &constant,
             ))
         }
         None => None,

@@ -74,6 +74,14 @@ fn range_value(v: &[f64]) -> Value {
 /// the signals at every communication point, by `instance.variable`;
 /// `constant(port)` gives the value of an input no signal drives (its start
 /// value) or of a parameter.
+/// The index of the first sample of `times` the metrics use (`from` on).
+pub(crate) fn first_sample(spec: &MetricsSpec, times: &[f64]) -> usize {
+    times
+        .iter()
+        .position(|&t| t >= spec.from - WINDOW_SLACK)
+        .unwrap_or(times.len())
+}
+
 pub(crate) fn compute(
     spec: &MetricsSpec,
     times: &[f64],
@@ -81,10 +89,7 @@ pub(crate) fn compute(
     columns: &BTreeMap<&str, &[f64]>,
     constant: &dyn Fn(&str) -> f64,
 ) -> Metrics {
-    let first = times
-        .iter()
-        .position(|&t| t >= spec.from - WINDOW_SLACK)
-        .unwrap_or(times.len());
+    let first = first_sample(spec, times);
     let n = times.len();
     let windowed = |port: String| -> Vec<f64> {
         match columns.get(port.as_str()) {

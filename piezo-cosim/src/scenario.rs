@@ -241,7 +241,11 @@ impl Scenario {
     /// Parses line `line` of a JSON Lines file of scenarios (`piezo-cosim
     /// batch`): one scenario as JSON on one line; errors name `origin`, the
     /// line and the column.
-    pub fn parse_json_line(text: &str, origin: &str, line: usize) -> Result<Scenario, ScenarioError> {
+    pub fn parse_json_line(
+        text: &str,
+        origin: &str,
+        line: usize,
+    ) -> Result<Scenario, ScenarioError> {
         let scenario: Scenario = serde_json::from_str(text).map_err(|e| {
             // serde_json's message ends with the position within the text,
             // which is always line 1 here: the file's line replaces it.
@@ -449,7 +453,10 @@ path = "c.fmu"
         let e = Scenario::parse_json_line(r#"{"duration": 1.0, "fmu": 3}"#, "runs.jsonl", 7)
             .unwrap_err()
             .0;
-        assert!(e.starts_with("runs.jsonl:7:26: invalid type: integer `3`"), "{e}");
+        assert!(
+            e.starts_with("runs.jsonl:7:26: invalid type: integer `3`"),
+            "{e}"
+        );
         assert!(!e.contains("at line 1"), "{e}");
         let e = Scenario::parse_json_line(r#"{"duration": 1.0, "fmu": {}}"#, "runs.jsonl", 8)
             .unwrap_err()
@@ -461,7 +468,10 @@ path = "c.fmu"
     fn a_preview_longer_than_the_run_is_refused() {
         let text = MINIMAL.replace("duration = 1.0", "duration = 1.0\npreview = 10001");
         let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
-        assert!(e.contains("preview (10001 samples) must not exceed the run's 10000 steps"), "{e}");
+        assert!(
+            e.contains("preview (10001 samples) must not exceed the run's 10000 steps"),
+            "{e}"
+        );
         let text = MINIMAL.replace("duration = 1.0", "duration = 1.0\npreview = 10000");
         assert!(Scenario::parse(&text, false, "s.toml").is_ok());
     }

@@ -125,12 +125,10 @@ fn runs_that_share_their_fmus_equal_runs_that_open_their_own() {
         .parameters
         .insert("noise.seed".to_owned(), ParameterValue::Number(7.0));
     let mut refused = first.clone();
-    refused
-        .fmu
-        .get_mut("plant")
-        .unwrap()
-        .parameters
-        .insert("mode.theta.damping".to_owned(), ParameterValue::Number(-1.0));
+    refused.fmu.get_mut("plant").unwrap().parameters.insert(
+        "mode.theta.damping".to_owned(),
+        ParameterValue::Number(-1.0),
+    );
     let alone = |scenario: &Scenario| run(scenario, RunOptions::default()).unwrap().metrics;
     let mut open = OpenFmus::default();
     let mut shared = |scenario: &Scenario| run_with(scenario, RunOptions::default(), &mut open);

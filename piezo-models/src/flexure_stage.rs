@@ -422,7 +422,8 @@ impl FlexureStage {
     fn settled(params: FlexureStageParams, reuse: Option<&Self>) -> Result<Self, ParamError> {
         params.validate()?;
         let cycle = params.rest_cycle_voltage;
-        let same_cycle = reuse.filter(|old| old.params.rest_cycle_voltage.to_bits() == cycle.to_bits());
+        let same_cycle =
+            reuse.filter(|old| old.params.rest_cycle_voltage.to_bits() == cycle.to_bits());
         let at_rest = |hysteresis: BoucWenParams, old: Option<&AsymmetricBoucWen>| match old {
             Some(old) if old.params() == &hysteresis => {
                 let mut model = old.clone();
@@ -902,7 +903,10 @@ mod tests {
         }
         let mut invalid = params;
         invalid.modes.theta.damping_ratio = -1.0;
-        assert!(stage.at_rest_with(invalid).is_err(), "parameters are validated");
+        assert!(
+            stage.at_rest_with(invalid).is_err(),
+            "parameters are validated"
+        );
     }
 
     /// Zero commands from rest keep everything exactly at rest.
