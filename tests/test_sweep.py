@@ -265,9 +265,17 @@ def test_a_sweep_on_a_scheduler_with_two_workers(spec_path, reference_table, das
 
 
 def test_killing_a_worker_mid_sweep_loses_and_duplicates_no_run(spec_path, reference_table,
-                                                               dask_cluster, tmp_path):
+                                                               dask_cluster, tmp_path,
+                                                               monkeypatch):
     from distributed import Client
 
+    # Tasks of two runs (the default would give eight runs on two workers
+    # a task each): the killed worker loses a task of several runs, which
+    # another worker runs whole.
+    def in_pairs(runs, workers, runs_per_task):
+        return [runs[i:i + 2] for i in range(0, len(runs), 2)]
+
+    monkeypatch.setattr(sweep, "batches", in_pairs)
     killed = {}
     with Client(dask_cluster, timeout="30s") as client:
         client.wait_for_workers(2, timeout=60)
