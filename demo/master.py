@@ -167,7 +167,18 @@ def _batch_process(scenarios: list[dict], timeout: float | None, cwd) -> list:
                 pending += chunk
                 *complete, pending = pending.split(b"\n")
                 for line in complete:
-                    result = json.loads(line)
+                    try:
+                        result = json.loads(line)
+                    except json.JSONDecodeError:
+                        # Not the master's (it writes results on a stream of
+                        # their own): the process is not to be trusted with
+                        # the remaining runs.
+                        process.kill()
+                        process.wait()
+                        text = line[:200].decode(errors="replace")
+                        outcomes.append(MasterError(
+                            f"piezo-cosim wrote {text!r} where a result was due", None))
+                        return outcomes
                     result.pop("line", None)
                     if result["status"] == "error":
                         outcomes.append(MasterError(result["error"], result["exit"]))

@@ -247,3 +247,91 @@ offset = 1.0
     table = pq.read_table(out)
     assert table.num_rows == 501
     assert {"t", "controller.y_ref", "plant.s1", "controller.u1"} <= set(table.column_names)
+
+
+def scenario_of(example: str) -> dict:
+    """An example scenario as the dict `run_batch` takes (absolute paths)."""
+    import tomllib
+
+    path = REPO_ROOT / "piezo-cosim" / "examples" / example
+    scenario = tomllib.loads(path.read_text())
+    for entry in scenario["fmu"].values():
+        entry["path"] = str((path.parent / entry["path"]).resolve())
+    return scenario
+
+
+def test_a_batch_gives_what_single_runs_give_and_keeps_failures_apart():
+    """`run_batch` (one piezo-cosim process, each FMU opened once): every
+    result equals that of a run of its own, bit for bit; a run the master
+    refuses is that run's MasterError, and the runs after it go on."""
+    first = scenario_of("table3_y.toml")
+    first["duration"], first["metrics"]["from"] = 0.5, 0.25
+    other = json.loads(json.dumps(first))
+    other["fmu"]["plant"]["parameters"]["noise.seed"] = 7
+    refused = json.loads(json.dumps(first))
+    refused["fmu"]["plant"]["parameters"]["pzt[4].A"] = 1.0
+    outcomes = master.run_batch([first, refused, other, first])
+    assert isinstance(outcomes[1], master.MasterError) and outcomes[1].returncode == 2
+    assert "pzt[4].A" in str(outcomes[1])
+    for scenario, outcome in zip([first, other, first], [outcomes[0], outcomes[2], outcomes[3]]):
+        assert outcome["metrics"] == master.run(scenario)["metrics"]
+    assert outcomes[0]["metrics"] != outcomes[2]["metrics"], "the seed moves the noise"
+
+
+PRINTING_DLOPEN = r"""
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <unistd.h>
+/* Prints to the standard output whenever a library is opened, as an FMU's
+   C code may print: the master opens the FMUs' binaries after it has moved
+   its results to a stream of their own. */
+void *dlopen(const char *file, int mode) {
+    static void *(*real)(const char *, int);
+    if (!real) real = (void *(*)(const char *, int))dlsym(RTLD_NEXT, "dlopen");
+    (void)!write(1, "an FMU says hello\n", 18);
+    return real(file, mode);
+}
+"""
+
+
+def test_what_an_fmu_prints_never_mixes_with_the_results(tmp_path):
+    """Text an FMU writes to the standard output goes to the error stream:
+    each line the master prints is a result (here an LD_PRELOADed dlopen
+    prints whenever the master loads an FMU's binary)."""
+    import os
+    import shutil
+
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        pytest.skip("no C compiler")
+    source = tmp_path / "printing_dlopen.c"
+    source.write_text(PRINTING_DLOPEN)
+    library = tmp_path / "printing_dlopen.so"
+    subprocess.run([compiler, "-shared", "-fPIC", "-o", str(library), str(source), "-ldl"],
+                   check=True)
+    scenario = scenario_of("table3_y.toml")
+    scenario["duration"], scenario["metrics"]["from"] = 0.05, 0.0
+    lines = "".join(json.dumps(s) + "\n" for s in (scenario, scenario))
+    env = {**os.environ, "LD_PRELOAD": str(library)}
+    for args, stdin, expected in ((["batch", "-"], lines, 2),
+                                  (["run", "-"], json.dumps(scenario), 1)):
+        done = subprocess.run([str(master.binary()), *args], input=stdin, capture_output=True,
+                              text=True, env=env)
+        assert done.returncode == 0, done.stderr
+        assert "an FMU says hello" in done.stderr, "the preloaded dlopen ran"
+        results = done.stdout.splitlines()
+        assert len(results) == expected, done.stdout
+        assert all(json.loads(line)["status"] == "ok" for line in results)
+
+
+def test_a_batch_process_that_writes_no_result_fails_that_run_alone(tmp_path, monkeypatch):
+    """A line that is not a result (a master that is not ours, or broken)
+    fails the run it stands for and ends that process; the next run gets a
+    new one."""
+    fake = tmp_path / "piezo-cosim"
+    fake.write_text("#!/bin/sh\nread first\necho 'not a result'\nsleep 30\n")
+    fake.chmod(0o755)
+    monkeypatch.setenv("PIEZO_COSIM", str(fake))
+    outcomes = master.run_batch([{"duration": 1.0}, {"duration": 2.0}], timeout=20)
+    assert [type(o) for o in outcomes] == [master.MasterError, master.MasterError]
+    assert all("wrote 'not a result' where a result was due" in str(o) for o in outcomes)

@@ -93,6 +93,38 @@ fn load(path: &Path) -> Result<Scenario, String> {
     }
 }
 
+/// Where the results go: the process's standard output, moved to a
+/// descriptor of its own, with standard output itself pointed at the error
+/// stream (Linux). An FMU may print (a C runtime's printf, a tool's log):
+/// that text then lands among the errors, never inside the JSON a caller
+/// parses line by line.
+fn results_output() -> Box<dyn Write> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::FromRawFd;
+        // SAFETY: dup takes a descriptor number; 1 is the standard output.
+        let results = unsafe { libc::dup(1) };
+        if results >= 0 {
+            // SAFETY: dup2 takes descriptor numbers; 2 and 1 are the
+            // standard streams, and nothing has been written to 1 yet.
+            if unsafe { libc::dup2(2, 1) } >= 0 {
+                // SAFETY: `results` was just opened by dup and is owned by
+                // nothing else.
+                return Box::new(unsafe { std::fs::File::from_raw_fd(results) });
+            }
+            // SAFETY: `results` is open and nothing else owns it.
+            unsafe { libc::close(results) };
+        }
+    }
+    Box::new(std::io::stdout())
+}
+
+/// Writes one result line and flushes it.
+fn emit(output: &mut dyn Write, line: &str) -> std::io::Result<()> {
+    output.write_all(format!("{line}\n").as_bytes())?;
+    output.flush()
+}
+
 /// The exit status of a run that did not complete.
 fn exit_code(e: &RunError) -> u8 {
     match e {
@@ -119,7 +151,7 @@ fn result_json(scenario: &Scenario, output: &RunOutput) -> serde_json::Value {
 /// `piezo-cosim batch`: every line of `source` run in turn, one result line
 /// each, flushed as it is written (a caller reads them as they come and
 /// knows which run a stall belongs to).
-fn batch(source: &Path) -> ExitCode {
+fn batch(source: &Path, results: &mut dyn Write) -> ExitCode {
     let (reader, origin, base): (Box<dyn BufRead>, String, Option<&Path>) =
         if source.as_os_str() == "-" {
             (
@@ -141,7 +173,6 @@ fn batch(source: &Path) -> ExitCode {
             }
         };
     let mut open = OpenFmus::default();
-    let mut stdout = std::io::stdout().lock();
     for (index, line) in reader.lines().enumerate() {
         let number = index + 1;
         let line = match line {
@@ -167,10 +198,7 @@ fn batch(source: &Path) -> ExitCode {
             |e| json!({"status": "error", "exit": exit_code(&e), "error": e.to_string()}),
         );
         result["line"] = json!(number);
-        if writeln!(stdout, "{result}")
-            .and_then(|()| stdout.flush())
-            .is_err()
-        {
+        if emit(results, &result.to_string()).is_err() {
             // The reader has gone: nobody wants the remaining runs.
             return ExitCode::from(1);
         }
@@ -180,6 +208,7 @@ fn batch(source: &Path) -> ExitCode {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let mut results = results_output();
     let (scenario, series_path, out, check_only) = match cli.command {
         Command::Run {
             scenario,
@@ -196,7 +225,7 @@ fn main() -> ExitCode {
             if let Some(pid) = parent {
                 exit_with_parent(pid);
             }
-            return batch(&scenarios);
+            return batch(&scenarios, &mut *results);
         }
         Command::Check { scenario } => (scenario, None, None, true),
     };
@@ -234,8 +263,11 @@ fn main() -> ExitCode {
         return ExitCode::from(1);
     }
     if check_only {
-        println!("{}", json!({"status": "ok", "warnings": output.warnings}));
-        return ExitCode::SUCCESS;
+        let line = json!({"status": "ok", "warnings": output.warnings}).to_string();
+        return match emit(&mut *results, &line) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(_) => ExitCode::from(1),
+        };
     }
     let result = result_json(&scenario, &output);
     let text = result.to_string();
@@ -246,7 +278,11 @@ fn main() -> ExitCode {
                 return ExitCode::from(1);
             }
         }
-        None => println!("{text}"),
+        None => {
+            if emit(&mut *results, &text).is_err() {
+                return ExitCode::from(1);
+            }
+        }
     }
     ExitCode::SUCCESS
 }
