@@ -135,10 +135,11 @@ struct Loaded<'a> {
 
 /// The FMUs a process has opened, by the path a scenario names them with:
 /// runs of one process (`piezo-cosim batch`, a sweep task's runs) open,
-/// unpack, parse and load each FMU once, and instantiate it per run. An
-/// instance holds nothing of the runs before it; the FMU's binary may keep
-/// what its instances share (FMI 2.0.4 §2.1.5), which for this project's
-/// FMUs is their GUID.
+/// unpack, parse and load each FMU once, and instantiate it per run. A run's
+/// instances are its own; what the binary keeps between instances is the
+/// FMU's business (this project's FMUs keep their GUID, nothing of a run),
+/// and an FMU that keeps more, or declares
+/// `canBeInstantiatedOnlyOncePerProcess`, needs a process per run.
 #[derive(Default)]
 pub struct OpenFmus {
     by_path: BTreeMap<PathBuf, FmuArchive>,
