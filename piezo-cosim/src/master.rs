@@ -14,7 +14,7 @@
 //! signals and parameter values are resolved to value references and buffer
 //! indices before the first step, and the loop allocates nothing.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -143,10 +143,14 @@ struct Loaded<'a> {
 #[derive(Default)]
 pub struct OpenFmus {
     by_path: BTreeMap<PathBuf, FmuArchive>,
+    /// FMUs this process has instantiated.
+    instantiated: BTreeSet<PathBuf>,
 }
 
 impl OpenFmus {
-    /// Opens every FMU of `scenario` not open yet.
+    /// Opens every FMU of `scenario` not open yet, and claims each for the
+    /// run: an FMU that declares `canBeInstantiatedOnlyOncePerProcess` may
+    /// be instantiated by one run of one process, once.
     fn open_all(&mut self, scenario: &Scenario) -> Result<(), RunError> {
         for spec in scenario.fmu.values() {
             if !self.by_path.contains_key(&spec.path) {
@@ -155,6 +159,27 @@ impl OpenFmus {
                 self.by_path.insert(spec.path.clone(), archive);
             }
         }
+        let mut claimed = BTreeSet::new();
+        for spec in scenario.fmu.values() {
+            let once = self.by_path[&spec.path]
+                .fmu
+                .description
+                .co_simulation
+                .as_ref()
+                .and_then(|cs| cs.can_be_instantiated_only_once_per_process)
+                .unwrap_or(false);
+            if once && (self.instantiated.contains(&spec.path) || !claimed.insert(&spec.path)) {
+                return Err(RunError::Scenario(format!(
+                    "{}: the FMU can be instantiated only once per process \
+                     (canBeInstantiatedOnlyOncePerProcess), and this process has an instance \
+                     of it already: give each run its own process (`piezo-cosim run`; in a \
+                     sweep, runs_per_task = 1)",
+                    spec.path.display()
+                )));
+            }
+        }
+        self.instantiated
+            .extend(scenario.fmu.values().map(|spec| spec.path.clone()));
         Ok(())
     }
 

@@ -143,6 +143,34 @@ fn runs_that_share_their_fmus_equal_runs_that_open_their_own() {
     assert_eq!(a_again, a);
 }
 
+/// An FMU that declares `canBeInstantiatedOnlyOncePerProcess` is refused,
+/// by name and with what to do, by the second run of a process, and runs in
+/// a process of its own.
+#[test]
+fn an_fmu_instantiable_once_per_process_is_not_shared_by_runs() {
+    let fmus = fmus();
+    let description = fmus.plant.join("modelDescription.xml");
+    let text = std::fs::read_to_string(&description).unwrap();
+    let once = text.replace(
+        "canBeInstantiatedOnlyOncePerProcess=\"false\"",
+        "canBeInstantiatedOnlyOncePerProcess=\"true\"",
+    );
+    assert_ne!(once, text);
+    std::fs::write(&description, once).unwrap();
+    let scenario = y_sine(&fmus, 0.05, "");
+    let mut open = OpenFmus::default();
+    run_with(&scenario, RunOptions::default(), &mut open).unwrap();
+    let Err(RunError::Scenario(message)) = run_with(&scenario, RunOptions::default(), &mut open)
+    else {
+        panic!("a second instance in one process was not refused");
+    };
+    assert!(
+        message.contains("only once per process") && message.contains("runs_per_task = 1"),
+        "{message}"
+    );
+    run(&scenario, RunOptions::default()).unwrap();
+}
+
 #[test]
 fn series_hold_every_output_and_signal() {
     let fmus = fmus();
