@@ -335,3 +335,27 @@ def test_a_batch_process_that_writes_no_result_fails_that_run_alone(tmp_path, mo
     outcomes = master.run_batch([{"duration": 1.0}, {"duration": 2.0}], timeout=20)
     assert [type(o) for o in outcomes] == [master.MasterError, master.MasterError]
     assert all("wrote 'not a result' where a result was due" in str(o) for o in outcomes)
+
+
+def test_a_batch_file_resolves_paths_from_its_folder_and_names_bad_lines(tmp_path):
+    """`piezo-cosim batch FILE.jsonl` from another working directory: paths
+    relative to the file's folder, one result line per scenario line (blank
+    lines skipped), a malformed line answered with its file, line and
+    column."""
+    import os
+
+    scenario = scenario_of("table3_y.toml")
+    scenario["duration"], scenario["metrics"]["from"] = 0.05, 0.0
+    for entry in scenario["fmu"].values():
+        entry["path"] = os.path.relpath(entry["path"], tmp_path)
+    runs = tmp_path / "runs.jsonl"
+    runs.write_text(json.dumps(scenario) + "\n" + '{"duration": 1.0, "fmu": 3}\n\n'
+                    + json.dumps(scenario) + "\n")
+    done = subprocess.run([str(master.binary()), "batch", str(runs)], capture_output=True,
+                          text=True, cwd="/")
+    assert done.returncode == 0, done.stderr
+    results = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [(r["line"], r["status"]) for r in results] == [(1, "ok"), (2, "error"), (4, "ok")]
+    assert results[1]["exit"] == 2
+    assert results[1]["error"].startswith(f"{runs}:2:26: invalid type: integer `3`")
+    assert results[0]["metrics"] == results[2]["metrics"]
