@@ -151,16 +151,22 @@ def _batch_process(scenarios: list[dict], timeout: float | None, cwd) -> list:
                                    cwd=cwd)
         outcomes: list = []
         pending = b""
+
+        def stop(outcome) -> list:
+            """Ends the process; `outcome` is the run it stopped at."""
+            process.kill()
+            process.wait()
+            process.stdout.close()
+            outcomes.append(outcome)
+            return outcomes
+
         with selectors.DefaultSelector() as selector:
             selector.register(process.stdout, selectors.EVENT_READ)
             deadline = None if timeout is None else time.monotonic() + timeout
             while len(outcomes) < len(scenarios):
                 wait = None if deadline is None else max(deadline - time.monotonic(), 0.0)
                 if not selector.select(wait):
-                    process.kill()
-                    process.wait()
-                    outcomes.append(subprocess.TimeoutExpired(args, timeout))
-                    return outcomes
+                    return stop(subprocess.TimeoutExpired(args, timeout))
                 chunk = os.read(process.stdout.fileno(), 1 << 16)
                 if not chunk:
                     break
@@ -173,12 +179,9 @@ def _batch_process(scenarios: list[dict], timeout: float | None, cwd) -> list:
                         # Not the master's (it writes results on a stream of
                         # their own): the process is not to be trusted with
                         # the remaining runs.
-                        process.kill()
-                        process.wait()
                         text = line[:200].decode(errors="replace")
-                        outcomes.append(MasterError(
+                        return stop(MasterError(
                             f"piezo-cosim wrote {text!r} where a result was due", None))
-                        return outcomes
                     result.pop("line", None)
                     if result["status"] == "error":
                         outcomes.append(MasterError(result["error"], result["exit"]))

@@ -210,11 +210,12 @@ def dask_cluster(tmp_path_factory):
     scheduler_file = folder / "scheduler.json"
     env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     processes = []
+    logs = []
 
     def start(*args):
-        log = open(folder / f"{len(processes)}.log", "w")
+        logs.append(open(folder / f"{len(processes)}.log", "w"))
         processes.append(subprocess.Popen([str(DASK), *args], cwd=REPO_ROOT, env=env,
-                                          stdout=log, stderr=subprocess.STDOUT))
+                                          stdout=logs[-1], stderr=subprocess.STDOUT))
 
     try:
         # Port 0 for its HTTP server too (health checks, even without the
@@ -247,6 +248,8 @@ def dask_cluster(tmp_path_factory):
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
+        for log in logs:
+            log.close()
 
 
 def test_a_sweep_on_a_scheduler_with_two_workers(spec_path, reference_table, dask_cluster,

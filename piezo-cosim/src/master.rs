@@ -148,9 +148,10 @@ pub struct OpenFmus {
 }
 
 impl OpenFmus {
-    /// Opens every FMU of `scenario` not open yet, and claims each for the
-    /// run: an FMU that declares `canBeInstantiatedOnlyOncePerProcess` may
-    /// be instantiated by one run of one process, once.
+    /// Opens every FMU of `scenario` not open yet, and checks that the run
+    /// may instantiate each: an FMU that declares
+    /// `canBeInstantiatedOnlyOncePerProcess` may have one instance in a
+    /// process, once (`instantiated` counts those a run made).
     fn open_all(&mut self, scenario: &Scenario) -> Result<(), RunError> {
         for spec in scenario.fmu.values() {
             if !self.by_path.contains_key(&spec.path) {
@@ -178,8 +179,6 @@ impl OpenFmus {
                 )));
             }
         }
-        self.instantiated
-            .extend(scenario.fmu.values().map(|spec| spec.path.clone()));
         Ok(())
     }
 
@@ -406,6 +405,7 @@ pub fn run_with(
                 log_text(&log)
             ))
         })?;
+        open.instantiated.insert(scenario.fmu[&l.name].path.clone());
         let (vrs, sources): (Vec<u32>, Vec<Source>) = inputs[i].iter().copied().unzip();
         slots.push(Slot {
             name: l.name.clone(),

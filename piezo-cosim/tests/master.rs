@@ -159,6 +159,18 @@ fn an_fmu_instantiable_once_per_process_is_not_shared_by_runs() {
     std::fs::write(&description, once).unwrap();
     let scenario = y_sine(&fmus, 0.05, "");
     let mut open = OpenFmus::default();
+    // A run refused before it instantiates anything does not count.
+    let mut unfit = scenario.clone();
+    unfit
+        .fmu
+        .get_mut("plant")
+        .unwrap()
+        .parameters
+        .insert("pzt[4].A".to_owned(), ParameterValue::Number(1.0));
+    assert!(matches!(
+        run_with(&unfit, RunOptions::default(), &mut open),
+        Err(RunError::Scenario(_))
+    ));
     run_with(&scenario, RunOptions::default(), &mut open).unwrap();
     let Err(RunError::Scenario(message)) = run_with(&scenario, RunOptions::default(), &mut open)
     else {
