@@ -320,8 +320,7 @@ pub fn run_with(
     let steps = scenario.steps();
     let h = scenario.step;
     let preview = scenario.preview as usize;
-    let grid: Vec<f64> = (0..=steps + preview).map(|k| k as f64 * h).collect();
-    let times: Vec<f64> = grid[..=steps].to_vec();
+    let mut grid: Vec<f64> = (0..=steps + preview).map(|k| k as f64 * h).collect();
     let mut signal_names = Vec::new();
     let mut signal_samples = Vec::new();
     for (port, trajectory) in &scenario.signal {
@@ -330,6 +329,9 @@ pub fn run_with(
         signal_samples.push(trajectory.sample(&grid).map_err(fail)?);
         signal_names.push(port.clone());
     }
+    // The communication points t_0 .. t_steps: the grid without its preview.
+    grid.truncate(steps + 1);
+    let times = grid;
     let signal_now = |s: usize| &signal_samples[s][..=steps];
 
     // Inputs per FMU.

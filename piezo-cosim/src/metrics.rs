@@ -70,10 +70,6 @@ fn range_value(v: &[f64]) -> Value {
     json!([lo, hi])
 }
 
-/// Computes the metrics of a run. `columns` holds the recorded outputs and
-/// the signals at every communication point, by `instance.variable`;
-/// `constant(port)` gives the value of an input no signal drives (its start
-/// value) or of a parameter.
 /// The index of the first sample of `times` the metrics use (`from` on).
 pub(crate) fn first_sample(spec: &MetricsSpec, times: &[f64]) -> usize {
     times
@@ -82,6 +78,10 @@ pub(crate) fn first_sample(spec: &MetricsSpec, times: &[f64]) -> usize {
         .unwrap_or(times.len())
 }
 
+/// Computes the metrics of a run. `columns` holds the recorded outputs and
+/// the signals at every communication point, by `instance.variable`;
+/// `constant(port)` gives the value of an input no signal drives (its start
+/// value) or of a parameter.
 pub(crate) fn compute(
     spec: &MetricsSpec,
     times: &[f64],
