@@ -121,3 +121,36 @@ def test_seed_000s_feedforward_on_the_xy200s_errs_at_most_its_fit(scratch):
             print(f"{axis}: max error {error:.3f} um, allowed {allowed:.3f} um "
                   f"({report[f'{axis}_fit']['max_v']:.4f} V x {gain:.2f} um/V)")
             assert error <= allowed
+
+
+def test_docs_seed001_prints_the_fit_figures_the_targets_make(scratch):
+    """docs/seed001.md explains why seed 000's method fails on the XY200S with
+    the inverse P-I models' fit to their eq. (6) records on both stages, the
+    XY200S's mean gains and the cutoff q3 of D3, all of which the two
+    identifications of this module print: each figure must be the one they
+    make now (tests/docs_figures.py's rule: 1 % or a unit of the last printed
+    digit), so a re-identification that moves them leaves no stale sentence."""
+    from tests.docs_figures import stale_prose
+
+    xy200s_preset, xy200s = identified("xy200s-controller-preset", scratch)
+    _, flexure = identified("stage-preset", scratch)
+    rms = {(stage, axis): report[f"{axis}_fit"]["rms_v"]
+           for stage, report in (("xy200s", xy200s), ("flexure", flexure))
+           for axis in "xy"}
+    gain = {axis: xy200s_preset[f"{axis}_model"]["rest_cycle"] / xy200s_preset["command_max"]
+            for axis in "xy"}
+    measured = (
+        f"{rms['xy200s', 'x']:.4f} V RMS ({xy200s['x_fit']['max_v']:.3f} V max) on the XY200S and "
+        f"{rms['flexure', 'x']:.4f} V RMS ({flexure['x_fit']['max_v']:.3f} V max) on FlexureStage, "
+        f"{rms['xy200s', 'x'] / rms['flexure', 'x']:.1f}x; y: {rms['xy200s', 'y']:.4f} V and "
+        f"{rms['flexure', 'y']:.4f} V, {rms['xy200s', 'y'] / rms['flexure', 'y']:.1f}x. At the "
+        f"XY200S's mean gain ({gain['x']:.1f} um/V for x, {gain['y']:.1f} um/V for y: the top of "
+        f"the exercise cycle over the {xy200s_preset['command_max']:g} V command) that is "
+        f"{rms['xy200s', 'x'] * gain['x']:.2f} um and {rms['xy200s', 'y'] * gain['y']:.2f} um RMS")
+    q3 = xy200s_preset["decoupling_params"]["q"][2]
+    print(measured, f"q3 = {q3:.2f} um", sep="\n")
+    problems = stale_prose("seed001.md", r"record with (\d.*? um RMS)\.", measured,
+                           "the inverse P-I fits on eq. (6) and the XY200S's gains")
+    problems += stale_prose("seed001.md", r"cutoff q3 = (\S+ um)", f"{q3:.2f} um",
+                            "D3's cutoff on the XY200S")
+    assert not problems, "\n".join(problems)
