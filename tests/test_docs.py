@@ -19,7 +19,8 @@ piezo-identify/tests/quality_bars.rs, the FMU-state restores of docs/fmi.md
 in the FMU crates' abi_conformance tests, the table of docs/presets.md in
 test_presets.py, the binaries' and importers' figures of docs/platforms.md in
 test_linux_binaries.py, test_windows_binaries.py and test_importers.py); the counts of tests/test_parameter_ranges.py that
-docs/robustness.md prints are checked here."""
+docs/robustness.md prints are checked here, and so are the README's
+headlines: each number of its Figures section is one its document prints."""
 
 from __future__ import annotations
 
@@ -264,3 +265,35 @@ def test_parameter_range_counts_are_the_ones_the_tests_run():
         f"docs/robustness.md ({heading!r}) does not count what tests/test_parameter_ranges.py "
         "runs: count again with the commands it gives and print the counts with the commit\n"
         + "\n".join(problems))
+
+
+def headline_figures() -> list[tuple[str, str]]:
+    """(document, text) of each bullet of README.md's Figures section: a
+    headline of one document of docs/, linked at its start."""
+    text = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("\n## Figures\n"):]
+    bullets = re.findall(r"^- \[[^\]]*\]\((docs/[^)#]+)[^)]*\):(.*?)(?=^- |^#|\Z)", section,
+                         re.MULTILINE | re.DOTALL)
+    return [(document, " ".join(body.split())) for document, body in bullets]
+
+
+def test_readme_headlines_are_figures_of_their_documents():
+    """The README gives each document's headline figures only: every number
+    of a Figures bullet must be printed in the document it links to (read as
+    docs_figures reads numbers, ranges by their ends), so a headline left
+    behind when its document is measured again, or a figure no document
+    holds, fails here."""
+    from tests.docs_figures import NUMBER, plain_powers
+
+    def values(text: str) -> set[str]:
+        return {literal.replace("−", "").replace("-", "").replace("+", "").replace(",", "")
+                for literal in NUMBER.findall(plain_powers(text))}
+
+    bullets = headline_figures()
+    assert len(bullets) >= 8, f"the README's Figures section lost its bullets: {bullets}"
+    problems = []
+    for document, body in bullets:
+        printed = values((REPO_ROOT / document).read_text(encoding="utf-8"))
+        for figure in sorted(values(body) - printed):
+            problems.append(f"README.md, Figures, {document}: {figure} is not in {document}")
+    assert not problems, "\n".join(problems)

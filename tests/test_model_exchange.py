@@ -34,7 +34,12 @@ from tests.docs_figures import doc_rows, stale_rows
 
 #: The rows of docs/fmi.md's fmpy table that these tests measure again (the
 #: solver and the span are the rows' key).
-CVODE_ROW = "CVode, relative tolerance 1e-11 (absolute: 1e-11 × each state's nominal, as fmpy sets it)"
+#: CVode's relative tolerances of the table, by row.
+CVODE_ROWS = {
+    1e-11: "CVode, relative tolerance 1e-11 (absolute: 1e-11 × each state's nominal, as fmpy sets it)",
+    1e-10: "CVode, relative tolerance 1e-10",
+    1e-9: "CVode, relative tolerance 1e-9",
+}
 EULER_ROWS = ("forward Euler, 2 µs steps", "forward Euler, 1 µs steps")
 
 
@@ -110,26 +115,27 @@ def test_both_interfaces_validate_and_are_declared():
     assert "no continuous states" in controller.description
 
 
-def test_cvode_matches_co_simulation():
-    """CVode at relative tolerance 1e-11 (absolute: 1e-11 x each state's
-    nominal, as fmpy sets it) against Co-Simulation over 50 ms of held
-    commands, through the amplifier's transient and the modes' ringing: within
-    1e-6 um. Measured: 1.1e-7 um; at 1e-10 7.3e-7 um, at 1e-9 5.5e-6 um
-    (CVode's error follows its tolerance). The step from the exercised rest
-    drives all seven hysteretic states through 0, each a state event where
-    CVode restarts: without the event indicators it took more than its 500
-    steps per output interval to creep across the n = 1 kinks."""
+@pytest.mark.parametrize("tolerance", sorted(CVODE_ROWS), ids=lambda rtol: f"rtol={rtol:g}")
+def test_cvode_matches_co_simulation(tolerance):
+    """CVode (absolute tolerance: the relative one x each state's nominal, as
+    fmpy sets it) against Co-Simulation over 50 ms of held commands, through
+    the amplifier's transient and the modes' ringing: within 1e5 x the
+    relative tolerance in um (1e-6 um at 1e-11), as CVode's error follows its
+    tolerance. The step from the exercised rest drives all seven hysteretic
+    states through 0, each a state event where CVode restarts: without the
+    event indicators it took more than its 500 steps per output interval to
+    creep across the n = 1 kinks."""
     cs = co_simulation(0.05)
     me = fmpy.simulate_fmu(
-        require(PLANT), fmi_type="ModelExchange", solver="CVode", relative_tolerance=1e-11,
+        require(PLANT), fmi_type="ModelExchange", solver="CVode", relative_tolerance=tolerance,
         start_values=COMMANDS, stop_time=0.05, output_interval=1e-4, output=SENSORS,
     )
     worst = largest_difference(cs, me)
-    print(f"CVode (rtol 1e-11) vs Co-Simulation: largest difference {worst:.2e} um "
+    print(f"CVode (rtol {tolerance:g}) vs Co-Simulation: largest difference {worst:.2e} um "
           f"(y at the end {me['y'][-1]:.6f} um)")
-    assert worst < 1e-6
+    assert worst < 1e5 * tolerance
     assert me["y"][-1] > 1.0, "the stage moved"
-    assert_documented([[CVODE_ROW, "50 ms", f"{worst:.1e} µm"]])
+    assert_documented([[CVODE_ROWS[tolerance], "50 ms", f"{worst:.1e} µm"]])
 
 
 def test_forward_euler_converges_to_co_simulation():

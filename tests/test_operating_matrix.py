@@ -161,13 +161,18 @@ def test_decoupling_cuts_every_coupling_of_a_5_or_10_um_drive_4x(matrix_rows):
 
 
 def test_docs_seed000_prints_this_matrix(matrix_rows):
-    """docs/seed000.md's account of the matrix is this run: the count of
-    cases met and missed, the range of each coupling's reduction at 2 um and
+    """docs/seed000.md's account of the matrix is this run: the counts of
+    cases and runs, of bounded cases, of those met and missed, the range of each coupling's reduction at 2 um and
     of every reduction at 5 and 10 um (bounded frequencies)."""
     bounded = [row for row in matrix_rows if row["checked"]]
     met = sum(row["rms_ok"] and row["coupling_ok"] for row in bounded)
     problems = stale_prose("seed000.md", r"ran: (\d+ met, \d+ missed)",
                            f"{met} met, {len(bounded) - met} missed", "matrix: met, missed")
+    problems += stale_prose("seed000.md", r"(\d+ cases, \d+ runs) in",
+                            f"{len(matrix_rows)} cases, {2 * len(matrix_rows)} runs",
+                            "matrix: cases and runs (each case without and with decoupling)")
+    problems += stale_prose("seed000.md", r"All (\d+) bounded cases", f"{len(bounded)}",
+                            "matrix: bounded cases")
 
     def spread(values) -> str:
         return f"{min(values):.1f}-{max(values):.1f}x"

@@ -230,6 +230,10 @@ def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
     # The instance is in the error state: stepping on is refused, not NaN.
     assert step_status(slave, 1e-4) == fmi2.fmi2Error
     print(f"diverged after {steps} steps: {message}")
+    # README.md shows this message, its times to 0.1 ms and cut after the state.
+    shown = " ".join(readme_log("A stage state that diverges"))
+    rounded = re.sub(r"t = ([-+0-9.e]+)", lambda m: f"t = {float(m.group(1)):.4f}", message)
+    assert shown.endswith(" ...") and shown[:-len(" ...")] in rounded, (shown, rounded)
     slave.free()
 
 
@@ -281,3 +285,24 @@ def test_overflowing_controller_output_is_an_error(envs):
     # The first non-finite output by its FMI name, and the time.
     assert re.search(r"t = 0: \w+ became (NaN|inf|-inf)", text), slave.log.dump()
     slave.free()
+
+
+def readme_log(after: str) -> list[str]:
+    """The lines of the README's first text block (a log excerpt) after the
+    paragraph that says `after`."""
+    text = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
+    block = re.search(r"^```\n(.*?)^```$", text[text.index(after):], re.MULTILINE | re.DOTALL)
+    assert block, f"README.md: no log block after {after!r}"
+    return block.group(1).splitlines()
+
+
+def test_the_readmes_refusals_are_what_the_fmus_log(envs):
+    """README.md shows two refusals at fmi2ExitInitializationMode: each line is
+    the one the FMU logs for that value, word for word."""
+    shown = readme_log("offence, and `fmi2Reset` brings back the start values")
+    cases = [("FlexureStage", {"pzt[2].n": 0.5}), ("PiezoController", {"x.c": 0.0})]
+    assert len(shown) == len(cases), shown
+    for line, (name, values) in zip(shown, cases):
+        logged = [r.text for r in refused_at_exit_initialization(envs[name], values)]
+        print(logged)
+        assert line in logged, (line, logged)
