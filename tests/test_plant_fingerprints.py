@@ -87,3 +87,51 @@ def test_a_malformed_parameter_set_is_refused_by_file_and_line(tmp_path):
     unknown.write_text('{"no_such_parameter": 1.0}')
     done = run_tool("--fmu", str(require_fmu()), "--parameters", str(unknown))
     assert done.returncode == 2 and "no parameter no_such_parameter" in done.stderr, done
+
+
+def test_model_md_prints_what_the_tool_measures(measured):
+    """piezo-models/MODEL.md's fingerprint table prints each measured figure
+    of the packaged FMU: every row's "measured" cell must be what the tool
+    reports now (tests/docs_figures.py's rule: 1 % or a unit of the last
+    printed digit), so a recalibration that moves one leaves no stale row."""
+    from tests.docs_figures import NUMBER, same_numbers, table_rows
+
+    m = {c["key"]: c["measured"] for c in measured[0]["checks"]}
+
+    def loop(axis):
+        return f"{100 * m[f'loop_{axis}_width_ratio']:.2f} %, {m[f'loop_{axis}_asymmetry']:.3f}"
+
+    def span(key):
+        return f"{m[key]:.6f} µm (loop width {100 * m[f'{key}_width_ratio']:.1f} %)"
+
+    expected = {
+        "x stroke at 10 V": f"{m['stroke_x']:.6f} µm",
+        "y stroke at 10 V": f"{m['stroke_y']:.6f} µm",
+        "rotation, anticlockwise": f"{m['rotation_anticlockwise']:.6f}°",
+        "rotation, clockwise": f"{m['rotation_clockwise']:.6f}°",
+        "θ resonance (spectral peak)": f"{m['theta_resonance']:.1f} Hz",
+        "x major loop: width / span, asymmetry": loop("x"),
+        "y major loop: width / span, asymmetry": loop("y"),
+        "s2 span from y sweep": span("s2_from_y"),
+        "s3 span from y sweep": span("s3_from_y"),
+        "y span from x sweep": span("y_from_x"),
+        "y span from rotation sweep": span("y_from_rotation"),
+        "ultimate gain x, y (ZN: kp 0.05 / 0.45)":
+            f"{m['ultimate_gain_x']:.4f}, {m['ultimate_gain_y']:.4f} V/µm",
+        "ultimate period x, y (ZN: 1.2·kp/ki)":
+            f"{1e3 * m['ultimate_period_x']:.3f}, {1e3 * m['ultimate_period_y']:.3f} ms",
+        # The θ row also prints T_u and the ZN ki, which the tool's checks
+        # do not report: its first figure, the gain, is compared.
+        "ultimate gain θ (ZN: kp 0.06 / 0.45)": f"{m['ultimate_gain_theta']:.4f}",
+    }
+    text = (REPO_ROOT / "piezo-models" / "MODEL.md").read_text(encoding="utf-8")
+    rows = {row[0]: row[2] for row in table_rows(text.splitlines())
+            if len(row) == 4 and row[0] in expected}
+    assert rows.keys() == expected.keys(), sorted(set(expected) - set(rows))
+    problems = []
+    for name, printed in rows.items():
+        if name.startswith("ultimate gain θ"):
+            printed = NUMBER.findall(printed)[0]
+        if not same_numbers(printed, expected[name]):
+            problems.append(f"MODEL.md, {name}: printed {printed!r}, measured {expected[name]!r}")
+    assert not problems, "\n".join(problems)
