@@ -120,3 +120,42 @@ def stale_prose(document: str, pattern: str, measured: str, figure: str,
         if not same:
             problems.append(f"docs/{document}: {figure}: printed {figure_text!r}, measured {measured!r}")
     return problems
+
+
+def stale_script_output(document: str, heading: str, scratch: pathlib.Path) -> tuple[str, list[str]]:
+    """(what it printed, what differs) when the one ```python script of the
+    section `heading` of docs/<document> runs as printed, from the
+    repository's root, against the one ```text block of the section (its
+    output as the document shows it): every line the same but for its
+    numbers, and every number within one unit of its last printed digit."""
+    import os
+    import subprocess
+    import sys
+
+    text = (DOCS / document).read_text(encoding="utf-8")
+    start = text.index(f"\n{heading}\n")
+    following = re.search(r"^#{1,%d} " % heading.count("#"), text[start + len(heading) + 2:],
+                          re.MULTILINE)
+    section = text[start:start + len(heading) + 2 + (following.start() if following else len(text))]
+    python = re.findall(r"^```python\n(.*?)^```$", section, re.MULTILINE | re.DOTALL)
+    printed = re.findall(r"^```text\n(.*?)^```$", section, re.MULTILINE | re.DOTALL)
+    if len(python) != 1 or len(printed) != 1:
+        return "", [f"docs/{document}, {heading}: {len(python)} scripts and {len(printed)} "
+                    "outputs, one of each expected"]
+    script = scratch / "documented_script.py"
+    script.write_text(python[0], encoding="utf-8")
+    measured = subprocess.run([sys.executable, str(script)], cwd=REPO_ROOT, capture_output=True,
+                              text=True, check=True,
+                              env={**os.environ, "PYTHONPATH": str(REPO_ROOT)}).stdout
+    got, shown = measured.splitlines(), printed[0].splitlines()
+    if len(got) != len(shown):
+        return measured, [f"docs/{document}, {heading}: {len(shown)} lines shown, {len(got)} printed"]
+    problems = []
+    number = re.compile(r"[-+]?\d+(?:\.\d+)?")
+    for line, doc_line in zip(got, shown):
+        same = number.sub("#", line) == number.sub("#", doc_line) and all(
+            abs(float(m) - float(d)) <= (10.0 ** -len(d.split(".")[1]) if "." in d else 1.0) * 1.01
+            for m, d in zip(number.findall(line), number.findall(doc_line)))
+        if not same:
+            problems.append(f"docs/{document}, {heading}: shown {doc_line!r}, printed {line!r}")
+    return measured, problems

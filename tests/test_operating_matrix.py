@@ -22,7 +22,7 @@ import pytest
 from demo.cosim import Fmu, simulate
 from demo.matrix import COUPLING_REDUCTION, REACHABLE, Case, cases, evaluate, run
 from tests.conftest import REPO_ROOT
-from tests.docs_figures import stale_prose
+from tests.docs_figures import stale_prose, stale_script_output
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -84,30 +84,10 @@ def test_the_documented_minor_loop_of_a_2_um_drive_is_what_the_script_prints(tmp
     output: the script runs as the document gives it, and every figure it
     prints must be the one the document shows (within one unit of the last
     printed digit), so a stale explanation fails."""
-    import os
-    import re
-    import subprocess
-    import sys
-
-    text = (REPO_ROOT / "docs" / "seed000.md").read_text(encoding="utf-8")
-    section = text[text.index("## Off the paper's operating point"):]
-    python = re.findall(r"^```python\n(.*?)^```$", section, re.MULTILINE | re.DOTALL)
-    printed = re.findall(r"^```text\n(.*?)^```$", section, re.MULTILINE | re.DOTALL)
-    assert len(python) == 1 and len(printed) == 1, "one script and one output in the section"
-    script = tmp_path / "minor_loop.py"
-    script.write_text(python[0])
-    measured = subprocess.run([sys.executable, str(script)], cwd=REPO_ROOT, capture_output=True,
-                              text=True, check=True,
-                              env={**os.environ, "PYTHONPATH": str(REPO_ROOT)}).stdout
+    measured, problems = stale_script_output("seed000.md", "## Off the paper's operating point",
+                                             tmp_path)
     print(measured)
-    number = re.compile(r"[-+]?\d+(?:\.\d+)?")
-    lines = list(zip(measured.splitlines(), printed[0].splitlines()))
-    assert len(measured.splitlines()) == len(printed[0].splitlines()), (measured, printed[0])
-    for got, shown in lines:
-        assert number.sub("#", got) == number.sub("#", shown), (got, shown)
-        for m, d in zip(number.findall(got), number.findall(shown)):
-            unit = 10.0 ** -len(d.split(".")[1]) if "." in d else 1.0
-            assert abs(float(m) - float(d)) <= unit * 1.01, (got, shown)
+    assert not problems, "\n".join(problems)
 
 
 @pytest.mark.parametrize("case", [Case("y", 3.0, 5.0, 2.0), Case("theta", 3.0, 2.0, 2.0)],

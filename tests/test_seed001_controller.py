@@ -17,7 +17,7 @@ import pytest
 from demo.cosim import Fmu, simulate
 from demo.experiments import ABW_XY_HOME, ABW_XY_HZ, pose, trajectory
 from tests.conftest import REPO_ROOT
-from tests.docs_figures import doc_rows, stale_prose, stale_rows, table_rows
+from tests.docs_figures import doc_rows, stale_prose, stale_rows, stale_script_output, table_rows
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
 CONTROLLER = REPO_ROOT / "dist" / "PiezoController.fmu"
@@ -146,4 +146,14 @@ def test_docs_seed001_prints_these_figures(feedforward_xy_results):
                             "seed 001's runs", exact=True)
     problems += stale_prose("seed001.md", r"\(\d+ runs, ([0-9.]+) s simulated", f"{simulated:g}",
                             "time seed 001's runs simulate")
+    assert not problems, "\n".join(problems)
+
+
+def test_docs_seed001_prints_what_seed_000s_pi_does_on_the_xy200s(tmp_path):
+    """docs/seed001.md's lead on seed 000's method with its PI feedback on the
+    XY200S is a script and its output: the script runs as printed and every
+    figure must be the one shown (within one unit of the last digit)."""
+    measured, problems = stale_script_output(
+        "seed001.md", "### Seed 000's method with its own PI feedback (XY200S)", tmp_path)
+    print(measured)
     assert not problems, "\n".join(problems)
