@@ -122,21 +122,39 @@ def stale_prose(document: str, pattern: str, measured: str, figure: str,
     return problems
 
 
+def section_of(document: str, heading: str) -> str:
+    """The text of docs/<document> from the line `heading` (a Markdown
+    heading, e.g. "### Why ...") to the next heading of its level or above,
+    headings inside fenced blocks (a shell comment) not counted."""
+    text = (DOCS / document).read_text(encoding="utf-8")
+    lines = text.splitlines(keepends=True)
+    level = len(heading) - len(heading.lstrip("#"))
+    try:
+        first = next(i for i, line in enumerate(lines) if line.rstrip("\n") == heading)
+    except StopIteration:
+        raise AssertionError(f"docs/{document}: no heading {heading!r}") from None
+    fenced = False
+    for end in range(first + 1, len(lines)):
+        if lines[end].startswith("```"):
+            fenced = not fenced
+        elif not fenced and re.match(r"#{1,%d} " % level, lines[end]):
+            return "".join(lines[first:end])
+    return "".join(lines[first:])
+
+
 def stale_script_output(document: str, heading: str, scratch: pathlib.Path) -> tuple[str, list[str]]:
     """(what it printed, what differs) when the one ```python script of the
     section `heading` of docs/<document> runs as printed, from the
     repository's root, against the one ```text block of the section (its
     output as the document shows it): every line the same but for its
-    numbers, and every number within one unit of its last printed digit."""
+    numbers; a number with decimals or an exponent within one unit of its
+    last printed digit (a last-bit difference of libm may move it), an
+    integer (a count, a label) exactly."""
     import os
     import subprocess
     import sys
 
-    text = (DOCS / document).read_text(encoding="utf-8")
-    start = text.index(f"\n{heading}\n")
-    following = re.search(r"^#{1,%d} " % heading.count("#"), text[start + len(heading) + 2:],
-                          re.MULTILINE)
-    section = text[start:start + len(heading) + 2 + (following.start() if following else len(text))]
+    section = section_of(document, heading)
     python = re.findall(r"^```python\n(.*?)^```$", section, re.MULTILINE | re.DOTALL)
     printed = re.findall(r"^```text\n(.*?)^```$", section, re.MULTILINE | re.DOTALL)
     if len(python) != 1 or len(printed) != 1:
@@ -144,18 +162,23 @@ def stale_script_output(document: str, heading: str, scratch: pathlib.Path) -> t
                     "outputs, one of each expected"]
     script = scratch / "documented_script.py"
     script.write_text(python[0], encoding="utf-8")
-    measured = subprocess.run([sys.executable, str(script)], cwd=REPO_ROOT, capture_output=True,
-                              text=True, check=True,
-                              env={**os.environ, "PYTHONPATH": str(REPO_ROOT)}).stdout
-    got, shown = measured.splitlines(), printed[0].splitlines()
+    done = subprocess.run([sys.executable, str(script)], cwd=REPO_ROOT, capture_output=True,
+                          text=True, env={**os.environ, "PYTHONPATH": str(REPO_ROOT)})
+    if done.returncode != 0:
+        return done.stdout, [f"docs/{document}, {heading}: the script exited with "
+                             f"{done.returncode}:\n{done.stderr[-3000:]}"]
+    got, shown = done.stdout.splitlines(), printed[0].splitlines()
     if len(got) != len(shown):
-        return measured, [f"docs/{document}, {heading}: {len(shown)} lines shown, {len(got)} printed"]
+        return done.stdout, [f"docs/{document}, {heading}: {len(shown)} lines shown, "
+                             f"{len(got)} printed"]
     problems = []
-    number = re.compile(r"[-+]?\d+(?:\.\d+)?")
     for line, doc_line in zip(got, shown):
-        same = number.sub("#", line) == number.sub("#", doc_line) and all(
-            abs(float(m) - float(d)) <= (10.0 ** -len(d.split(".")[1]) if "." in d else 1.0) * 1.01
-            for m, d in zip(number.findall(line), number.findall(doc_line)))
+        measured, documented = numbers(line), numbers(doc_line)
+        same = (NUMBER.sub("#", line) == NUMBER.sub("#", doc_line)
+                and len(measured) == len(documented)
+                and all(abs(m - d) <= (unit * (1 + 1e-9) if re.search(r"[.eE]", literal) else 0.0)
+                        for (m, _), (d, unit), literal
+                        in zip(measured, documented, NUMBER.findall(doc_line))))
         if not same:
             problems.append(f"docs/{document}, {heading}: shown {doc_line!r}, printed {line!r}")
-    return measured, problems
+    return done.stdout, problems

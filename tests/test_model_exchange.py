@@ -33,8 +33,8 @@ from conftest import LogCapture
 from tests.docs_figures import doc_rows, stale_rows
 
 #: The rows of docs/fmi.md's fmpy table that these tests measure again (the
-#: solver and the span are the rows' key).
-#: CVode's relative tolerances of the table, by row.
+#: solver and the span are the rows' key): CVode's, by relative tolerance,
+#: and forward Euler's.
 CVODE_ROWS = {
     1e-11: "CVode, relative tolerance 1e-11 (absolute: 1e-11 × each state's nominal, as fmpy sets it)",
     1e-10: "CVode, relative tolerance 1e-10",

@@ -291,9 +291,11 @@ def readme_log(after: str) -> list[str]:
     """The lines of the README's first text block (a log excerpt) after the
     paragraph that says `after`."""
     text = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
-    block = re.search(r"^```\n(.*?)^```$", text[text.index(after):], re.MULTILINE | re.DOTALL)
-    assert block, f"README.md: no log block after {after!r}"
-    return block.group(1).splitlines()
+    # The first fence after the paragraph opens the block: it must be a
+    # block without a language (a log), not code.
+    block = re.search(r"^```(\w*)\n(.*?)^```$", text[text.index(after):], re.MULTILINE | re.DOTALL)
+    assert block and not block.group(1), f"README.md: no log block right after {after!r}"
+    return block.group(2).splitlines()
 
 
 def test_the_readmes_refusals_are_what_the_fmus_log(envs):

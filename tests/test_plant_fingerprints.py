@@ -92,9 +92,15 @@ def test_a_malformed_parameter_set_is_refused_by_file_and_line(tmp_path):
 def test_model_md_prints_what_the_tool_measures(measured):
     """piezo-models/MODEL.md's fingerprint table prints each measured figure
     of the packaged FMU: every row's "measured" cell must be what the tool
-    reports now (tests/docs_figures.py's rule: 1 % or a unit of the last
-    printed digit), so a recalibration that moves one leaves no stale row."""
-    from tests.docs_figures import NUMBER, same_numbers, table_rows
+    reports now, within one unit of the last printed digit (the run is
+    deterministic; the table prints up to six decimals), so a recalibration
+    that moves one leaves no stale row."""
+    from tests.docs_figures import NUMBER, numbers, table_rows
+
+    def same_numbers(printed: str, measured: str) -> bool:
+        a, b = numbers(printed), numbers(measured)
+        return len(a) == len(b) and all(abs(p - m) <= unit * (1 + 1e-9)
+                                        for (p, unit), (m, _) in zip(a, b))
 
     m = {c["key"]: c["measured"] for c in measured[0]["checks"]}
 

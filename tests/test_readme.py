@@ -67,8 +67,8 @@ def test_block_runs(line, language, code):
             pytest.fail(f"{path} is missing: run `make fmus` first", pytrace=False)
     for path in re.findall(r"target/release/[\w-]+", code):
         if not (REPO_ROOT / path).is_file():
-            pytest.fail(f"{path} is missing: run `make master` (or `cargo build --release "
-                        f"--locked`) first", pytrace=False)
+            pytest.fail(f"{path} is missing: run `cargo build --release --locked` first",
+                        pytrace=False)
     done = subprocess.run([*RUNNERS[language], code], cwd=REPO_ROOT, capture_output=True,
                           text=True, timeout=600)
     assert done.returncode == 0, (
