@@ -167,3 +167,13 @@ def test_docs_seed001_prints_the_xy200s_ratchet(tmp_path):
         "seed001.md", "### Why seed 000's feedforward drifts on the XY200S", tmp_path)
     print(measured)
     assert not problems, "\n".join(problems)
+
+
+def test_docs_seed001_prints_the_linearity_runs_from_rest(tmp_path):
+    """docs/seed001.md's second reading of §5.2 (sines from rest up to the
+    paper's peak) is a script and its output: the script runs as printed
+    and every figure must be the one shown."""
+    measured, problems = stale_script_output(
+        "seed001.md", "### Seed 001's §5.2 read from rest", tmp_path)
+    print(measured)
+    assert not problems, "\n".join(problems)
