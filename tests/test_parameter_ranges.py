@@ -290,12 +290,15 @@ def test_overflowing_controller_output_is_an_error(envs):
 def readme_log(after: str) -> list[str]:
     """The lines of the README's first text block (a log excerpt) after the
     paragraph that says `after`."""
+    from tests.test_readme import blocks
+
     text = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
-    # The first fence after the paragraph opens the block: it must be a
-    # block without a language (a log), not code.
-    block = re.search(r"^```(\w*)\n(.*?)^```$", text[text.index(after):], re.MULTILINE | re.DOTALL)
-    assert block and not block.group(1), f"README.md: no log block right after {after!r}"
-    return block.group(2).splitlines()
+    line = text[:text.index(after)].count("\n") + 1
+    # The first block after the paragraph must be one without a language
+    # (a log), not code.
+    _, language, code, _ = next(b for b in blocks() if b[0] > line)
+    assert not language, f"README.md: no log block right after {after!r}"
+    return code.splitlines()
 
 
 def test_the_readmes_refusals_are_what_the_fmus_log(envs):

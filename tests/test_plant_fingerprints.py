@@ -95,12 +95,7 @@ def test_model_md_prints_what_the_tool_measures(measured):
     reports now, within one unit of the last printed digit (the run is
     deterministic; the table prints up to six decimals), so a recalibration
     that moves one leaves no stale row."""
-    from tests.docs_figures import NUMBER, numbers, table_rows
-
-    def same_numbers(printed: str, measured: str) -> bool:
-        a, b = numbers(printed), numbers(measured)
-        return len(a) == len(b) and all(abs(p - m) <= unit * (1 + 1e-9)
-                                        for (p, unit), (m, _) in zip(a, b))
+    from tests.docs_figures import NUMBER, same_numbers, table_rows
 
     m = {c["key"]: c["measured"] for c in measured[0]["checks"]}
 
@@ -138,6 +133,6 @@ def test_model_md_prints_what_the_tool_measures(measured):
     for name, printed in rows.items():
         if name.startswith("ultimate gain θ"):
             printed = NUMBER.findall(printed)[0]
-        if not same_numbers(printed, expected[name]):
+        if not same_numbers(printed, expected[name], relative=0.0):
             problems.append(f"MODEL.md, {name}: printed {printed!r}, measured {expected[name]!r}")
     assert not problems, "\n".join(problems)
