@@ -231,7 +231,7 @@ pub enum BoucWenFitError {
     )]
     NoUsableShape,
     #[error(
-        "the GA-PSO optimum, searched on every {decimation}th sample, is unusable on the whole \
+        "the GA-PSO optimum, searched on one sample in {decimation}, is unusable on the whole \
          record (it diverges or draws a falling branch there); search with --decimation 1"
     )]
     UnusableOnAllSamples { decimation: usize },

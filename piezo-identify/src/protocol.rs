@@ -899,6 +899,10 @@ pub struct ForwardErrors {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BoucWenProtocolFit {
     pub identification: BoucWenIdentification,
+    /// The decimation whose GA-PSO optimum was unusable on the fitted samples
+    /// (a falling branch or a divergence between the searched samples),
+    /// when the search therefore ran again on every sample.
+    pub searched_again_from: Option<usize>,
     /// The options the fit ran with (decimation and excluded samples
     /// included).
     pub options: BoucWenFitOptions,
@@ -993,7 +997,7 @@ pub fn identify_bouc_wen_protocol(
         .filter(|&s| s < fit_end)
         .collect();
     let target = smoothed_between_steps(y_fit, settings.smoothing, &fit_steps);
-    let options = BoucWenFitOptions {
+    let mut options = BoucWenFitOptions {
         gapso: settings.gapso.clone(),
         bounds: settings.bounds.clone(),
         decimation: settings
@@ -1011,9 +1015,28 @@ pub fn identify_bouc_wen_protocol(
         name: "GA-PSO",
         steps: options.gapso.generations,
     });
-    let identification = identify_bouc_wen(u_fit, &target, &options, |_, best| {
+    let mut searched_again_from = None;
+    let identification = match identify_bouc_wen(u_fit, &target, &options, |_, best| {
         progress(ProgressEvent::Step { best })
-    })?;
+    }) {
+        // The decimated search sees the loops' turning points only to within
+        // the decimation, so with --monotone its optimum can draw a falling
+        // branch right after a reversal it did not sample. Searching every
+        // sample checks every branch as the model is then scored; it costs
+        // the search's time once more, instead of a failed command.
+        Err(BoucWenFitError::UnusableOnAllSamples { decimation }) if decimation > 1 => {
+            searched_again_from = Some(decimation);
+            options.decimation = 1;
+            progress(ProgressEvent::Phase {
+                name: "GA-PSO on every sample",
+                steps: options.gapso.generations,
+            });
+            identify_bouc_wen(u_fit, &target, &options, |_, best| {
+                progress(ProgressEvent::Step { best })
+            })?
+        }
+        other => other?,
+    };
     let fit_options = FitOptions {
         excluded: options.excluded.clone(),
         rss_increase: LINEAR_RSS_INCREASE,
@@ -1030,6 +1053,7 @@ pub fn identify_bouc_wen_protocol(
     let (low, high) = range_of(y_fit, &fitted);
     let mut result = BoucWenProtocolFit {
         identification,
+        searched_again_from,
         options,
         classical: classical.params,
         line: [line[0], line[1]],

@@ -348,6 +348,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
                 "plan": plan,
                 "settings": settings,
                 "options": fit.options,
+                "searched_again_from": fit.searched_again_from,
                 "identification": fit.identification,
                 "classical": fit.classical,
                 "line": fit.line,
@@ -368,6 +369,12 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
 
 pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSettings) {
     let identification = &fit.identification;
+    if let Some(decimation) = fit.searched_again_from {
+        println!(
+            "\nthe GA-PSO optimum searched on one sample in {decimation} drew a falling branch or diverged \
+             between them; searched again on every sample"
+        );
+    }
     println!(
         "\nGA-PSO: {} particles, {} generations ({} evaluations), seed {}, every {} sample(s): {:.2} s; eq. (5) RMS {:.6} um on the fitted samples",
         settings.gapso.population,
