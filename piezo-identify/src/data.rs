@@ -1,7 +1,7 @@
 //! Reading a numeric voltage/displacement record from a text file.
 //!
 //! The format is the common one of measurement exports: one sample per line,
-//! columns separated by tabs, commas, semicolons or spaces (whichever the
+//! columns separated by tabs, semicolons, commas or spaces (whichever the
 //! first line has, in that order: [`Separator`]), an optional header row of
 //! column names (with a separator character, names may contain spaces), `#`
 //! starting a comment (whole line or trailing) and blank lines ignored.
@@ -16,6 +16,14 @@
 //! is more likely corrupt than intended, and refusing it early is cheaper
 //! than a fit on garbage. Empty fields are accepted in columns that are not
 //! read (a pandas export's unnamed index column, a trailing separator).
+//!
+//! Exports made in a locale whose decimal mark is a comma (spreadsheets and
+//! LabVIEW in much of Europe) separate their fields by semicolons or tabs and
+//! write `-123,059`: in a file so separated, a field that is not a number as
+//! written but is one with its single comma read as the decimal point (and
+//! no point of its own) is read that way, and the summary says so
+//! ([`ColumnsUsed::decimal_comma`]). A comma-separated file has no decimal
+//! commas: its commas are separators.
 //! Errors name the file, the 1-based line and the problem (`file:line:
 //! problem`).
 
@@ -164,8 +172,9 @@ impl DataError {
 }
 
 /// How the fields of a line are separated, found on the file's first
-/// non-blank, non-comment line: a tab if it has one, else a comma, else a
-/// semicolon, else runs of spaces. With a separator character every field
+/// non-blank, non-comment line: a tab if it has one, else a semicolon, else a
+/// comma, else runs of spaces (a semicolon before a comma: a line with both
+/// is a decimal-comma export, `0,005;1,856`). With a separator character every field
 /// counts, empty ones included (an unnamed index column, a trailing
 /// separator), and a header name may contain spaces ("Moment (Nm)").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -180,10 +189,10 @@ impl Separator {
     fn of(line: &str) -> Separator {
         if line.contains('\t') {
             Separator::Tab
-        } else if line.contains(',') {
-            Separator::Comma
         } else if line.contains(';') {
             Separator::Semicolon
+        } else if line.contains(',') {
+            Separator::Comma
         } else {
             Separator::Whitespace
         }
@@ -197,6 +206,24 @@ impl Separator {
             Separator::Semicolon => "semicolon",
             Separator::Whitespace => "space",
         }
+    }
+
+    /// The value of a field, and whether it was written with a decimal
+    /// comma (module comment); None when it is not a number.
+    fn number(self, text: &str) -> Option<(f64, bool)> {
+        if let Ok(value) = text.parse::<f64>() {
+            return Some((value, false));
+        }
+        let decimal_comma_possible = matches!(self, Separator::Tab | Separator::Semicolon)
+            && text.matches(',').count() == 1
+            && !text.contains('.');
+        if !decimal_comma_possible {
+            return None;
+        }
+        text.replacen(',', ".", 1)
+            .parse::<f64>()
+            .ok()
+            .map(|value| (value, true))
     }
 
     fn split(self, content: &str) -> Vec<&str> {
@@ -233,6 +260,8 @@ pub struct ColumnsUsed {
     pub output: UsedColumn,
     pub time: Option<UsedColumn>,
     pub separator: Separator,
+    /// Whether numbers were written with a decimal comma (module comment).
+    pub decimal_comma: bool,
     /// Line of the header row, when there is one.
     pub header_line: Option<usize>,
 }
@@ -282,6 +311,7 @@ pub fn parse_record_with_columns(
     let mut input = Vec::new();
     let mut output = Vec::new();
     let mut times: Vec<(usize, f64)> = Vec::new();
+    let mut decimal_comma = false;
     let mut last_line = 0;
 
     for (index, raw) in text.lines().enumerate() {
@@ -302,7 +332,10 @@ pub fn parse_record_with_columns(
         let separator = *separator.get_or_insert_with(|| Separator::of(content));
         let fields = separator.split(content);
         if first_content_row {
-            let numeric = fields.iter().filter(|f| f.parse::<f64>().is_ok()).count();
+            let numeric = fields
+                .iter()
+                .filter(|f| separator.number(f).is_some())
+                .count();
             if numeric == 0 {
                 header = Some((line, fields.iter().map(|f| (*f).to_owned()).collect()));
                 continue;
@@ -359,7 +392,7 @@ pub fn parse_record_with_columns(
                     None => continue,
                 }
             }
-            let value: f64 = text.parse().map_err(|_| {
+            let (value, comma) = separator.number(text).ok_or_else(|| {
                 malformed(
                     line,
                     Problem::NotANumber {
@@ -368,6 +401,7 @@ pub fn parse_record_with_columns(
                     },
                 )
             })?;
+            decimal_comma |= comma;
             if !value.is_finite() {
                 return Err(malformed(line, Problem::NotFinite { field, value }));
             }
@@ -426,6 +460,7 @@ pub fn parse_record_with_columns(
         output: used(columns.output),
         time: columns.time.map(used),
         separator,
+        decimal_comma,
         header_line: header.as_ref().map(|(line, _)| *line),
     };
     Ok((
@@ -670,6 +705,84 @@ mod tests {
         assert_eq!(
             message(&text, &by_name("Moment")),
             "data.txt:1: column \"Moment\" is not in the header (columns: \"Time (s)\", \"Moment (Nm)\", \"Angle (deg)\")"
+        );
+    }
+
+    /// A European spreadsheet's export: semicolons, decimal commas, with or
+    /// without a header; and a LabVIEW one: tabs, decimal commas. Each reads
+    /// the same numbers as the same record written with decimal points, and
+    /// says it read decimal commas.
+    #[test]
+    fn reads_decimal_commas_in_semicolon_and_tab_separated_files() {
+        let samples: Vec<(f64, f64, f64)> = (0..40)
+            .map(|n| {
+                (
+                    n as f64 * 0.005,
+                    1.8 + 0.25 * n as f64,
+                    -123.059139 + 0.5 * n as f64,
+                )
+            })
+            .collect();
+        let written = |separator: &str, header: &str, comma: bool| {
+            let mut text = header.to_owned();
+            for (t, u, y) in &samples {
+                let row = format!("{t:.3}{separator}{u:.6}{separator}{y:.6}\n");
+                text.push_str(&if comma { row.replace('.', ",") } else { row });
+            }
+            text
+        };
+        let time_column = options(
+            Column::Index(1),
+            Column::Index(2),
+            Sampling::TimeColumn(Column::Index(0)),
+        );
+        let read = |text: &str| {
+            parse_record_with_columns(text, Path::new("export.csv"), &time_column).unwrap()
+        };
+        let (reference, used) = read(&written(";", "", false));
+        assert!(!used.decimal_comma);
+        assert_eq!(reference.output[1], -122.559139);
+        for (separator, header) in [
+            (";", "Zeit [s];Spannung [V];Weg [um]\n"),
+            (";", ""),
+            ("\t", "Zeit [s]\tSpannung [V]\tWeg [um]\n"),
+            ("\t", ""),
+        ] {
+            let (record, used) = read(&written(separator, header, true));
+            assert_eq!(record, reference, "{separator:?} {header:?}");
+            assert!(used.decimal_comma);
+            assert_eq!(used.header_line.is_some(), !header.is_empty());
+            assert_eq!(
+                used.separator,
+                if separator == ";" {
+                    Separator::Semicolon
+                } else {
+                    Separator::Tab
+                }
+            );
+        }
+        // In a comma-separated file a comma separates: "1,5" is two fields.
+        let mut text = String::from("volts,microns\n");
+        for n in 0..40 {
+            text.push_str(&format!("{n},5\n"));
+        }
+        let (record, used) =
+            parse_record_with_columns(&text, Path::new("c.csv"), &by_index()).unwrap();
+        assert_eq!((record.input[3], record.output[3]), (3.0, 5.0));
+        assert!(!used.decimal_comma);
+        // Neither a field with two commas nor one with a comma and a point is
+        // a decimal-comma number.
+        let odd = |field: &str| {
+            let text = format!("u;y\n{field};1\n") + &"1;2\n".repeat(40);
+            message(&text, &by_index())
+        };
+        assert_eq!(
+            odd("1,2,3"),
+            "data.txt:2: field 0 (\"1,2,3\") is not a number"
+        );
+        assert_eq!(
+            odd("1,234.5"),
+            "data.txt:2: field 0 (\"1,234.5\") is not a number"
         );
     }
 

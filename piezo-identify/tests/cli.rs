@@ -350,6 +350,63 @@ fn tab_separated_names_with_spaces_are_whole_names() {
     );
 }
 
+/// The same record exported with decimal commas and semicolons (a spreadsheet
+/// in a European locale) fits to the same figures as with decimal points,
+/// and the summary says how it was read.
+#[test]
+fn a_decimal_comma_export_fits_as_its_decimal_point_twin() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut point = String::from("Zeit [s];Spannung [V];Weg [um]\n");
+    for n in 0..400 {
+        let t = n as f64 * 0.01;
+        let u = 5.0 + 4.0 * (std::f64::consts::TAU * t).sin();
+        let y = 1.3 * u + 0.1 * (std::f64::consts::TAU * t).cos();
+        point.push_str(&format!("{t:.2};{u:.6};{y:.6}\n"));
+    }
+    let comma = point.replace('.', ",");
+    let fit = |name: &str, text: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let output = run(&[
+            "inverse-pi",
+            path.to_str().unwrap(),
+            "--time",
+            "Zeit [s]",
+            "--input",
+            "Spannung [V]",
+            "--output",
+            "Weg [um]",
+            "--starts",
+            "2",
+            "--max-iterations",
+            "40",
+            "--split",
+            "0.5",
+        ]);
+        assert!(output.status.success(), "{}", stderr(&output));
+        stdout(&output)
+    };
+    let (point, comma) = (fit("point.csv", &point), fit("comma.csv", &comma));
+    let columns = "columns: input column 1 \"Spannung [V]\", output column 2 \"Weg [um]\", \
+                   time column 0 \"Zeit [s]\", semicolon-separated";
+    assert!(
+        point.contains(&format!("{columns}, header on line 1")),
+        "{point}"
+    );
+    assert!(
+        comma.contains(&format!("{columns}, decimal comma, header on line 1")),
+        "{comma}"
+    );
+    let figures = |out: &str| -> Vec<String> {
+        out.lines()
+            .filter(|line| line.contains(" RMS "))
+            .map(str::to_owned)
+            .collect()
+    };
+    assert!(!figures(&point).is_empty());
+    assert_eq!(figures(&point), figures(&comma));
+}
+
 /// A record like a pandas export with its unnamed index column and a file
 /// whose first column is empty throughout are read; an empty file is named
 /// as such (it was reported at "line 0").

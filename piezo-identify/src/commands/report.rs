@@ -24,6 +24,9 @@ pub(crate) fn describe_columns(columns: &ColumnsUsed) -> String {
         text.push_str(&format!(", time {time}"));
     }
     text.push_str(&format!(", {}-separated", columns.separator.name()));
+    if columns.decimal_comma {
+        text.push_str(", decimal comma");
+    }
     match columns.header_line {
         Some(line) => text.push_str(&format!(", header on line {line}")),
         None => text.push_str(", no header"),
