@@ -7,7 +7,11 @@
 //!   with the model run from the start of the record: its state at the first
 //!   scored sample is the one the measured history left. A separate
 //!   validation file is run from rest at its own first sample and scored
-//!   after its own warm-up.
+//!   after its own warm-up. When both begin at rest at the same input, the
+//!   validation file's displacement is read from the same zero as the fit
+//!   record's ([`Plan::zero_alignment`]): a sensor is zeroed anew for each
+//!   session, and the model, which starts both from the same rest, cannot
+//!   tell a new zero from a new position.
 //! - **What is fitted** ([`Plan`], [`crate::segments`]): not the rest
 //!   segments, not the settling after each voltage step, not the first
 //!   settling time of the record; the models run through all of them. The
@@ -112,6 +116,27 @@ pub const LINEAR_RSS_INCREASE: f64 = 1e-3;
 /// RK4 substeps per scaled input unit in GA-PSO's evaluations
 /// (`BoucWenFitOptions::search_substeps` says why 100 is enough).
 pub const BOUC_WEN_SEARCH_SUBSTEPS: f64 = 100.0;
+
+/// A validation file's sensor zero, aligned with the fit record's
+/// ([`Plan::zero_alignment`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ZeroAlignment {
+    /// The input both records rest at when they begin.
+    pub rest_input: f64,
+    /// The samples of each rest that were averaged (after settling).
+    pub fit_rest: Range<usize>,
+    pub validation_rest: Range<usize>,
+    /// The validation file's rest reading minus the fit record's: subtracted
+    /// from every output sample of the validation file.
+    pub shift: f64,
+}
+
+impl ZeroAlignment {
+    /// `output` read from the fit record's zero.
+    pub fn aligned(&self, output: &[f64]) -> Vec<f64> {
+        output.iter().map(|y| y - self.shift).collect()
+    }
+}
 
 /// Where the record is cut and what is left out.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -309,6 +334,50 @@ impl Plan {
         excluded.push(0..warm_up.min(u.len()));
         merge(&mut excluded);
         (segments, flags(u.len(), 0, &excluded))
+    }
+
+    /// The sensor zero of a separate validation file, aligned with the fit
+    /// record's: when both records begin at rest (a rest segment from their
+    /// first sample) at the same input (within the rest tolerance), the
+    /// validation file's output is read relative to its rest as the fit
+    /// record's is to its own. Both rests are taken after the settling time
+    /// (a sensor's start-up transient). This assumes what the scoring already
+    /// assumes, that both start from the same rest state; it uses only
+    /// samples that are neither fitted nor scored. None when either record
+    /// does not begin at rest, when they rest at different inputs, or when
+    /// nothing of a rest is left after settling.
+    pub fn zero_alignment(
+        &self,
+        fit: &Record,
+        validation: &Record,
+        validation_segments: &Segments,
+    ) -> Option<ZeroAlignment> {
+        let settled = |rests: &[Range<usize>]| {
+            rests
+                .first()
+                .filter(|rest| rest.start == 0)
+                .map(|rest| (rest.start + self.thresholds.settle_samples)..rest.end)
+                .filter(|rest| !rest.is_empty())
+        };
+        let fit_rest = settled(&self.segments.rests)?;
+        let validation_rest = settled(&validation_segments.rests)?;
+        if fit_rest.end > fit.input.len() || validation_rest.end > validation.input.len() {
+            return None;
+        }
+        let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len() as f64;
+        let fit_input = mean(&fit.input[fit_rest.clone()]);
+        let validation_input = mean(&validation.input[validation_rest.clone()]);
+        if (fit_input - validation_input).abs() > self.thresholds.rest_tolerance {
+            return None;
+        }
+        let shift =
+            mean(&validation.output[validation_rest.clone()]) - mean(&fit.output[fit_rest.clone()]);
+        Some(ZeroAlignment {
+            rest_input: fit_input,
+            fit_rest,
+            validation_rest,
+            shift,
+        })
     }
 
     /// Search decimation for `fitted` samples (module comment).

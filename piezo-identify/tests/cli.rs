@@ -629,3 +629,76 @@ fn a_monotone_fit_searches_every_sample_when_the_decimated_optimum_falls() {
         .all(|(u, y)| (y[1] - y[0]) * (u[1] - u[0]) > 0.0);
     assert!(rising, "the written model falls somewhere on the record");
 }
+
+/// A validation file from a second session whose sensor was zeroed elsewhere
+/// (`lab-record --sensor-offset -40` against the default −42.7 µm, other
+/// noise): by default its displacement is read from the fit record's zero
+/// by their rests at 0 V, and both models score it as they score its twin
+/// with the fit record's zero; read as recorded, the 2.7 µm between the
+/// zeros is a model error of about a fifth of the stroke.
+#[test]
+fn a_second_session_is_read_from_the_fit_records_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = |name: &str, extra: &[&str]| {
+        let path = dir.path().join(name);
+        let mut args = vec![
+            "lab-record",
+            "--rate",
+            "200",
+            "--out",
+            path.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let output = run(&args);
+        assert!(output.status.success(), "{}", stderr(&output));
+        path.to_str().unwrap().to_owned()
+    };
+    let fit = record("fit.csv", &[]);
+    let moved = record(
+        "moved.csv",
+        &["--sensor-offset", "-40", "--noise-seed", "9"],
+    );
+    let twin = record("twin.csv", &["--noise-seed", "9"]);
+    let validation = |command: &str, file: &str, zero: &str| -> serde_json::Value {
+        let report = dir.path().join("report.json");
+        let output = run(&[
+            command,
+            &fit,
+            "--input",
+            "1",
+            "--output",
+            "2",
+            "--time",
+            "0",
+            "--validate",
+            file,
+            "--validate-zero",
+            zero,
+            "--report",
+            report.to_str().unwrap(),
+        ]);
+        assert!(output.status.success(), "{}", stderr(&output));
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        report["validation"].clone()
+    };
+    for (command, model) in [("inverse-pi", "proposed"), ("bouc-wen", "bouc_wen")] {
+        let rms = |v: &serde_json::Value| v["errors"][model]["rms_percent"].as_f64().unwrap();
+        let aligned = validation(command, &moved, "rest");
+        let shift = aligned["zero_alignment"]["shift"].as_f64().unwrap();
+        assert!((shift - 2.7).abs() < 0.005, "{command}: {shift}");
+        let same_zero = validation(command, &twin, "rest");
+        assert!(same_zero["zero_alignment"]["shift"].as_f64().unwrap().abs() < 0.005);
+        // The two differ by the constant 2.7 µm − shift, under 0.005 µm:
+        // 0.04 % of the 12.5 µm stroke.
+        assert!(
+            (rms(&aligned) - rms(&same_zero)).abs() <= 0.01 * rms(&same_zero) + 0.04,
+            "{command}: {} against {}",
+            rms(&aligned),
+            rms(&same_zero)
+        );
+        let recorded = validation(command, &moved, "recorded");
+        assert!(recorded["zero_alignment"].is_null());
+        assert!(rms(&recorded) > 10.0, "{command}: {}", rms(&recorded));
+    }
+}

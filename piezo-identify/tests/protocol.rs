@@ -10,6 +10,7 @@ use piezo_identify::protocol::{
     BoucWenSettings, InversePiSettings, Plan, PlanOptions, identify_bouc_wen_protocol,
     identify_inverse_pi,
 };
+use piezo_identify::segments::detect_segments;
 
 /// 200 Hz, unipolar 1 Hz sine after 2 s of rest, 12 s of excitation.
 fn record() -> Record {
@@ -189,4 +190,61 @@ fn refinement_stays_in_the_box_and_must_improve_the_fit() {
             assert!(fit.best().params.n <= 3.0, "n {}", fit.best().params.n);
         }
     }
+}
+
+/// A second session of the same experiment with its sensor zeroed elsewhere
+/// (offset −40 µm instead of −42.7 µm, other noise): both records begin at
+/// rest at 0 V, the second's rest reads 2.7 µm higher, and read from the fit
+/// record's zero it is its twin with the fit record's zero. A file that does
+/// not begin at rest, or rests at another input, has no zero to compare.
+#[test]
+fn a_validation_file_is_read_from_the_fit_records_zero_by_their_rests() {
+    let spec = LabRecordSpec::new(
+        200.0,
+        Drive::Unipolar,
+        Excitation::Sine { frequency: 1.0 },
+        12.0,
+    );
+    let fit = lab_record(&spec).unwrap();
+    let session = |sensor_offset_um| {
+        lab_record(&LabRecordSpec {
+            sensor_offset_um,
+            noise_seed: 9,
+            ..spec
+        })
+        .unwrap()
+    };
+    let (moved, twin) = (session(-40.0), session(-42.7));
+    let plan = split_plan(&fit, fit.input.len());
+    let segments = |record: &Record| detect_segments(&record.input, &plan.thresholds);
+    let alignment = plan
+        .zero_alignment(&fit, &moved, &segments(&moved))
+        .expect("both begin at rest at 0 V");
+    assert_eq!(alignment.rest_input, 0.0);
+    // 2 s of rest at 200 Hz less the 0.1 s settling: means of 380 samples of
+    // 0.02 µm noise, each within about 0.001 µm; 0.005 µm is 3σ of their
+    // difference and more.
+    assert_eq!(alignment.fit_rest, 20..400);
+    assert!((alignment.shift - 2.7).abs() < 0.005, "{alignment:?}");
+    let aligned = alignment.aligned(&moved.output);
+    let largest = aligned
+        .iter()
+        .zip(&twin.output)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(largest < 0.005, "{largest}");
+
+    // Begun mid-excitation: no rest at its start.
+    let late = Record {
+        input: moved.input[600..].to_vec(),
+        output: moved.output[600..].to_vec(),
+        sample_period: moved.sample_period,
+    };
+    assert_eq!(plan.zero_alignment(&fit, &late, &segments(&late)), None);
+    // Resting at 1 V, not 0 V.
+    let mut lifted = moved.clone();
+    for u in &mut lifted.input[..400] {
+        *u = 1.0;
+    }
+    assert_eq!(plan.zero_alignment(&fit, &lifted, &segments(&lifted)), None);
 }

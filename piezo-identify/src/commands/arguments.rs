@@ -7,8 +7,8 @@ use clap::Args;
 
 use piezo_identify::data::{ColumnsUsed, read_record_with_columns};
 use piezo_identify::plant::{PlantFmu, read_parameter_set};
-use piezo_identify::protocol::{Plan, PlanOptions};
-use piezo_identify::segments::SegmentOptions;
+use piezo_identify::protocol::{Plan, PlanOptions, ZeroAlignment};
+use piezo_identify::segments::{SegmentOptions, Segments};
 use piezo_identify::validation::displacement_offset;
 use piezo_identify::{Column, FitOptions, ReadOptions, Record, Sampling, read_record};
 
@@ -31,6 +31,11 @@ pub(crate) struct ProtocolArgs {
     /// settling time and the first loading, as at the start of FILE].
     #[arg(long, allow_negative_numbers = true, value_parser = seconds, requires = "validate")]
     pub(crate) validate_warm_up: Option<f64>,
+    /// The --validate file's displacement zero: "rest" reads it from its
+    /// rest at the start as FILE's is read from FILE's (when both begin at
+    /// rest at the same input: a sensor zeroed anew); "recorded" as written.
+    #[arg(long, default_value = "rest", value_parser = ["rest", "recorded"], requires = "validate")]
+    pub(crate) validate_zero: String,
     /// Seconds at the start of FILE not fitted [default: the settling time
     /// and the first loading, up to the input's second turning point].
     #[arg(long, allow_negative_numbers = true, value_parser = seconds)]
@@ -245,12 +250,13 @@ impl ProtocolArgs {
         .map_err(|e| format!("{}: {e}", loaded.name))
     }
 
-    /// The validation file's scored samples, refusing a file with none.
+    /// The validation file's rests and steps and its scored samples,
+    /// refusing a file with none.
     pub(crate) fn validation_scored(
         &self,
         plan: &Plan,
         validation: &Loaded,
-    ) -> Result<(Vec<usize>, Vec<bool>), String> {
+    ) -> Result<(Segments, Vec<bool>), String> {
         let record = &validation.record;
         let warm_up = self
             .validate_warm_up
@@ -267,7 +273,42 @@ impl ProtocolArgs {
                 }
             ));
         }
-        Ok((segments.steps, scored))
+        Ok((segments, scored))
+    }
+
+    /// The validation file's output read from FILE's zero (`--validate-zero`),
+    /// and the alignment when there is one; says on standard output which.
+    pub(crate) fn validation_output(
+        &self,
+        plan: &Plan,
+        fit: &Record,
+        validation: &Record,
+        segments: &Segments,
+    ) -> (Vec<f64>, Option<ZeroAlignment>) {
+        if self.validate_zero == "recorded" {
+            println!("displacement as recorded (--validate-zero recorded)");
+            return (validation.output.clone(), None);
+        }
+        match plan.zero_alignment(fit, validation, segments) {
+            Some(alignment) => {
+                println!(
+                    "displacement zero: its rest at {:.4} (after settling, samples {}..{}) reads {:+.6} from the fit record's (samples {}..{}); read from the fit record's zero (--validate-zero recorded: as written)",
+                    alignment.rest_input,
+                    alignment.validation_rest.start,
+                    alignment.validation_rest.end,
+                    alignment.shift,
+                    alignment.fit_rest.start,
+                    alignment.fit_rest.end,
+                );
+                (alignment.aligned(&validation.output), Some(alignment))
+            }
+            None => {
+                println!(
+                    "displacement as recorded: it and the fit record do not both begin at rest at the same input, so their zeros cannot be compared"
+                );
+                (validation.output.clone(), None)
+            }
+        }
     }
 }
 

@@ -291,14 +291,14 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
         );
     }
     let mut validation_errors = None;
-    if let (Some(v), Some((_, scored))) = (&validation, &validation_scored) {
+    let mut zero_alignment = None;
+    if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
         println!("\n{}", describe(&v.record, &v.name));
-        let errors = fit.errors_on(
-            &v.record.input,
-            &v.record.output,
-            v.record.sample_period,
-            scored,
-        );
+        let (output, alignment) =
+            args.protocol
+                .validation_output(&plan, &loaded.record, &v.record, segments);
+        zero_alignment = alignment;
+        let errors = fit.errors_on(&v.record.input, &output, v.record.sample_period, scored);
         print_forward_errors(
             "validation file (models from rest at its start)",
             &errors,
@@ -357,6 +357,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
                 "unseen": fit.unseen,
                 "validation": validation.as_ref().map(|v| serde_json::json!({
                     "file": v.name,
+                    "zero_alignment": zero_alignment,
                     "errors": validation_errors,
                 })),
                 "seconds": fit.seconds,

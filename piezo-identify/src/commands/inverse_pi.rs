@@ -137,13 +137,18 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
         );
     }
     let mut validation_errors = None;
-    if let (Some(v), Some((steps, scored))) = (&validation, &validation_scored) {
+    let mut zero_alignment = None;
+    if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
         println!("\n{}", describe(&v.record, &v.name));
+        let (output, alignment) = args
+            .protocol
+            .validation_output(&plan, record, &v.record, segments);
+        zero_alignment = alignment;
         let errors = fit.errors_on(
-            &v.record.output,
+            &output,
             &v.record.input,
             v.record.sample_period,
-            steps,
+            &segments.steps,
             scored,
         );
         print_inverse_pi_errors("validation file (models from rest at its start)", &errors);
@@ -192,6 +197,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
                 "identification": fit,
                 "validation": validation.as_ref().map(|v| serde_json::json!({
                     "file": v.name,
+                    "zero_alignment": zero_alignment,
                     "errors": validation_errors,
                 })),
             }),
