@@ -1,8 +1,8 @@
 //! Reading a numeric voltage/displacement record from a text file.
 //!
 //! The format is the common one of measurement exports: one sample per line,
-//! columns separated by tabs, semicolons, commas or spaces (whichever the
-//! first line has, in that order: [`Separator`]), an optional header row of
+//! columns separated by tabs, semicolons, commas or spaces ([`Separator`]
+//! says how the file's first lines decide), an optional header row of
 //! column names (with a separator character, names may contain spaces), `#`
 //! starting a comment (whole line or trailing) and blank lines ignored.
 //! Options pick the input (voltage) and output (displacement) columns by
@@ -22,8 +22,11 @@
 //! write `-123,059`: in a file so separated, a field that is not a number as
 //! written but is one with its single comma read as the decimal point (and
 //! no point of its own) is read that way, and the summary says so
-//! ([`ColumnsUsed::decimal_comma`]). A comma-separated file has no decimal
-//! commas: its commas are separators.
+//! ([`ColumnsUsed::decimal_comma`]). One file has one decimal mark: a field
+//! with a decimal comma in a file whose numbers have decimal points (or the
+//! reverse) is refused, since `4,089` beside `0.005` is a thousands
+//! separator, not a decimal. A comma-separated file has no decimal commas:
+//! its commas are separators.
 //! Errors name the file, the 1-based line and the problem (`file:line:
 //! problem`).
 
@@ -104,6 +107,15 @@ pub struct Record {
 pub enum Problem {
     #[error("field {field} (\"{text}\") is not a number")]
     NotANumber { field: usize, text: String },
+    #[error(
+        "field {field} (\"{text}\"): the file writes decimals with a point (line {point_line}) and with a comma (line {comma_line}); a comma beside decimal points is a thousands separator, which is not read"
+    )]
+    TwoDecimalMarks {
+        field: usize,
+        text: String,
+        point_line: usize,
+        comma_line: usize,
+    },
     #[error("field {field} is {value}, not a finite number")]
     NotFinite { field: usize, value: f64 },
     #[error("field {field} is empty, and it is the {role} column")]
@@ -171,12 +183,18 @@ impl DataError {
     }
 }
 
-/// How the fields of a line are separated, found on the file's first
-/// non-blank, non-comment line: a tab if it has one, else a semicolon, else a
-/// comma, else runs of spaces (a semicolon before a comma: a line with both
-/// is a decimal-comma export, `0,005;1,856`). With a separator character every field
-/// counts, empty ones included (an unnamed index column, a trailing
-/// separator), and a header name may contain spaces ("Moment (Nm)").
+/// How the fields of a line are separated, decided on the file's first two
+/// non-blank, non-comment lines ([`Separator::detect`]): the first of a tab,
+/// a semicolon, a comma (each if the first line has one) and runs of spaces
+/// under which the first line is a row of numbers, or a row of names with a
+/// row of as many numbers below it; failing that, a tab if the first line
+/// has one, else a comma, else a semicolon, else spaces (and the reading
+/// reports what is wrong). So `0,005;1,856` (decimal commas) is
+/// semicolon-separated, and so is `Zeit, s;Weg, um` above `0,005;1,856`,
+/// while `time,u [V; amp],y` above `0.1,2,3` is comma-separated. With a
+/// separator character every field counts, empty ones included (an unnamed
+/// index column, a trailing separator), and a header name may contain spaces
+/// ("Moment (Nm)").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum Separator {
     Tab,
@@ -186,16 +204,51 @@ pub enum Separator {
 }
 
 impl Separator {
-    fn of(line: &str) -> Separator {
-        if line.contains('\t') {
+    /// The separator of a file whose first content lines are `first` and
+    /// `second` (type comment).
+    fn detect(first: &str, second: Option<&str>) -> Separator {
+        let present = |separator: &Separator| match separator {
+            Separator::Tab => first.contains('\t'),
+            Separator::Semicolon => first.contains(';'),
+            Separator::Comma => first.contains(','),
+            Separator::Whitespace => true,
+        };
+        let fitting = [
+            Separator::Tab,
+            Separator::Semicolon,
+            Separator::Comma,
+            Separator::Whitespace,
+        ]
+        .into_iter()
+        .filter(present)
+        .find(|separator| {
+            let fields = separator.split(first);
+            let numbers = fields
+                .iter()
+                .filter(|f| separator.number(f).is_some())
+                .count();
+            let empty = fields.iter().filter(|f| f.is_empty()).count();
+            if numbers > 0 {
+                return numbers + empty == fields.len();
+            }
+            second.is_some_and(|line| {
+                let below = separator.split(line);
+                below.len() == fields.len()
+                    && below
+                        .iter()
+                        .all(|f| f.is_empty() || separator.number(f).is_some())
+                    && below.iter().any(|f| !f.is_empty())
+            })
+        });
+        fitting.unwrap_or(if first.contains('\t') {
             Separator::Tab
-        } else if line.contains(';') {
-            Separator::Semicolon
-        } else if line.contains(',') {
+        } else if first.contains(',') {
             Separator::Comma
+        } else if first.contains(';') {
+            Separator::Semicolon
         } else {
             Separator::Whitespace
-        }
+        })
     }
 
     /// The name used in messages.
@@ -314,22 +367,37 @@ pub fn parse_record_with_columns(
     let mut decimal_comma = false;
     let mut last_line = 0;
 
-    for (index, raw) in text.lines().enumerate() {
-        let line = index + 1;
-        last_line = line;
-        // Only the line end and spaces are trimmed: a leading tab is an
-        // empty first field.
-        let content = raw
-            .split('#')
+    // Only the line end and spaces are trimmed: a leading tab is an empty
+    // first field.
+    let content_of = |raw: &str| -> String {
+        raw.split('#')
             .next()
             .unwrap_or("")
             .trim_end_matches(['\r', ' '])
-            .trim_start_matches(' ');
+            .trim_start_matches(' ')
+            .to_owned()
+    };
+    let mut first_lines = text
+        .lines()
+        .map(content_of)
+        .filter(|content| !content.trim().is_empty());
+    let (first, second) = (first_lines.next(), first_lines.next());
+    // The first field of each decimal mark, to refuse a file that has both.
+    let mut first_decimal_point: Option<usize> = None;
+    let mut first_decimal_comma: Option<usize> = None;
+
+    for (index, raw) in text.lines().enumerate() {
+        let line = index + 1;
+        last_line = line;
+        let content = content_of(raw);
+        let content = content.as_str();
         if content.trim().is_empty() {
             continue;
         }
         let first_content_row = separator.is_none();
-        let separator = *separator.get_or_insert_with(|| Separator::of(content));
+        let separator = *separator.get_or_insert_with(|| {
+            Separator::detect(first.as_deref().unwrap_or(content), second.as_deref())
+        });
         let fields = separator.split(content);
         if first_content_row {
             let numeric = fields
@@ -401,6 +469,23 @@ pub fn parse_record_with_columns(
                     },
                 )
             })?;
+            if comma {
+                first_decimal_comma.get_or_insert(line);
+            } else if text.contains('.') {
+                first_decimal_point.get_or_insert(line);
+            }
+            if let (Some(point_line), Some(comma_line)) = (first_decimal_point, first_decimal_comma)
+            {
+                return Err(malformed(
+                    line,
+                    Problem::TwoDecimalMarks {
+                        field,
+                        text: (*text).to_owned(),
+                        point_line,
+                        comma_line,
+                    },
+                ));
+            }
             decimal_comma |= comma;
             if !value.is_finite() {
                 return Err(malformed(line, Problem::NotFinite { field, value }));
@@ -783,6 +868,56 @@ mod tests {
         assert_eq!(
             odd("1,234.5"),
             "data.txt:2: field 0 (\"1,234.5\") is not a number"
+        );
+    }
+
+    /// The separator is the one under which the first line is numbers, or
+    /// names above as many numbers: a comma-separated file whose header has a
+    /// semicolon in a name, and a semicolon-separated one whose names have
+    /// commas in them, are both read by their names.
+    #[test]
+    fn the_separator_is_the_one_the_header_and_first_row_agree_on() {
+        let by_names = options(
+            Column::Name("u [V; amp in]".into()),
+            Column::Name("y".into()),
+            Sampling::Rate(100.0),
+        );
+        let text = (0..40).fold(String::from("time,u [V; amp in],y\n"), |t, n| {
+            t + &format!("{},{},{}\n", n, 0.5 * n as f64, n)
+        });
+        let (record, used) =
+            parse_record_with_columns(&text, Path::new("c.csv"), &by_names).unwrap();
+        assert_eq!(used.separator, Separator::Comma);
+        assert_eq!((record.input[3], record.output[3]), (1.5, 3.0));
+
+        let by_names = options(
+            Column::Name("Spannung, V".into()),
+            Column::Name("Weg, um".into()),
+            Sampling::Rate(100.0),
+        );
+        let text = (0..40).fold(String::from("Zeit, s;Spannung, V;Weg, um\n"), |t, n| {
+            t + &format!("{n};{n},5;-{n},25\n")
+        });
+        let (record, used) =
+            parse_record_with_columns(&text, Path::new("s.csv"), &by_names).unwrap();
+        assert_eq!(used.separator, Separator::Semicolon);
+        assert!(used.decimal_comma);
+        assert_eq!((record.input[3], record.output[3]), (3.5, -3.25));
+    }
+
+    /// A comma beside decimal points is a thousands separator (a US export
+    /// separated by tabs): refused, with both lines named, not read as a
+    /// decimal.
+    #[test]
+    fn refuses_decimal_commas_beside_decimal_points() {
+        let mut text = String::from("time\tnm\tV\n");
+        for n in 0..40 {
+            text.push_str(&format!("{}\t{}\t1.5\n", n as f64 * 0.01, 14 + n));
+        }
+        text.push_str("0.41\t4,089\t1.5\n");
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:42: field 1 (\"4,089\"): the file writes decimals with a point (line 2) and with a comma (line 42); a comma beside decimal points is a thousands separator, which is not read"
         );
     }
 

@@ -131,6 +131,17 @@ pub struct ZeroAlignment {
     pub shift: f64,
 }
 
+/// Why a validation file's zero was not aligned ([`Plan::zero_alignment`]).
+#[derive(Clone, Debug, PartialEq, Serialize, thiserror::Error)]
+pub enum NoZeroAlignment {
+    #[error("the {record} does not begin at rest")]
+    NotAtRest { record: &'static str },
+    #[error("the {record}'s rest at its start ({seconds} s) ends within the settling time")]
+    RestWithinSettling { record: &'static str, seconds: f64 },
+    #[error("the two rest at different inputs ({fit} and {validation})")]
+    DifferentInputs { fit: f64, validation: f64 },
+}
+
 impl ZeroAlignment {
     /// `output` read from the fit record's zero.
     pub fn aligned(&self, output: &[f64]) -> Vec<f64> {
@@ -306,73 +317,93 @@ impl Plan {
         self.fit_end < self.samples
     }
 
-    /// The scored samples of a separate record of the same experiment, run
-    /// from rest at its first sample: all but its warm-up (`warm_up_samples`,
-    /// or by default the settling time and the first loading, as at the
-    /// start of the fit part: its state before the record is assumed) and,
-    /// with `detect`, its rests and settling after steps (found with this
-    /// plan's thresholds).
+    /// The scored samples of a separate record of the same experiment
+    /// (sampled every `sample_period` s), run from rest at its first sample:
+    /// all but its warm-up (`warm_up_samples`, or by default the settling
+    /// time and the first loading, as at the start of the fit part: its state
+    /// before the record is assumed) and, with `detect`, its rests and
+    /// settling after steps (found with this plan's thresholds, their
+    /// durations in seconds).
     pub fn validation_scored(
         &self,
         u: &[f64],
+        sample_period: f64,
         warm_up_samples: Option<usize>,
         detect: bool,
     ) -> (Segments, Vec<bool>) {
+        let thresholds = self.thresholds.resampled(self.sample_period, sample_period);
         let segments = if detect {
-            detect_segments(u, &self.thresholds)
+            detect_segments(u, &thresholds)
         } else {
             Segments::default()
         };
         let warm_up = warm_up_samples.unwrap_or_else(|| {
-            let settled = self.thresholds.settle_samples;
+            let settled = thresholds.settle_samples;
             let next = segments.steps.first().copied().unwrap_or(u.len());
-            first_loading_end(u, settled, next, self.thresholds.span)
+            first_loading_end(u, settled, next, thresholds.span)
                 .unwrap_or(settled)
                 .max(settled)
         });
-        let mut excluded = segments.excluded(self.thresholds.settle_samples, u.len());
+        let mut excluded = segments.excluded(thresholds.settle_samples, u.len());
         excluded.push(0..warm_up.min(u.len()));
         merge(&mut excluded);
         (segments, flags(u.len(), 0, &excluded))
     }
 
     /// The sensor zero of a separate validation file, aligned with the fit
-    /// record's: when both records begin at rest (a rest segment from their
-    /// first sample) at the same input (within the rest tolerance), the
+    /// record's: when both records begin at rest (a rest from their first
+    /// sample, found with this plan's thresholds whether or not rests are
+    /// left out) at the same input (within the rest tolerance), the
     /// validation file's output is read relative to its rest as the fit
     /// record's is to its own. Both rests are taken after the settling time
-    /// (a sensor's start-up transient). This assumes what the scoring already
-    /// assumes, that both start from the same rest state; it uses only
-    /// samples that are neither fitted nor scored. None when either record
-    /// does not begin at rest, when they rest at different inputs, or when
-    /// nothing of a rest is left after settling.
+    /// (a sensor's start-up transient), in seconds of each file's own
+    /// sampling. This assumes what the scoring already assumes, that both
+    /// start from the same rest state; it uses only samples that are neither
+    /// fitted nor scored.
     pub fn zero_alignment(
         &self,
         fit: &Record,
         validation: &Record,
-        validation_segments: &Segments,
-    ) -> Option<ZeroAlignment> {
-        let settled = |rests: &[Range<usize>]| {
-            rests
-                .first()
+    ) -> Result<ZeroAlignment, NoZeroAlignment> {
+        let settled_rest = |input: &[f64], thresholds: &SegmentThresholds, period, record| {
+            let rest = detect_segments(input, thresholds)
+                .rests
+                .into_iter()
+                .next()
                 .filter(|rest| rest.start == 0)
-                .map(|rest| (rest.start + self.thresholds.settle_samples)..rest.end)
-                .filter(|rest| !rest.is_empty())
+                .ok_or(NoZeroAlignment::NotAtRest { record })?;
+            let settled = (rest.start + thresholds.settle_samples)..rest.end;
+            if settled.is_empty() {
+                return Err(NoZeroAlignment::RestWithinSettling {
+                    record,
+                    seconds: rest.len() as f64 * period,
+                });
+            }
+            Ok(settled)
         };
-        let fit_rest = settled(&self.segments.rests)?;
-        let validation_rest = settled(&validation_segments.rests)?;
-        if fit_rest.end > fit.input.len() || validation_rest.end > validation.input.len() {
-            return None;
-        }
+        let fit_part = &fit.input[..self.fit_end.min(fit.input.len())];
+        let fit_rest = settled_rest(fit_part, &self.thresholds, self.sample_period, "fit record")?;
+        let validation_thresholds = self
+            .thresholds
+            .resampled(self.sample_period, validation.sample_period);
+        let validation_rest = settled_rest(
+            &validation.input,
+            &validation_thresholds,
+            validation.sample_period,
+            "validation file",
+        )?;
         let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len() as f64;
         let fit_input = mean(&fit.input[fit_rest.clone()]);
         let validation_input = mean(&validation.input[validation_rest.clone()]);
         if (fit_input - validation_input).abs() > self.thresholds.rest_tolerance {
-            return None;
+            return Err(NoZeroAlignment::DifferentInputs {
+                fit: fit_input,
+                validation: validation_input,
+            });
         }
         let shift =
             mean(&validation.output[validation_rest.clone()]) - mean(&fit.output[fit_rest.clone()]);
-        Some(ZeroAlignment {
+        Ok(ZeroAlignment {
             rest_input: fit_input,
             fit_rest,
             validation_rest,
@@ -964,14 +995,24 @@ pub struct ForwardErrors {
     pub best_line: ErrorFigures,
 }
 
+/// A GA-PSO search whose optimum was unusable on the fitted samples.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct UnusableSearch {
+    /// It searched one sample in `decimation` ...
+    pub decimation: usize,
+    /// ... for this long [s].
+    pub seconds: f64,
+}
+
 /// What [`identify_bouc_wen_protocol`] found.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BoucWenProtocolFit {
     pub identification: BoucWenIdentification,
-    /// The decimation whose GA-PSO optimum was unusable on the fitted samples
-    /// (a falling branch or a divergence between the searched samples),
-    /// when the search therefore ran again on every sample.
-    pub searched_again_from: Option<usize>,
+    /// The decimations, chosen by the protocol, whose GA-PSO optimum was
+    /// unusable on the fitted samples (a falling branch or a divergence
+    /// between the searched samples), each followed by a search on half as
+    /// many samples apart; empty when the first search's optimum was usable.
+    pub unusable_searches: Vec<UnusableSearch>,
     /// The options the fit ran with (decimation and excluded samples
     /// included).
     pub options: BoucWenFitOptions,
@@ -1084,27 +1125,34 @@ pub fn identify_bouc_wen_protocol(
         name: "GA-PSO",
         steps: options.gapso.generations,
     });
-    let mut searched_again_from = None;
-    let identification = match identify_bouc_wen(u_fit, &target, &options, |_, best| {
-        progress(ProgressEvent::Step { best })
-    }) {
-        // The decimated search sees the loops' turning points only to within
-        // the decimation, so with --monotone its optimum can draw a falling
-        // branch right after a reversal it did not sample. Searching every
-        // sample checks every branch as the model is then scored; it costs
-        // the search's time once more, instead of a failed command.
-        Err(BoucWenFitError::UnusableOnAllSamples { decimation }) if decimation > 1 => {
-            searched_again_from = Some(decimation);
-            options.decimation = 1;
-            progress(ProgressEvent::Phase {
-                name: "GA-PSO on every sample",
-                steps: options.gapso.generations,
-            });
-            identify_bouc_wen(u_fit, &target, &options, |_, best| {
-                progress(ProgressEvent::Step { best })
-            })?
+    // The decimated search sees the loops' turning points only to within its
+    // decimation, so with --monotone its optimum can draw a falling branch
+    // right after a reversal it did not sample. Then it searches again on
+    // twice as many samples, down to every sample, where every branch is
+    // checked as the model is then scored: each search costs about twice the
+    // one before, the whole at most about twice the last. A decimation the
+    // user gave is kept, and the error says what to do.
+    let mut unusable_searches = Vec::new();
+    let identification = loop {
+        let search_started = Instant::now();
+        match identify_bouc_wen(u_fit, &target, &options, |_, best| {
+            progress(ProgressEvent::Step { best })
+        }) {
+            Err(BoucWenFitError::UnusableOnAllSamples { decimation })
+                if decimation > 1 && settings.decimation.is_none() =>
+            {
+                unusable_searches.push(UnusableSearch {
+                    decimation,
+                    seconds: search_started.elapsed().as_secs_f64(),
+                });
+                options.decimation = decimation / 2;
+                progress(ProgressEvent::Phase {
+                    name: "GA-PSO on more samples",
+                    steps: options.gapso.generations,
+                });
+            }
+            other => break other?,
         }
-        other => other?,
     };
     let fit_options = FitOptions {
         excluded: options.excluded.clone(),
@@ -1122,7 +1170,7 @@ pub fn identify_bouc_wen_protocol(
     let (low, high) = range_of(y_fit, &fitted);
     let mut result = BoucWenProtocolFit {
         identification,
-        searched_again_from,
+        unusable_searches,
         options,
         classical: classical.params,
         line: [line[0], line[1]],

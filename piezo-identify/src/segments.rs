@@ -95,6 +95,22 @@ pub struct SegmentThresholds {
     pub settle_samples: usize,
 }
 
+impl SegmentThresholds {
+    /// The same thresholds for a record sampled every `to` s instead of every
+    /// `from` s: the durations (shortest rest, settling) stay the same in
+    /// seconds. The step threshold, a change from one sample to the next, is
+    /// kept: a record at the fit record's rate or faster changes less per
+    /// sample, so its steps are found as the fit record's are.
+    pub fn resampled(self, from: f64, to: f64) -> SegmentThresholds {
+        let samples = |n: usize| (n as f64 * from / to).round() as usize;
+        SegmentThresholds {
+            min_rest_samples: samples(self.min_rest_samples).max(2),
+            settle_samples: samples(self.settle_samples),
+            ..self
+        }
+    }
+}
+
 /// What [`detect_segments`] found in a record.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Segments {

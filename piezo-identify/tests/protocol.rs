@@ -7,10 +7,9 @@ use piezo_identify::Record;
 use piezo_identify::bouc_wen_fit::{BoucWenFitOptions, identify_bouc_wen};
 use piezo_identify::lab_records::{Drive, Excitation, LabRecordSpec, lab_record};
 use piezo_identify::protocol::{
-    BoucWenSettings, InversePiSettings, Plan, PlanOptions, identify_bouc_wen_protocol,
-    identify_inverse_pi,
+    BoucWenSettings, InversePiSettings, NoZeroAlignment, Plan, PlanOptions,
+    identify_bouc_wen_protocol, identify_inverse_pi,
 };
-use piezo_identify::segments::detect_segments;
 
 /// 200 Hz, unipolar 1 Hz sine after 2 s of rest, 12 s of excitation.
 fn record() -> Record {
@@ -216,9 +215,8 @@ fn a_validation_file_is_read_from_the_fit_records_zero_by_their_rests() {
     };
     let (moved, twin) = (session(-40.0), session(-42.7));
     let plan = split_plan(&fit, fit.input.len());
-    let segments = |record: &Record| detect_segments(&record.input, &plan.thresholds);
     let alignment = plan
-        .zero_alignment(&fit, &moved, &segments(&moved))
+        .zero_alignment(&fit, &moved)
         .expect("both begin at rest at 0 V");
     assert_eq!(alignment.rest_input, 0.0);
     // 2 s of rest at 200 Hz less the 0.1 s settling: means of 380 samples of
@@ -240,11 +238,63 @@ fn a_validation_file_is_read_from_the_fit_records_zero_by_their_rests() {
         output: moved.output[600..].to_vec(),
         sample_period: moved.sample_period,
     };
-    assert_eq!(plan.zero_alignment(&fit, &late, &segments(&late)), None);
+    assert_eq!(
+        plan.zero_alignment(&fit, &late),
+        Err(NoZeroAlignment::NotAtRest {
+            record: "validation file"
+        })
+    );
     // Resting at 1 V, not 0 V.
     let mut lifted = moved.clone();
     for u in &mut lifted.input[..400] {
         *u = 1.0;
     }
-    assert_eq!(plan.zero_alignment(&fit, &lifted, &segments(&lifted)), None);
+    assert!(matches!(
+        plan.zero_alignment(&fit, &lifted),
+        Err(NoZeroAlignment::DifferentInputs { fit, validation }) if fit == 0.0 && validation == 1.0
+    ));
+    // Rests are found for the zero whether or not they are left out of the
+    // fit (--keep-rest-and-steps), and the settling time is in seconds of
+    // each file's own sampling: the same session taken at 1 kHz.
+    let kept = Plan::new(
+        &fit.input,
+        fit.sample_period,
+        fit.input.len(),
+        &PlanOptions {
+            detect_segments: false,
+            ..PlanOptions::default()
+        },
+    )
+    .unwrap();
+    let fast = lab_record(&LabRecordSpec {
+        sample_rate: 1000.0,
+        sensor_offset_um: -40.0,
+        ..spec
+    })
+    .unwrap();
+    let alignment = kept.zero_alignment(&fit, &fast).unwrap();
+    assert_eq!(alignment.fit_rest, 20..400);
+    assert_eq!(alignment.validation_rest, 100..2000);
+    assert!((alignment.shift - 2.7).abs() < 0.005, "{alignment:?}");
+    // A rest shorter than the settling time leaves nothing to read.
+    let settle_longer = Plan::new(
+        &fit.input,
+        fit.sample_period,
+        fit.input.len(),
+        &PlanOptions {
+            segments: piezo_identify::segments::SegmentOptions {
+                settle_seconds: 2.5,
+                ..Default::default()
+            },
+            ..PlanOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(matches!(
+        settle_longer.zero_alignment(&fit, &moved),
+        Err(NoZeroAlignment::RestWithinSettling {
+            record: "fit record",
+            ..
+        })
+    ));
 }

@@ -11,6 +11,7 @@ use piezo_identify::protocol::{Plan, PlanOptions, ZeroAlignment};
 use piezo_identify::segments::{SegmentOptions, Segments};
 use piezo_identify::validation::displacement_offset;
 use piezo_identify::{Column, FitOptions, ReadOptions, Record, Sampling, read_record};
+use serde::Serialize;
 
 /// Where the record is cut, what is left out of fit and score, and the
 /// report file: the same for `inverse-pi` and `bouc-wen`.
@@ -261,8 +262,12 @@ impl ProtocolArgs {
         let warm_up = self
             .validate_warm_up
             .map(|s| (s / record.sample_period).round() as usize);
-        let (segments, scored) =
-            plan.validation_scored(&record.input, warm_up, !self.keep_rest_and_steps);
+        let (segments, scored) = plan.validation_scored(
+            &record.input,
+            record.sample_period,
+            warm_up,
+            !self.keep_rest_and_steps,
+        );
         if !scored.iter().any(|s| *s) {
             return Err(format!(
                 "{}: no sample is left to score after its warm-up ({}), rest segments and settling after steps; give a shorter --validate-warm-up",
@@ -276,37 +281,58 @@ impl ProtocolArgs {
         Ok((segments, scored))
     }
 
-    /// The validation file's output read from FILE's zero (`--validate-zero`),
-    /// and the alignment when there is one; says on standard output which.
+    /// The validation file's output read from FILE's zero (`--validate-zero`)
+    /// and what was done, which it also prints; `stroke` is the fit part's
+    /// displacement span, to put the shift in proportion.
     pub(crate) fn validation_output(
         &self,
         plan: &Plan,
-        fit: &Record,
-        validation: &Record,
-        segments: &Segments,
-    ) -> (Vec<f64>, Option<ZeroAlignment>) {
+        fit: &Loaded,
+        validation: &Loaded,
+        stroke: f64,
+    ) -> (Vec<f64>, ValidationZero) {
+        let recorded = validation.record.output.clone();
         if self.validate_zero == "recorded" {
             println!("displacement as recorded (--validate-zero recorded)");
-            return (validation.output.clone(), None);
+            let zero = ValidationZero {
+                mode: "recorded",
+                alignment: None,
+                not_aligned_because: None,
+            };
+            return (recorded, zero);
         }
-        match plan.zero_alignment(fit, validation, segments) {
-            Some(alignment) => {
+        match plan.zero_alignment(&fit.record, &validation.record) {
+            Ok(alignment) => {
                 println!(
-                    "displacement zero: its rest at {:.4} (after settling, samples {}..{}) reads {:+.6} from the fit record's (samples {}..{}); read from the fit record's zero (--validate-zero recorded: as written)",
+                    "displacement zero: its rest at {:.4} V (samples {}..{}) reads {:+.6} um from {}'s (samples {}..{}), {:.2} % of the fit part's stroke; subtracted from every sample (--validate-zero recorded keeps it as written)",
                     alignment.rest_input,
                     alignment.validation_rest.start,
                     alignment.validation_rest.end,
                     alignment.shift,
+                    fit.name,
                     alignment.fit_rest.start,
                     alignment.fit_rest.end,
+                    100.0 * alignment.shift.abs() / stroke,
                 );
-                (alignment.aligned(&validation.output), Some(alignment))
+                let output = alignment.aligned(&validation.record.output);
+                let zero = ValidationZero {
+                    mode: "rest",
+                    alignment: Some(alignment),
+                    not_aligned_because: None,
+                };
+                (output, zero)
             }
-            None => {
+            Err(reason) => {
                 println!(
-                    "displacement as recorded: it and the fit record do not both begin at rest at the same input, so their zeros cannot be compared"
+                    "displacement as recorded: its zero cannot be compared with {}'s, because {reason}",
+                    fit.name
                 );
-                (validation.output.clone(), None)
+                let zero = ValidationZero {
+                    mode: "rest",
+                    alignment: None,
+                    not_aligned_because: Some(reason.to_string()),
+                };
+                (recorded, zero)
             }
         }
     }
@@ -321,4 +347,13 @@ pub(crate) fn open_plant(path: &Path, parameters: Option<&Path>) -> Result<Plant
             .map_err(|e| e.to_string()),
         None => Ok(plant),
     }
+}
+
+/// How a validation file's displacement zero was read, for the report.
+#[derive(Serialize)]
+pub(crate) struct ValidationZero {
+    /// `--validate-zero`.
+    pub(crate) mode: &'static str,
+    pub(crate) alignment: Option<ZeroAlignment>,
+    pub(crate) not_aligned_because: Option<String>,
 }

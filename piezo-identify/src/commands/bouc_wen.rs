@@ -292,12 +292,12 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
     }
     let mut validation_errors = None;
     let mut zero_alignment = None;
-    if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
+    if let (Some(v), Some((_, scored))) = (&validation, &validation_scored) {
         println!("\n{}", describe(&v.record, &v.name));
-        let (output, alignment) =
-            args.protocol
-                .validation_output(&plan, &loaded.record, &v.record, segments);
-        zero_alignment = alignment;
+        let (output, zero) = args
+            .protocol
+            .validation_output(&plan, &loaded, v, fit.stroke);
+        zero_alignment = Some(zero);
         let errors = fit.errors_on(&v.record.input, &output, v.record.sample_period, scored);
         print_forward_errors(
             "validation file (models from rest at its start)",
@@ -348,7 +348,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
                 "plan": plan,
                 "settings": settings,
                 "options": fit.options,
-                "searched_again_from": fit.searched_again_from,
+                "unusable_searches": fit.unusable_searches,
                 "identification": fit.identification,
                 "classical": fit.classical,
                 "line": fit.line,
@@ -357,7 +357,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
                 "unseen": fit.unseen,
                 "validation": validation.as_ref().map(|v| serde_json::json!({
                     "file": v.name,
-                    "zero_alignment": zero_alignment,
+                    "zero": zero_alignment,
                     "errors": validation_errors,
                 })),
                 "seconds": fit.seconds,
@@ -370,10 +370,14 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
 
 pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSettings) {
     let identification = &fit.identification;
-    if let Some(decimation) = fit.searched_again_from {
+    for (i, search) in fit.unusable_searches.iter().enumerate() {
+        let next = fit
+            .unusable_searches
+            .get(i + 1)
+            .map_or(fit.options.decimation, |s| s.decimation);
         println!(
-            "\nthe GA-PSO optimum searched on one sample in {decimation} drew a falling branch or diverged \
-             between them; searched again on every sample"
+            "\nthe GA-PSO optimum searched on one sample in {} ({:.2} s) drew a falling branch or diverged between them; searched again on one sample in {next}",
+            search.decimation, search.seconds
         );
     }
     println!(

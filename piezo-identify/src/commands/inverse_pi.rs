@@ -140,10 +140,10 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
     let mut zero_alignment = None;
     if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
         println!("\n{}", describe(&v.record, &v.name));
-        let (output, alignment) = args
+        let (output, zero) = args
             .protocol
-            .validation_output(&plan, record, &v.record, segments);
-        zero_alignment = alignment;
+            .validation_output(&plan, &loaded, v, fit.stroke);
+        zero_alignment = Some(zero);
         let errors = fit.errors_on(
             &output,
             &v.record.input,
@@ -197,7 +197,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
                 "identification": fit,
                 "validation": validation.as_ref().map(|v| serde_json::json!({
                     "file": v.name,
-                    "zero_alignment": zero_alignment,
+                    "zero": zero_alignment,
                     "errors": validation_errors,
                 })),
             }),
