@@ -581,18 +581,24 @@ fn a_monotone_fit_searches_every_sample_when_the_decimated_optimum_falls() {
         env!("CARGO_MANIFEST_DIR"),
         "/tests/data/piezo-p885/Model_Vi_Do.dat"
     );
-    let output = run(&[
-        "bouc-wen",
-        record,
-        "--input",
-        "0",
-        "--output",
-        "4",
-        "--rate",
-        "200",
-        "--split",
-        "0.5",
-        "--monotone",
+    let monotone_split = |extra: &[&str]| {
+        let mut args = vec![
+            "bouc-wen",
+            record,
+            "--input",
+            "0",
+            "--output",
+            "4",
+            "--rate",
+            "200",
+            "--split",
+            "0.5",
+            "--monotone",
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let output = monotone_split(&[
         "--report",
         report.to_str().unwrap(),
         "--out",
@@ -633,21 +639,7 @@ fn a_monotone_fit_searches_every_sample_when_the_decimated_optimum_falls() {
         .all(|(u, y)| (y[1] - y[0]) * (u[1] - u[0]) > 0.0);
     assert!(rising, "the written model falls somewhere on the record");
 
-    let output = run(&[
-        "bouc-wen",
-        record,
-        "--input",
-        "0",
-        "--output",
-        "4",
-        "--rate",
-        "200",
-        "--split",
-        "0.5",
-        "--monotone",
-        "--decimation",
-        "2",
-    ]);
+    let output = monotone_split(&["--decimation", "2"]);
     assert!(!output.status.success());
     assert!(
         stderr(&output).contains(
