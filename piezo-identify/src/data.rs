@@ -17,6 +17,15 @@
 //! than a fit on garbage. Empty fields are accepted in columns that are not
 //! read (a pandas export's unnamed index column, a trailing separator).
 //!
+//! A row of units right below the header (`s;V;um`, `(ms),(V)`: PicoScope,
+//! LabVIEW and many DAQ exports write one) is read as such: a row of as many
+//! fields as the header, none of them a number. The time column's unit, from
+//! that row or else from a unit in brackets at the end of its name
+//! (`Time (ms)`, `t [us]`), scales it to seconds: s, ms, us (µs) or ns; a
+//! units row that gives the time column another unit is refused, since the
+//! rates and the sampling period would be off by that factor. The summary
+//! names the units it read.
+//!
 //! Exports made in a locale whose decimal mark is a comma (spreadsheets and
 //! LabVIEW in much of Europe) separate their fields by semicolons or tabs and
 //! write `-123,059`: in a file so separated, a field that is not a number as
@@ -116,6 +125,10 @@ pub enum Problem {
         point_line: usize,
         comma_line: usize,
     },
+    #[error(
+        "field {field}, the time column, is in \"{unit}\"; give it in s, ms, us or ns, or give --rate instead"
+    )]
+    TimeUnit { field: usize, unit: String },
     #[error("field {field} is {value}, not a finite number")]
     NotFinite { field: usize, value: f64 },
     #[error("field {field} is empty, and it is the {role} column")]
@@ -205,8 +218,9 @@ pub enum Separator {
 
 impl Separator {
     /// The separator of a file whose first content lines are `first` and
-    /// `second` (type comment).
-    fn detect(first: &str, second: Option<&str>) -> Separator {
+    /// `next` (type comment; a units row may stand between the header and
+    /// the first row of numbers).
+    fn detect(first: &str, next: &[String]) -> Separator {
         let present = |separator: &Separator| match separator {
             Separator::Tab => first.contains('\t'),
             Separator::Semicolon => first.contains(';'),
@@ -231,14 +245,23 @@ impl Separator {
             if numbers > 0 {
                 return numbers + empty == fields.len();
             }
-            second.is_some_and(|line| {
+            let numbers_below = |line: &String| {
                 let below = separator.split(line);
                 below.len() == fields.len()
                     && below
                         .iter()
                         .all(|f| f.is_empty() || separator.number(f).is_some())
                     && below.iter().any(|f| !f.is_empty())
-            })
+            };
+            let units_below = |line: &String| {
+                let below = separator.split(line);
+                below.len() == fields.len() && below.iter().all(|f| separator.number(f).is_none())
+            };
+            match next {
+                [second, ..] if numbers_below(second) => true,
+                [second, third, ..] => units_below(second) && numbers_below(third),
+                _ => false,
+            }
         });
         fitting.unwrap_or(if first.contains('\t') {
             Separator::Tab
@@ -290,18 +313,57 @@ impl Separator {
     }
 }
 
-/// One column as it was used: its 0-based index and its header name.
+/// One column as it was used: its 0-based index, its header name and its
+/// unit (from a units row).
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct UsedColumn {
     pub index: usize,
     pub name: Option<String>,
+    pub unit: Option<String>,
+}
+
+/// Seconds per unit of a time column's unit (`ms`, `(ms)`, `[ms]`, ...);
+/// None when it is not one of s, ms, us (µs) and ns.
+fn seconds_per(unit: &str) -> Option<f64> {
+    match bare_unit(unit) {
+        "s" | "sec" | "seconds" => Some(1.0),
+        "ms" => Some(1e-3),
+        "us" | "µs" | "μs" => Some(1e-6),
+        "ns" => Some(1e-9),
+        _ => None,
+    }
+}
+
+/// A unit without the brackets it may be written in: `(ms)` is `ms`.
+fn bare_unit(unit: &str) -> &str {
+    unit.trim()
+        .trim_start_matches(['(', '[', '{'])
+        .trim_end_matches([')', ']', '}'])
+        .trim()
+}
+
+/// The unit in brackets at the end of a column name (`Time (ms)`,
+/// `t [us]`), when it is a time unit.
+fn seconds_per_from_name(name: &str) -> Option<(f64, String)> {
+    let name = name.trim_end();
+    let open = match name.chars().last()? {
+        ')' => '(',
+        ']' => '[',
+        _ => return None,
+    };
+    let unit = &name[name.rfind(open)?..];
+    seconds_per(unit).map(|s| (s, unit.to_owned()))
 }
 
 impl fmt::Display for UsedColumn {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.name {
-            Some(name) => write!(f, "column {} \"{name}\"", self.index),
-            None => write!(f, "column {}", self.index),
+            Some(name) => write!(f, "column {} \"{name}\"", self.index)?,
+            None => write!(f, "column {}", self.index)?,
+        }
+        match &self.unit {
+            Some(unit) => write!(f, " [{unit}]"),
+            None => Ok(()),
         }
     }
 }
@@ -317,6 +379,11 @@ pub struct ColumnsUsed {
     pub decimal_comma: bool,
     /// Line of the header row, when there is one.
     pub header_line: Option<usize>,
+    /// Line of the units row, when there is one.
+    pub units_line: Option<usize>,
+    /// Seconds per unit of the time column (1 unless its unit says
+    /// otherwise).
+    pub time_scale: f64,
 }
 
 /// Reads a record from a file.
@@ -381,7 +448,11 @@ pub fn parse_record_with_columns(
         .lines()
         .map(content_of)
         .filter(|content| !content.trim().is_empty());
-    let (first, second) = (first_lines.next(), first_lines.next());
+    let first = first_lines.next();
+    let next: Vec<String> = first_lines.take(2).collect();
+    let mut units: Option<(usize, Vec<String>)> = None;
+    // Seconds per unit of the time column, once the columns are resolved.
+    let mut time_scale = 1.0;
     // The first field of each decimal mark, to refuse a file that has both.
     let mut first_decimal_point: Option<usize> = None;
     let mut first_decimal_comma: Option<usize> = None;
@@ -395,9 +466,8 @@ pub fn parse_record_with_columns(
             continue;
         }
         let first_content_row = separator.is_none();
-        let separator = *separator.get_or_insert_with(|| {
-            Separator::detect(first.as_deref().unwrap_or(content), second.as_deref())
-        });
+        let separator = *separator
+            .get_or_insert_with(|| Separator::detect(first.as_deref().unwrap_or(content), &next));
         let fields = separator.split(content);
         if first_content_row {
             let numeric = fields
@@ -414,6 +484,15 @@ pub fn parse_record_with_columns(
             if 2 * numeric < fields.len() {
                 return Err(malformed(line, Problem::MixedHeader));
             }
+        }
+        if let Some((_, names)) = &header
+            && units.is_none()
+            && resolved.is_none()
+            && fields.len() == names.len()
+            && fields.iter().all(|f| separator.number(f).is_none())
+        {
+            units = Some((line, fields.iter().map(|f| (*f).to_owned()).collect()));
+            continue;
         }
         let columns = match &resolved {
             Some(columns) => *columns,
@@ -433,6 +512,10 @@ pub fn parse_record_with_columns(
                 }
                 let columns = resolve_columns(options, header.as_ref())
                     .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
+                if let Some(time) = columns.time {
+                    time_scale = time_scale_of(time, header.as_ref(), units.as_ref())
+                        .map_err(|(at, problem)| malformed(at, problem))?;
+                }
                 resolved = Some(columns);
                 columns
             }
@@ -495,7 +578,7 @@ pub fn parse_record_with_columns(
         input.push(values[columns.input]);
         output.push(values[columns.output]);
         if let Some(time) = columns.time {
-            let t = values[time];
+            let t = values[time] * time_scale;
             if let Some(&(_, previous)) = times.last()
                 && t <= previous
             {
@@ -539,6 +622,12 @@ pub fn parse_record_with_columns(
             .and_then(|(_, names)| names.get(index))
             .filter(|name| !name.is_empty())
             .cloned(),
+        unit: units
+            .as_ref()
+            .and_then(|(_, row)| row.get(index))
+            .map(|unit| bare_unit(unit))
+            .filter(|unit| !unit.is_empty())
+            .map(str::to_owned),
     };
     let columns_used = ColumnsUsed {
         input: used(columns.input),
@@ -547,6 +636,8 @@ pub fn parse_record_with_columns(
         separator,
         decimal_comma,
         header_line: header.as_ref().map(|(line, _)| *line),
+        units_line: units.as_ref().map(|(line, _)| *line),
+        time_scale,
     };
     Ok((
         Record {
@@ -556,6 +647,33 @@ pub fn parse_record_with_columns(
         },
         columns_used,
     ))
+}
+
+/// Seconds per unit of time column `time`: its unit in the units row, else
+/// a time unit in brackets at the end of its name, else 1 (seconds). A units
+/// row that gives it a unit other than a time unit is refused.
+fn time_scale_of(
+    time: usize,
+    header: Option<&(usize, Vec<String>)>,
+    units: Option<&(usize, Vec<String>)>,
+) -> Result<f64, (usize, Problem)> {
+    if let Some((line, row)) = units
+        && let Some(unit) = row.get(time).filter(|u| !u.is_empty())
+    {
+        return seconds_per(unit).ok_or_else(|| {
+            (
+                *line,
+                Problem::TimeUnit {
+                    field: time,
+                    unit: unit.clone(),
+                },
+            )
+        });
+    }
+    Ok(header
+        .and_then(|(_, names)| names.get(time))
+        .and_then(|name| seconds_per_from_name(name))
+        .map_or(1.0, |(scale, _)| scale))
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -903,6 +1021,69 @@ mod tests {
         assert_eq!(used.separator, Separator::Semicolon);
         assert!(used.decimal_comma);
         assert_eq!((record.input[3], record.output[3]), (3.5, -3.25));
+    }
+
+    /// A PicoScope-style export: a units row below the header, a blank line,
+    /// time in ms. The same record with its time in seconds, in µs by a name
+    /// like `t [us]`, and in a semicolon file whose units row says `s`, reads
+    /// the same; a units row that gives the time column no time unit is
+    /// refused, naming it.
+    #[test]
+    fn reads_a_units_row_and_the_time_columns_unit() {
+        let rows = |scale: f64, separator: &str| -> String {
+            (0..40)
+                .map(|n| {
+                    let t = n as f64 * 0.005 / scale;
+                    format!(
+                        "{t}{separator}{}{separator}{}\n",
+                        0.1 * n as f64,
+                        0.2 * n as f64
+                    )
+                })
+                .collect()
+        };
+        let by_index = options(
+            Column::Index(1),
+            Column::Index(2),
+            Sampling::TimeColumn(Column::Index(0)),
+        );
+        let read = |text: &str| parse_record_with_columns(text, Path::new("p.csv"), &by_index);
+        let (reference, plain) =
+            read(&("Time,Channel A,Channel B\n".to_owned() + &rows(1.0, ","))).unwrap();
+        assert_eq!(reference.sample_period, 0.005);
+        assert_eq!((plain.units_line, plain.time_scale), (None, 1.0));
+
+        let pico = "Time,Channel A,Channel B\n(ms),(V),(um)\n\n".to_owned() + &rows(1e-3, ",");
+        let (record, used) = read(&pico).unwrap();
+        assert!((record.sample_period - 0.005).abs() < 1e-15);
+        assert_eq!(
+            (record.input.clone(), record.output.clone()),
+            (reference.input.clone(), reference.output.clone())
+        );
+        assert_eq!(
+            (used.separator, used.units_line, used.time_scale),
+            (Separator::Comma, Some(2), 1e-3)
+        );
+        assert_eq!(used.output.to_string(), "column 2 \"Channel B\" [um]");
+
+        let by_name = "t [us]\tu\ty\n".to_owned() + &rows(1e-6, "\t");
+        let (record, used) = read(&by_name).unwrap();
+        assert!((record.sample_period - 0.005).abs() < 1e-15);
+        assert_eq!((used.units_line, used.time_scale), (None, 1e-6));
+
+        let seconds = "Zeit;Spannung;Weg\ns;V;um\n".to_owned() + &rows(1.0, ";");
+        let (record, used) = read(&seconds).unwrap();
+        assert_eq!(record.sample_period, 0.005);
+        assert_eq!(
+            (used.separator, used.units_line),
+            (Separator::Semicolon, Some(2))
+        );
+
+        let samples = "n;u;y\nsample;V;um\n".to_owned() + &rows(1.0, ";");
+        assert_eq!(
+            message(&samples, &by_index),
+            "data.txt:2: field 0, the time column, is in \"sample\"; give it in s, ms, us or ns, or give --rate instead"
+        );
     }
 
     /// A comma beside decimal points is a thousands separator (a US export

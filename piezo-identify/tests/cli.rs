@@ -407,6 +407,78 @@ fn a_decimal_comma_export_fits_as_its_decimal_point_twin() {
     assert_eq!(figures(&point), figures(&comma));
 }
 
+/// A PicoScope-style export (a units row below the header, a blank line,
+/// time in ms) fits to the same figures as the same record in seconds, and
+/// the summary names the units it read.
+#[test]
+fn a_units_row_and_a_time_column_in_ms_fit_as_their_twin_in_seconds() {
+    let dir = tempfile::tempdir().unwrap();
+    let samples: Vec<(f64, f64, f64)> = (0..400)
+        .map(|n| {
+            let t = n as f64 * 0.01;
+            let u = 5.0 + 4.0 * (std::f64::consts::TAU * t).sin();
+            (t, u, 1.3 * u + 0.1 * (std::f64::consts::TAU * t).cos())
+        })
+        .collect();
+    let write = |name: &str, head: &str, per_second: f64| {
+        let mut text = head.to_owned();
+        for (t, u, y) in &samples {
+            text.push_str(&format!("{:.3},{u:.6},{y:.6}\n", t * per_second));
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let seconds = write("s.csv", "Time,Channel A,Channel B\n", 1.0);
+    let pico = write(
+        "pico.csv",
+        "Time,Channel A,Channel B\n(ms),(V),(um)\n\n",
+        1e3,
+    );
+    let fit = |path: &std::path::Path| {
+        let output = run(&[
+            "inverse-pi",
+            path.to_str().unwrap(),
+            "--time",
+            "Time",
+            "--input",
+            "Channel A",
+            "--output",
+            "Channel B",
+            "--starts",
+            "2",
+            "--max-iterations",
+            "40",
+            "--split",
+            "0.5",
+        ]);
+        assert!(output.status.success(), "{}", stderr(&output));
+        stdout(&output)
+    };
+    let (seconds, pico) = (fit(&seconds), fit(&pico));
+    assert!(
+        pico.contains(
+            "columns: input column 1 \"Channel A\" [V], output column 2 \"Channel B\" [um], \
+             time column 0 \"Time\" [ms], comma-separated, header on line 1, units on line 2, \
+             time read as 0.001 s per unit"
+        ),
+        "{pico}"
+    );
+    let figures = |out: &str| -> Vec<String> {
+        out.lines()
+            .filter(|line| line.contains(" RMS ") || line.contains(" Hz"))
+            .map(str::to_owned)
+            .map(|line| line.replace("pico.csv", "s.csv"))
+            .collect()
+    };
+    assert!(
+        figures(&seconds)
+            .iter()
+            .any(|line| line.contains("100.000000 Hz"))
+    );
+    assert_eq!(figures(&seconds), figures(&pico));
+}
+
 /// A record like a pandas export with its unnamed index column and a file
 /// whose first column is empty throughout are read; an empty file is named
 /// as such (it was reported at "line 0").

@@ -31,6 +31,12 @@ pub(crate) fn describe_columns(columns: &ColumnsUsed) -> String {
         Some(line) => text.push_str(&format!(", header on line {line}")),
         None => text.push_str(", no header"),
     }
+    if let Some(line) = columns.units_line {
+        text.push_str(&format!(", units on line {line}"));
+    }
+    if columns.time.is_some() && columns.time_scale != 1.0 {
+        text.push_str(&format!(", time read as {} s per unit", columns.time_scale));
+    }
     text
 }
 
