@@ -155,7 +155,7 @@ pub enum Problem {
     #[error("time {time} s does not increase (previous row: {previous} s)")]
     TimeNotIncreasing { previous: f64, time: f64 },
     #[error(
-        "time step {step} s differs from the mean step {mean} s by more than 1 % (non-uniform sampling)"
+        "time step {step} s differs from the mean step {mean} s by more than 1 % (non-uniform sampling: resample the record, or give --rate instead of --time to take its rows as evenly spaced)"
     )]
     NonUniformSampling { step: f64, mean: f64 },
     #[error("only {found} data rows, at least {minimum} are needed")]
@@ -1226,7 +1226,9 @@ mod tests {
         );
         assert!(
             message.ends_with(
-                "differs from the mean step 0.01 s by more than 1 % (non-uniform sampling)"
+                "differs from the mean step 0.01 s by more than 1 % (non-uniform sampling: \
+                 resample the record, or give --rate instead of --time to take its rows as \
+                 evenly spaced)"
             ),
             "{message}"
         );
