@@ -23,6 +23,30 @@ fn stdout(output: &Output) -> String {
     String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
+/// A quick `inverse-pi` fit of half a record, columns by name (2 starts of 40
+/// iterations: the tests that use it compare two readings of one record, not
+/// the fit); its standard output.
+fn quick_split_fit(path: &Path, time: &str, input: &str, output: &str) -> String {
+    let done = run(&[
+        "inverse-pi",
+        path.to_str().unwrap(),
+        "--time",
+        time,
+        "--input",
+        input,
+        "--output",
+        output,
+        "--starts",
+        "2",
+        "--max-iterations",
+        "40",
+        "--split",
+        "0.5",
+    ]);
+    assert!(done.status.success(), "{}", stderr(&done));
+    stdout(&done)
+}
+
 /// A record "time, volts, microns" with a header and a comment: the paper's y
 /// model driven by an eq. (6)-shaped displacement, 600 samples at 100 Hz.
 fn write_good_record(path: &Path) {
@@ -367,24 +391,7 @@ fn a_decimal_comma_export_fits_as_its_decimal_point_twin() {
     let fit = |name: &str, text: &str| {
         let path = dir.path().join(name);
         std::fs::write(&path, text).unwrap();
-        let output = run(&[
-            "inverse-pi",
-            path.to_str().unwrap(),
-            "--time",
-            "Zeit [s]",
-            "--input",
-            "Spannung [V]",
-            "--output",
-            "Weg [um]",
-            "--starts",
-            "2",
-            "--max-iterations",
-            "40",
-            "--split",
-            "0.5",
-        ]);
-        assert!(output.status.success(), "{}", stderr(&output));
-        stdout(&output)
+        quick_split_fit(&path, "Zeit [s]", "Spannung [V]", "Weg [um]")
     };
     let (point, comma) = (fit("point.csv", &point), fit("comma.csv", &comma));
     let columns = "columns: input column 1 \"Spannung [V]\", output column 2 \"Weg [um]\", \
@@ -435,26 +442,7 @@ fn a_units_row_and_a_time_column_in_ms_fit_as_their_twin_in_seconds() {
         "Time,Channel A,Channel B\n(ms),(V),(um)\n\n",
         1e3,
     );
-    let fit = |path: &std::path::Path| {
-        let output = run(&[
-            "inverse-pi",
-            path.to_str().unwrap(),
-            "--time",
-            "Time",
-            "--input",
-            "Channel A",
-            "--output",
-            "Channel B",
-            "--starts",
-            "2",
-            "--max-iterations",
-            "40",
-            "--split",
-            "0.5",
-        ]);
-        assert!(output.status.success(), "{}", stderr(&output));
-        stdout(&output)
-    };
+    let fit = |path: &Path| quick_split_fit(path, "Time", "Channel A", "Channel B");
     let (seconds, pico) = (fit(&seconds), fit(&pico));
     assert!(
         pico.contains(
