@@ -129,6 +129,14 @@ pub enum Problem {
         "field {field}, the time column, is in \"{unit}\"; give it in s, ms, us or ns, or give --rate instead"
     )]
     TimeUnit { field: usize, unit: String },
+    #[error(
+        "field {field}, the time column, is in \"{unit}\" by the units row but in \"{name_unit}\" by its name"
+    )]
+    TimeUnitsDisagree {
+        field: usize,
+        unit: String,
+        name_unit: String,
+    },
     #[error("field {field} is {value}, not a finite number")]
     NotFinite { field: usize, value: f64 },
     #[error("field {field} is empty, and it is the {role} column")]
@@ -325,13 +333,34 @@ pub struct UsedColumn {
 /// Seconds per unit of a time column's unit (`ms`, `(ms)`, `[ms]`, ...);
 /// None when it is not one of s, ms, us (µs) and ns.
 fn seconds_per(unit: &str) -> Option<f64> {
-    match bare_unit(unit) {
-        "s" | "sec" | "seconds" => Some(1.0),
-        "ms" => Some(1e-3),
-        "us" | "µs" | "μs" => Some(1e-6),
-        "ns" => Some(1e-9),
+    match bare_unit(unit).to_lowercase().as_str() {
+        "s" | "sec" | "secs" | "second" | "seconds" => Some(1.0),
+        "ms" | "msec" | "millisecond" | "milliseconds" => Some(1e-3),
+        "us" | "µs" | "μs" | "usec" | "microsecond" | "microseconds" => Some(1e-6),
+        "ns" | "nsec" | "nanosecond" | "nanoseconds" => Some(1e-9),
         _ => None,
     }
+}
+
+/// Whether a field of a row below the header reads as a unit (`V`, `(ms)`,
+/// `um/s^2`, `%`): it starts with a letter, µ, %, or °, has digits only after
+/// a `^`, and is not a missing-value marker (NA, NaN, null). A typo'd row of
+/// numbers (`O.OO5`, `l.2`) is not a unit row, and is refused as data.
+fn unit_like(field: &str) -> bool {
+    let bare = bare_unit(field);
+    let Some(first) = bare.chars().next() else {
+        return false;
+    };
+    let digits_after_caret = bare
+        .char_indices()
+        .filter(|(_, c)| c.is_ascii_digit())
+        .all(|(i, _)| bare[..i].contains('^'));
+    (first.is_alphabetic() || "µμ%°".contains(first))
+        && digits_after_caret
+        && !matches!(
+            bare.to_lowercase().as_str(),
+            "na" | "nan" | "n/a" | "null" | "none" | "inf" | "infinity"
+        )
 }
 
 /// A unit without the brackets it may be written in: `(ms)` is `ms`.
@@ -342,17 +371,16 @@ fn bare_unit(unit: &str) -> &str {
         .trim()
 }
 
-/// The unit in brackets at the end of a column name (`Time (ms)`,
-/// `t [us]`), when it is a time unit.
-fn seconds_per_from_name(name: &str) -> Option<(f64, String)> {
+/// The unit a column name ends with: in brackets (`Time (ms)`, `t [us]`)
+/// or after a slash (`t/ms`, as ISO 80000 writes a quantity over its unit).
+fn unit_in_name(name: &str) -> Option<&str> {
     let name = name.trim_end();
     let open = match name.chars().last()? {
         ')' => '(',
         ']' => '[',
-        _ => return None,
+        _ => return name.rfind('/').map(|at| &name[at + 1..]),
     };
-    let unit = &name[name.rfind(open)?..];
-    seconds_per(unit).map(|s| (s, unit.to_owned()))
+    name.rfind(open).map(|at| &name[at..])
 }
 
 impl fmt::Display for UsedColumn {
@@ -381,9 +409,10 @@ pub struct ColumnsUsed {
     pub header_line: Option<usize>,
     /// Line of the units row, when there is one.
     pub units_line: Option<usize>,
-    /// Seconds per unit of the time column (1 unless its unit says
-    /// otherwise).
-    pub time_scale: f64,
+    /// The time column's unit, when there is a time column.
+    pub time_unit: Option<TimeUnit>,
+    /// The file was not UTF-8 and was read as Latin-1 (Windows exports).
+    pub latin1: bool,
 }
 
 /// Reads a record from a file.
@@ -396,11 +425,19 @@ pub fn read_record_with_columns(
     path: &Path,
     options: &ReadOptions,
 ) -> Result<(Record, ColumnsUsed), DataError> {
-    let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
         path: path.to_owned(),
         source,
     })?;
-    parse_record_with_columns(&text, path, options)
+    // A Windows export in Latin-1 (or CP1252, the same for µ and °) is read
+    // byte for byte: every byte is a Latin-1 character.
+    let (text, latin1) = match String::from_utf8(bytes) {
+        Ok(text) => (text, false),
+        Err(e) => (e.into_bytes().iter().map(|&b| b as char).collect(), true),
+    };
+    let (record, mut used) = parse_record_with_columns(&text, path, options)?;
+    used.latin1 = latin1;
+    Ok((record, used))
 }
 
 /// Parses a record from text; `path` only names the source in errors.
@@ -451,8 +488,8 @@ pub fn parse_record_with_columns(
     let first = first_lines.next();
     let next: Vec<String> = first_lines.take(2).collect();
     let mut units: Option<(usize, Vec<String>)> = None;
-    // Seconds per unit of the time column, once the columns are resolved.
-    let mut time_scale = 1.0;
+    // The time column's unit, once the columns are resolved.
+    let mut time_unit: Option<TimeUnit> = None;
     // The first field of each decimal mark, to refuse a file that has both.
     let mut first_decimal_point: Option<usize> = None;
     let mut first_decimal_comma: Option<usize> = None;
@@ -489,7 +526,8 @@ pub fn parse_record_with_columns(
             && units.is_none()
             && resolved.is_none()
             && fields.len() == names.len()
-            && fields.iter().all(|f| separator.number(f).is_none())
+            && fields.iter().any(|f| !f.is_empty())
+            && fields.iter().all(|f| f.is_empty() || unit_like(f))
         {
             units = Some((line, fields.iter().map(|f| (*f).to_owned()).collect()));
             continue;
@@ -513,8 +551,10 @@ pub fn parse_record_with_columns(
                 let columns = resolve_columns(options, header.as_ref())
                     .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
                 if let Some(time) = columns.time {
-                    time_scale = time_scale_of(time, header.as_ref(), units.as_ref())
-                        .map_err(|(at, problem)| malformed(at, problem))?;
+                    time_unit = Some(
+                        time_scale_of(time, header.as_ref(), units.as_ref())
+                            .map_err(|(at, problem)| malformed(at, problem))?,
+                    );
                 }
                 resolved = Some(columns);
                 columns
@@ -578,7 +618,7 @@ pub fn parse_record_with_columns(
         input.push(values[columns.input]);
         output.push(values[columns.output]);
         if let Some(time) = columns.time {
-            let t = values[time] * time_scale;
+            let t = values[time] * time_unit.as_ref().map_or(1.0, |u| u.seconds_per_unit);
             if let Some(&(_, previous)) = times.last()
                 && t <= previous
             {
@@ -637,7 +677,8 @@ pub fn parse_record_with_columns(
         decimal_comma,
         header_line: header.as_ref().map(|(line, _)| *line),
         units_line: units.as_ref().map(|(line, _)| *line),
-        time_scale,
+        time_unit,
+        latin1: false,
     };
     Ok((
         Record {
@@ -656,11 +697,15 @@ fn time_scale_of(
     time: usize,
     header: Option<&(usize, Vec<String>)>,
     units: Option<&(usize, Vec<String>)>,
-) -> Result<f64, (usize, Problem)> {
+) -> Result<TimeUnit, (usize, Problem)> {
+    let named = header.and_then(|(line, names)| {
+        let unit = unit_in_name(names.get(time)?)?;
+        Some((*line, unit.to_owned(), seconds_per(unit)))
+    });
     if let Some((line, row)) = units
         && let Some(unit) = row.get(time).filter(|u| !u.is_empty())
     {
-        return seconds_per(unit).ok_or_else(|| {
+        let scale = seconds_per(unit).ok_or_else(|| {
             (
                 *line,
                 Problem::TimeUnit {
@@ -668,12 +713,52 @@ fn time_scale_of(
                     unit: unit.clone(),
                 },
             )
+        })?;
+        if let Some((_, name_unit, Some(name_scale))) = &named
+            && *name_scale != scale
+        {
+            return Err((
+                *line,
+                Problem::TimeUnitsDisagree {
+                    field: time,
+                    unit: unit.clone(),
+                    name_unit: name_unit.clone(),
+                },
+            ));
+        }
+        return Ok(TimeUnit {
+            seconds_per_unit: scale,
+            unit: bare_unit(unit).to_owned(),
+            source: "units row".to_owned(),
         });
     }
-    Ok(header
-        .and_then(|(_, names)| names.get(time))
-        .and_then(|name| seconds_per_from_name(name))
-        .map_or(1.0, |(scale, _)| scale))
+    Ok(match named {
+        Some((_, unit, Some(scale))) => TimeUnit {
+            seconds_per_unit: scale,
+            unit: bare_unit(&unit).to_owned(),
+            source: "column name".to_owned(),
+        },
+        Some((_, unit, None)) => TimeUnit {
+            seconds_per_unit: 1.0,
+            unit: "s".to_owned(),
+            source: format!("assumed: \"{unit}\" in its name is not a time unit"),
+        },
+        None => TimeUnit {
+            seconds_per_unit: 1.0,
+            unit: "s".to_owned(),
+            source: "assumed: no time unit given".to_owned(),
+        },
+    })
+}
+
+/// The time column's unit as it was read.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TimeUnit {
+    pub seconds_per_unit: f64,
+    /// As written, without brackets (`ms`).
+    pub unit: String,
+    /// "units row", "column name", or "assumed: ..." and why.
+    pub source: String,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -1051,7 +1136,11 @@ mod tests {
         let (reference, plain) =
             read(&("Time,Channel A,Channel B\n".to_owned() + &rows(1.0, ","))).unwrap();
         assert_eq!(reference.sample_period, 0.005);
-        assert_eq!((plain.units_line, plain.time_scale), (None, 1.0));
+        assert_eq!(plain.units_line, None);
+        assert_eq!(
+            plain.time_unit.unwrap().source,
+            "assumed: no time unit given"
+        );
 
         let pico = "Time,Channel A,Channel B\n(ms),(V),(um)\n\n".to_owned() + &rows(1e-3, ",");
         let (record, used) = read(&pico).unwrap();
@@ -1061,15 +1150,47 @@ mod tests {
             (reference.input.clone(), reference.output.clone())
         );
         assert_eq!(
-            (used.separator, used.units_line, used.time_scale),
-            (Separator::Comma, Some(2), 1e-3)
+            (used.separator, used.units_line),
+            (Separator::Comma, Some(2))
+        );
+        let unit = used.time_unit.clone().unwrap();
+        assert_eq!(
+            (
+                unit.seconds_per_unit,
+                unit.unit.as_str(),
+                unit.source.as_str()
+            ),
+            (1e-3, "ms", "units row")
         );
         assert_eq!(used.output.to_string(), "column 2 \"Channel B\" [um]");
 
         let by_name = "t [us]\tu\ty\n".to_owned() + &rows(1e-6, "\t");
         let (record, used) = read(&by_name).unwrap();
         assert!((record.sample_period - 0.005).abs() < 1e-15);
-        assert_eq!((used.units_line, used.time_scale), (None, 1e-6));
+        assert_eq!(used.units_line, None);
+        let unit = used.time_unit.unwrap();
+        assert_eq!(
+            (unit.seconds_per_unit, unit.source.as_str()),
+            (1e-6, "column name")
+        );
+        // Spelled otherwise: upper case, and ISO's quantity/unit.
+        for head in ["Time (MS);u;y\n", "t/msec;u;y\n"] {
+            let (record, _) = read(&(head.to_owned() + &rows(1e-3, ";"))).unwrap();
+            assert!((record.sample_period - 0.005).abs() < 1e-15, "{head}");
+        }
+        // Brackets that are not a time unit: seconds, and the summary says why.
+        let (record, used) = read(&("Time (abs);u;y\n".to_owned() + &rows(1.0, ";"))).unwrap();
+        assert_eq!(record.sample_period, 0.005);
+        assert_eq!(
+            used.time_unit.unwrap().source,
+            "assumed: \"(abs)\" in its name is not a time unit"
+        );
+        // A name and a units row that disagree.
+        let both = "Time (ms);u;y\ns;V;um\n".to_owned() + &rows(1.0, ";");
+        assert_eq!(
+            message(&both, &by_index),
+            "data.txt:2: field 0, the time column, is in \"s\" by the units row but in \"(ms)\" by its name"
+        );
 
         let seconds = "Zeit;Spannung;Weg\ns;V;um\n".to_owned() + &rows(1.0, ";");
         let (record, used) = read(&seconds).unwrap();
@@ -1084,6 +1205,17 @@ mod tests {
             message(&samples, &by_index),
             "data.txt:2: field 0, the time column, is in \"sample\"; give it in s, ms, us or ns, or give --rate instead"
         );
+        // A row of typos, of missing values, or of nothing below the header
+        // is a bad data row, not units, even when no time column is read.
+        let by_rate = options(Column::Index(1), Column::Index(2), Sampling::Rate(200.0));
+        for (row, problem) in [
+            ("O.OO5,l.2,-4Z.7", "field 0 (\"O.OO5\") is not a number"),
+            ("NA,NA,NA", "field 0 (\"NA\") is not a number"),
+            (",,", "field 1 is empty, and it is the input column"),
+        ] {
+            let text = format!("Time,Channel A,Channel B\n{row}\n") + &rows(1.0, ",");
+            assert_eq!(message(&text, &by_rate), format!("data.txt:2: {problem}"));
+        }
     }
 
     /// A comma beside decimal points is a thousands separator (a US export

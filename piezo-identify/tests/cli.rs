@@ -416,7 +416,8 @@ fn a_decimal_comma_export_fits_as_its_decimal_point_twin() {
 
 /// A PicoScope-style export (a units row below the header, a blank line,
 /// time in ms) fits to the same figures as the same record in seconds, and
-/// the summary names the units it read.
+/// the summary names the units it read; so does a Windows export in Latin-1
+/// whose units row gives µs (byte 0xB5).
 #[test]
 fn a_units_row_and_a_time_column_in_ms_fit_as_their_twin_in_seconds() {
     let dir = tempfile::tempdir().unwrap();
@@ -427,36 +428,48 @@ fn a_units_row_and_a_time_column_in_ms_fit_as_their_twin_in_seconds() {
             (t, u, 1.3 * u + 0.1 * (std::f64::consts::TAU * t).cos())
         })
         .collect();
-    let write = |name: &str, head: &str, per_second: f64| {
-        let mut text = head.to_owned();
+    let write = |name: &str, head: &[u8], per_second: f64| {
+        let mut bytes = head.to_owned();
         for (t, u, y) in &samples {
-            text.push_str(&format!("{:.3},{u:.6},{y:.6}\n", t * per_second));
+            bytes.extend(format!("{:.3},{u:.6},{y:.6}\n", t * per_second).bytes());
         }
         let path = dir.path().join(name);
-        std::fs::write(&path, text).unwrap();
+        std::fs::write(&path, bytes).unwrap();
         path
     };
-    let seconds = write("s.csv", "Time,Channel A,Channel B\n", 1.0);
+    let seconds = write("s.csv", b"Time,Channel A,Channel B\n", 1.0);
     let pico = write(
         "pico.csv",
-        "Time,Channel A,Channel B\n(ms),(V),(um)\n\n",
+        b"Time,Channel A,Channel B\n(ms),(V),(um)\n\n",
         1e3,
     );
+    let latin1 = write(
+        "latin1.csv",
+        b"Time,Channel A,Channel B\n(\xb5s),(V),(um)\n\n",
+        1e6,
+    );
     let fit = |path: &Path| quick_split_fit(path, "Time", "Channel A", "Channel B");
-    let (seconds, pico) = (fit(&seconds), fit(&pico));
+    let (seconds, pico, latin1) = (fit(&seconds), fit(&pico), fit(&latin1));
     assert!(
         pico.contains(
             "columns: input column 1 \"Channel A\" [V], output column 2 \"Channel B\" [um], \
              time column 0 \"Time\" [ms], comma-separated, header on line 1, units on line 2, \
-             time read as 0.001 s per unit"
+             time in ms (units row)"
         ),
         "{pico}"
+    );
+    assert!(
+        latin1.contains("time in µs (units row), read as Latin-1 (not UTF-8)"),
+        "{latin1}"
     );
     let figures = |out: &str| -> Vec<String> {
         out.lines()
             .filter(|line| line.contains(" RMS ") || line.contains(" Hz"))
             .map(str::to_owned)
-            .map(|line| line.replace("pico.csv", "s.csv"))
+            .map(|line| {
+                line.replace("pico.csv", "s.csv")
+                    .replace("latin1.csv", "s.csv")
+            })
             .collect()
     };
     assert!(
@@ -465,6 +478,7 @@ fn a_units_row_and_a_time_column_in_ms_fit_as_their_twin_in_seconds() {
             .any(|line| line.contains("100.000000 Hz"))
     );
     assert_eq!(figures(&seconds), figures(&pico));
+    assert_eq!(figures(&seconds), figures(&latin1));
 }
 
 /// A record like a pandas export with its unnamed index column and a file

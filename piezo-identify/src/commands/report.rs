@@ -34,8 +34,11 @@ pub(crate) fn describe_columns(columns: &ColumnsUsed) -> String {
     if let Some(line) = columns.units_line {
         text.push_str(&format!(", units on line {line}"));
     }
-    if columns.time.is_some() && columns.time_scale != 1.0 {
-        text.push_str(&format!(", time read as {} s per unit", columns.time_scale));
+    if let Some(unit) = &columns.time_unit {
+        text.push_str(&format!(", time in {} ({})", unit.unit, unit.source));
+    }
+    if columns.latin1 {
+        text.push_str(", read as Latin-1 (not UTF-8)");
     }
     text
 }
