@@ -19,12 +19,14 @@
 //!
 //! A row of units right below the header (`s;V;um`, `(ms),(V)`: PicoScope,
 //! LabVIEW and many DAQ exports write one) is read as such: a row of as many
-//! fields as the header, none of them a number. The time column's unit, from
-//! that row or else from a unit in brackets at the end of its name
-//! (`Time (ms)`, `t [us]`), scales it to seconds: s, ms, us (µs) or ns; a
-//! units row that gives the time column another unit is refused, since the
+//! fields as the header, each empty or unit-like ([`unit_like`]; a row of
+//! typos or missing values is a bad data row). The time column's unit, from
+//! that row or else from the end of its name (`Time (ms)`, `t [us]`,
+//! `t/ms`), scales it to seconds ([`seconds_per`]: s, ms, us, µs, ns and
+//! their common spellings, in any case); a units row that gives the time
+//! column another unit, or disagrees with its name, is refused, since the
 //! rates and the sampling period would be off by that factor. The summary
-//! names the units it read.
+//! names the units it read, and where the time unit came from.
 //!
 //! Exports made in a locale whose decimal mark is a comma (spreadsheets and
 //! LabVIEW in much of Europe) separate their fields by semicolons or tabs and
@@ -552,7 +554,7 @@ pub fn parse_record_with_columns(
                     .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
                 if let Some(time) = columns.time {
                     time_unit = Some(
-                        time_scale_of(time, header.as_ref(), units.as_ref())
+                        time_unit_of(time, header.as_ref(), units.as_ref())
                             .map_err(|(at, problem)| malformed(at, problem))?,
                     );
                 }
@@ -693,7 +695,7 @@ pub fn parse_record_with_columns(
 /// Seconds per unit of time column `time`: its unit in the units row, else
 /// a time unit in brackets at the end of its name, else 1 (seconds). A units
 /// row that gives it a unit other than a time unit is refused.
-fn time_scale_of(
+fn time_unit_of(
     time: usize,
     header: Option<&(usize, Vec<String>)>,
     units: Option<&(usize, Vec<String>)>,

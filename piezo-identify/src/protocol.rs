@@ -9,9 +9,9 @@
 //!   validation file is run from rest at its own first sample and scored
 //!   after its own warm-up. When both begin at rest at the same input, the
 //!   validation file's displacement is read from the same zero as the fit
-//!   record's ([`Plan::zero_alignment`]): a sensor is zeroed anew for each
-//!   session, and the model, which starts both from the same rest, cannot
-//!   tell a new zero from a new position.
+//!   record's ([`Plan::zero_alignment`]): a sensor's zero moves between
+//!   sessions (zeroed again, remounted), and the model, which starts both
+//!   from the same rest, cannot tell a new zero from a new position.
 //! - **What is fitted** ([`Plan`], [`crate::segments`]): not the rest
 //!   segments, not the settling after each voltage step, not the first
 //!   settling time of the record; the models run through all of them. The

@@ -34,7 +34,8 @@ pub(crate) struct ProtocolArgs {
     pub(crate) validate_warm_up: Option<f64>,
     /// The --validate file's displacement zero: "rest" reads it from its
     /// rest at the start as FILE's is read from FILE's (when both begin at
-    /// rest at the same input: a sensor zeroed anew); "recorded" as written.
+    /// rest at the same input: a sensor zeroed again between sessions);
+    /// "recorded" as written.
     #[arg(long, default_value = "rest", value_parser = ["rest", "recorded"], requires = "validate")]
     pub(crate) validate_zero: String,
     /// Seconds at the start of FILE not fitted [default: the settling time
