@@ -116,6 +116,8 @@ def test_the_inverse_pi_fit_runs_in_the_controller_as_fitted(own_set, tmp_path):
     run = run_controller(own_set, x_ref, model["sample_period_s"])
     # A communication step's outputs are those of the inputs at its start.
     expected = columns["proposed_v"][:-1]
+    print(f"inverse-pi: u2_ff off the tool's predictions by at most "
+          f"{np.abs(run['u2_ff'][1:] - expected).max():.2e} V")
     assert np.abs(run["u2_ff"][1:] - expected).max() <= 1e-9
     assert np.abs(run["u3_ff"][1:] - expected).max() <= 1e-9
     assert np.ptp(expected) > 3.0  # the record's whole 0..3.6 V, not a corner of it
@@ -131,6 +133,8 @@ def test_the_bouc_wen_fit_inverts_to_the_voltage_it_was_fitted_for(own_set, tmp_
     as_set = own_set | {"hysteresis_model": 2}
     assert as_set["bouc_wen.rest_cycle"] == 0.0
     error = run_controller(as_set, x_ref, dt)["u2_ff"][1:] - voltage
+    print(f"bouc-wen: u2_ff off the record's voltage by at most {np.abs(error[settled]).max():.2e} V "
+          f"after {SETTLED_AFTER_S} s")
     assert np.abs(error[settled]).max() <= BOUC_WEN_ROUND_TRIP_V
     # The stage preset's rest (its models were fitted from a cycled rest):
     # the fit's model started from the wrong state, off by percent of the span.
@@ -139,4 +143,6 @@ def test_the_bouc_wen_fit_inverts_to_the_voltage_it_was_fitted_for(own_set, tmp_
     )["bouc_wen"]["rest_cycle"]
     wrong = run_controller(as_set | {"bouc_wen.rest_cycle": stage_rest}, x_ref, dt)
     off = np.abs(wrong["u2_ff"][1:] - voltage)[settled].max()
+    print(f"bouc-wen with the stage preset's rest_cycle {stage_rest}: off by "
+          f"{100 * off / np.ptp(voltage):.1f} % of the span")
     assert off > 0.01 * np.ptp(voltage), off
