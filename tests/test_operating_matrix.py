@@ -84,8 +84,20 @@ def test_the_documented_minor_loop_of_a_2_um_drive_is_what_the_script_prints(tmp
     output: the script runs as the document gives it, and every figure it
     prints must be the one the document shows (within one unit of the last
     printed digit), so a stale explanation fails."""
-    measured, problems = stale_script_output("seed000.md", "## Off the paper's operating point",
-                                             tmp_path)
+    measured, problems = stale_script_output(
+        "seed000.md", "### A 2 um drive: the law's line and the held stacks' answer", tmp_path)
+    print(measured)
+    assert not problems, "\n".join(problems)
+
+
+def test_the_documented_settling_of_the_held_stacks_is_what_the_script_prints(tmp_path):
+    """docs/seed000.md measures how much of a 2 um drive's miss is the held
+    stacks settling onto their minor loop (spans after 3 and after 13
+    cycles) and that no other slope of the law reaches 4x in the matrix's
+    window: the script runs as printed and every figure must be the one the
+    document shows (within one unit of the last printed digit)."""
+    measured, problems = stale_script_output(
+        "seed000.md", "### A 2 um drive: the held stacks' minor loops", tmp_path)
     print(measured)
     assert not problems, "\n".join(problems)
 
