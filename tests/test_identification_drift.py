@@ -60,3 +60,15 @@ def test_the_documented_drift_is_what_the_commands_print(tmp_path):
                        done.stdout)
     assert scored, done.stdout
     assert f"RMS {scored.group(1)} %" in traced, (scored.group(1), traced)
+
+
+def test_the_documented_halves_of_the_test_record_are_what_the_script_prints(tmp_path):
+    """docs/identification.md says what each half of `--split 0.5` holds
+    (a plain sine drive, then a drive shaped to make the displacement a sine):
+    its script runs as printed and every figure must be the one shown."""
+    from tests.docs_figures import stale_script_output
+
+    measured, problems = stale_script_output(
+        "identification.md", "### What the two halves of the P-885 test record hold", tmp_path)
+    print(measured)
+    assert not problems, "\n".join(problems)
