@@ -24,6 +24,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 
+#: Share of a run's samples with a command at its limit above which the run
+#: measures the command range more than the plant.
+SATURATED_SHARE = 0.01
+
 #: Table 3's couplings per driven axis: (metric, label).
 COUPLINGS = {
     "y": (("coupling_x2_span", "x2 from y"), ("coupling_x3_span", "x3 from y")),
@@ -203,7 +207,7 @@ def describe_breaks(items, holds, breaks, tracking_limit, reduction_limit) -> st
     reasons = defaultdict(int)
     for _, pair, rel, red in breaks:
         saturated = max(pair["on"].get("command_saturation") or 0,
-                        pair["off"].get("command_saturation") or 0) > 0.01
+                        pair["off"].get("command_saturation") or 0) > SATURATED_SHARE
         if rel > tracking_limit:
             reasons["tracking" + (", saturated" if saturated else "")] += 1
         if red < reduction_limit:
@@ -299,6 +303,7 @@ def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
         lines.append(f"| {method} | {name} | {fmt(p5)} | {fmt(p50)} | {fmt(p95)} | "
                      f"{len(values)} |")
     lines.append("")
+    lines += [saturation_summary(ok), ""]
     clipped = held_at_bounds(rows, factors)
     if clipped:
         lines += ["Factors held at a bound of the parameter's declared range (the model is "
@@ -335,6 +340,25 @@ def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
     lines.append(f"![robustness]({name})")
     lines.append("")
     return lines
+
+
+def saturation_summary(rows: list[dict]) -> str:
+    """Whether the figures measure the plant or the command limits: the runs
+    whose commands sat at a limit on more than SATURATED_SHARE of their
+    samples, by axis and decoupling."""
+    saturated = defaultdict(lambda: [0, 0])
+    for r in rows:
+        key = (r.get("method", "preset"), r["axis"], r["decoupling"])
+        saturated[key][1] += 1
+        saturated[key][0] += (r.get("command_saturation") or 0) > SATURATED_SHARE
+    hit = {k: v for k, v in saturated.items() if v[0]}
+    if not hit:
+        return (f"No run's commands sat at a limit on more than {100 * SATURATED_SHARE:g} % of "
+                "its samples: the figures measure the plants, not the command range.")
+    return (f"Commands at a limit on more than {100 * SATURATED_SHARE:g} % of the samples "
+            "(those figures measure the command range as much as the plant): " + ", ".join(
+                f"{method} {axis}, decoupling {decoupling}: {n} of {total} runs"
+                for (method, axis, decoupling), (n, total) in sorted(hit.items())) + ".")
 
 
 def held_at_bounds(rows: list[dict], factors: list[str]) -> dict:

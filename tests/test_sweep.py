@@ -382,3 +382,34 @@ def test_expressions_accept_arithmetic_only():
     for text in ("__import__('os')", "f.real", "[1][0]", "open('x')"):
         with pytest.raises(ValueError):
             sweep.evaluate(text, {"f": 1.0})
+
+
+def test_the_default_robustness_study_turns_the_rotation_about_xs_rotation_home():
+    """Table 3's rotation run, as the demo and the `stage` identification
+    run it, turns about x at half its stroke (seed 000 §3.2; one source:
+    demo/experiment_conditions.json). About x = 0 the commands saturate on
+    most samples and the study's theta figures would measure that."""
+    import tomllib
+
+    spec = tomllib.loads((REPO_ROOT / "demo" / "sweeps" / "robustness.toml").read_text())
+    axis = next(v for v in spec["variable"] if v["name"] == "axis")
+    rotation = axis["values"]["theta"]["patch"]["signal"]["controller.x_ref"]
+    conditions = json.loads((REPO_ROOT / "demo" / "experiment_conditions.json").read_text())
+    assert rotation["offset"] == conditions["homes_um"]["rotation"]["x"]
+
+
+def test_the_robustness_report_says_whether_commands_saturated():
+    """A figure from runs whose commands sat at their limit measures the
+    command range, not the plant: the report names those runs, or says that
+    there were none."""
+    from demo.sweep_report import saturation_summary
+
+    def row(axis, decoupling, saturation):
+        return {"axis": axis, "decoupling": decoupling, "command_saturation": saturation}
+
+    clean = [row("x", "on", 0.0), row("theta", "off", 0.005)]
+    assert saturation_summary(clean).startswith("No run's commands sat at a limit")
+    saturated = clean + [row("theta", "on", 0.6), row("theta", "on", 0.0)]
+    summary = saturation_summary(saturated)
+    assert "preset theta, decoupling on: 1 of 2 runs" in summary, summary
+    assert "theta, decoupling off" not in summary and "preset x" not in summary, summary
