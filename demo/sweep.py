@@ -17,9 +17,10 @@ metrics, the wall time.
   to an existing cluster (`dask scheduler`, `dask worker`) with --scheduler.
   The FMUs travel with the tasks (scattered to the workers, unpacked into
   each worker's temporary folder); parameter sets are read here and sent as
-  values, so no shared filesystem is assumed. Workers need this package
-  (with demo/bin/piezo-cosim, `make master`) importable: start them from the
-  repository with PYTHONPATH set to it.
+  values, so no shared filesystem is assumed. The scheduler and every worker
+  need this package importable (the scheduler unpickles the tasks, which
+  name its functions), the workers also demo/bin/piezo-cosim (`make
+  master`): start them from a checkout with PYTHONPATH set to it.
 - A run is a pure function of its scenario (spec, sample seed), whichever
   task runs it: its key is a hash of the scenario with the FMUs' contents. A
   task rescheduled after a worker dies gives the same rows, and the table
@@ -58,6 +59,17 @@ from pathlib import Path
 import numpy as np
 
 from . import master
+
+
+def lost_task_hint(error: BaseException) -> str:
+    """What to do about a task that could not run, where the error says."""
+    text = str(error)
+    if "deserializ" in text or "No module named 'demo'" in text:
+        return ("\n  The scheduler and every worker must be able to import this repository's "
+                "`demo` package: start `dask scheduler` and `dask worker` from a checkout with "
+                "PYTHONPATH set to it (README, \"Sweeps on dask\").")
+    return ""
+
 
 #: Columns that describe how a run was executed, not what it computed: they
 #: differ between two executions of the same spec (everything else is equal).
@@ -777,8 +789,8 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                 # whose workers died again and again. Its runs stay out of
                 # the table, so the next invocation runs them again.
                 if summary["lost"] == 0:
-                    print(f"a run could not be executed: {type(e).__name__}: {e}",
-                          file=sys.stderr, flush=True)
+                    print(f"a run could not be executed: {type(e).__name__}: {e}"
+                          + lost_task_hint(e), file=sys.stderr, flush=True)
                 summary["lost"] += size_of[future.key]
                 continue
             for row in rows:

@@ -11,6 +11,7 @@ not depend on the runs' length.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import os
@@ -201,28 +202,27 @@ def test_an_interrupted_sweep_continues_where_it_stopped(tmp_path):
     assert all(kept[r["key"]] == r for r in first)
 
 
-@pytest.fixture(scope="module")
-def dask_cluster(tmp_path_factory):
-    """`dask scheduler` and two `dask worker` processes on 127.0.0.1. They
-    stop themselves if left behind: the scheduler after 60 s without work,
-    the workers 30 s after losing it; the fixture stops them anyway."""
-    folder = tmp_path_factory.mktemp("cluster")
+@contextlib.contextmanager
+def cluster(folder: Path, workers: int, scheduler_env: dict, worker_env: dict, cwd: Path):
+    """`dask scheduler` and `workers` `dask worker` processes on 127.0.0.1,
+    each started in `cwd` with its environment. They stop themselves if left
+    behind: the scheduler after 60 s without work, the workers 30 s after
+    losing it; leaving the block stops them anyway. Yields the address."""
     scheduler_file = folder / "scheduler.json"
-    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
     processes = []
     logs = []
 
-    def start(*args):
+    def start(env, *args):
         logs.append(open(folder / f"{len(processes)}.log", "w"))
-        processes.append(subprocess.Popen([str(DASK), *args], cwd=REPO_ROOT, env=env,
+        processes.append(subprocess.Popen([str(DASK), *args], cwd=cwd, env=env,
                                           stdout=logs[-1], stderr=subprocess.STDOUT))
 
     try:
         # Port 0 for its HTTP server too (health checks, even without the
         # dashboard): 8787 may belong to a user's cluster or another test's.
-        start("scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-              "--dashboard-address", "127.0.0.1:0", "--scheduler-file", str(scheduler_file),
-              "--idle-timeout", "60s")
+        start(scheduler_env, "scheduler", "--host", "127.0.0.1", "--port", "0",
+              "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
+              "--scheduler-file", str(scheduler_file), "--idle-timeout", "60s")
         deadline = time.monotonic() + 60
         while not scheduler_file.is_file():
             if time.monotonic() > deadline or processes[0].poll() is not None:
@@ -230,13 +230,14 @@ def dask_cluster(tmp_path_factory):
                             + (folder / "0.log").read_text())
             time.sleep(0.1)
         address = json.loads(scheduler_file.read_text())["address"]
-        for _ in range(2):
-            start("worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard",
-                  "--host", "127.0.0.1", "--death-timeout", "30s", "--lifetime", "600s")
+        for _ in range(workers):
+            start(worker_env, "worker", address, "--nthreads", "1", "--nworkers", "1",
+                  "--no-dashboard", "--host", "127.0.0.1", "--death-timeout", "30s",
+                  "--lifetime", "600s")
         from distributed import Client
 
         with Client(address, timeout="30s") as client:
-            client.wait_for_workers(2, timeout=60)
+            client.wait_for_workers(workers, timeout=60)
         yield address
     finally:
         for process in reversed(processes):
@@ -250,6 +251,34 @@ def dask_cluster(tmp_path_factory):
                 process.wait()
         for log in logs:
             log.close()
+
+
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """A scheduler and two workers started as the README says: from the
+    checkout, PYTHONPATH set to it."""
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    with cluster(tmp_path_factory.mktemp("cluster"), 2, env, env, REPO_ROOT) as address:
+        yield address
+
+
+def test_a_scheduler_that_cannot_import_the_package_is_named_with_the_fix(spec_path,
+                                                                           tmp_path):
+    """The scheduler unpickles the tasks, which name `demo`'s functions: one
+    started outside the checkout without PYTHONPATH runs nothing, and the
+    sweep says what to do (the README's recipe sets PYTHONPATH for both)."""
+    bare = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    with_package = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    (tmp_path / "cluster").mkdir()
+    with cluster(tmp_path / "cluster", 1, bare, with_package, tmp_path) as address:
+        done = subprocess.run(
+            [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(tmp_path / "out"),
+             "--scheduler", address, "--progress", "none", "--no-report"],
+            cwd=REPO_ROOT, env=with_package, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "start `dask scheduler` and `dask worker` from a checkout with PYTHONPATH" \
+        in done.stderr, done.stderr
+    assert f"{RUNS} runs could not be executed" in done.stderr, done.stderr
 
 
 def test_a_sweep_on_a_scheduler_with_two_workers(spec_path, reference_table, dask_cluster,
