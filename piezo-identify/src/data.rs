@@ -95,10 +95,12 @@ pub enum Sampling {
 /// Which columns to read and how the samples are spaced.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReadOptions {
-    /// The actuator command [V].
-    pub input: Column,
-    /// The measured displacement [µm].
-    pub output: Column,
+    /// The actuator command [V]; None: the first column that is not the
+    /// time column.
+    pub input: Option<Column>,
+    /// The measured displacement [µm]; None: the first column that is
+    /// neither the time column nor the input.
+    pub output: Option<Column>,
     pub sampling: Sampling,
 }
 
@@ -149,6 +151,12 @@ pub enum Problem {
     UnknownColumn { name: String, header: String },
     #[error("column \"{name}\" is named twice in the header")]
     DuplicateColumn { name: String },
+    #[error("field {field} is both the {first} and the {second} column")]
+    SameColumn {
+        field: usize,
+        first: &'static str,
+        second: &'static str,
+    },
     #[error("column \"{name}\" is named but the file has no header row")]
     NoHeader { name: String },
     #[error("header has fields that are numbers and fields that are not")]
@@ -823,13 +831,45 @@ fn resolve_columns(
             },
         }
     };
+    let time = match &options.sampling {
+        Sampling::TimeColumn(column) => Some(resolve(column)?),
+        Sampling::Rate(_) => None,
+    };
+    // A column left to the default is the first one no other role takes, so
+    // `--time 0` with a header "time,u,y" reads u and y, not time and u.
+    let first_free = |taken: &[Option<usize>]| (0..).find(|i| !taken.contains(&Some(*i)));
+    let input = match &options.input {
+        Some(column) => resolve(column)?,
+        None => first_free(&[time]).expect("a free column index"),
+    };
+    let output = match &options.output {
+        Some(column) => resolve(column)?,
+        None => first_free(&[time, Some(input)]).expect("a free column index"),
+    };
+    let line = header.map(|(line, _)| *line);
+    let roles = [
+        ("input", Some(input)),
+        ("output", Some(output)),
+        ("time", time),
+    ];
+    for (i, (first, a)) in roles.iter().enumerate() {
+        for (second, b) in &roles[i + 1..] {
+            if let (Some(field), true) = (*a, a == b) {
+                return Err((
+                    line,
+                    Problem::SameColumn {
+                        field,
+                        first,
+                        second,
+                    },
+                ));
+            }
+        }
+    }
     Ok(ResolvedColumns {
-        input: resolve(&options.input)?,
-        output: resolve(&options.output)?,
-        time: match &options.sampling {
-            Sampling::TimeColumn(column) => Some(resolve(column)?),
-            Sampling::Rate(_) => None,
-        },
+        input,
+        output,
+        time,
     })
 }
 
@@ -853,8 +893,8 @@ mod tests {
 
     fn options(input: Column, output: Column, sampling: Sampling) -> ReadOptions {
         ReadOptions {
-            input,
-            output,
+            input: Some(input),
+            output: Some(output),
             sampling,
         }
     }
@@ -1297,6 +1337,70 @@ mod tests {
         assert_eq!(
             message(&text, &options),
             "data.txt:2: column \"displacement\" is not in the header (columns: \"volts\", \"um\")"
+        );
+    }
+
+    #[test]
+    fn columns_left_to_the_default_skip_the_time_column() {
+        let mut text = "time,u,y\n".to_owned();
+        for n in 0..40 {
+            text.push_str(&format!(
+                "{},{},{}\n",
+                n as f64 * 0.01,
+                n as f64,
+                2.0 * n as f64
+            ));
+        }
+        let defaults = |time: Column| ReadOptions {
+            input: None,
+            output: None,
+            sampling: Sampling::TimeColumn(time),
+        };
+        for time in [Column::Index(0), Column::Name("time".into())] {
+            let (record, used) =
+                parse_record_with_columns(&text, Path::new("data.txt"), &defaults(time))
+                    .expect("a record with a time column first");
+            assert_eq!((used.input.index, used.output.index), (1, 2));
+            assert_eq!((record.input[3], record.output[3]), (3.0, 6.0));
+            assert!((record.sample_period - 0.01).abs() < 1e-12);
+        }
+        // The time column last: the defaults are the first two columns.
+        let last = ReadOptions {
+            sampling: Sampling::TimeColumn(Column::Index(2)),
+            ..defaults(Column::Index(0))
+        };
+        let text: String = text
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<&str> = l.split(',').collect();
+                format!("{},{},{}\n", f[1], f[2], f[0])
+            })
+            .collect();
+        let (_, used) = parse_record_with_columns(&text, Path::new("data.txt"), &last).unwrap();
+        assert_eq!((used.input.index, used.output.index), (0, 1));
+    }
+
+    #[test]
+    fn refuses_one_column_in_two_roles() {
+        let header = format!("time,u,y\n{}", rows("", 40).replace(' ', ",0,"));
+        let given = |input: usize, output: usize| ReadOptions {
+            input: Some(Column::Index(input)),
+            output: Some(Column::Index(output)),
+            sampling: Sampling::TimeColumn(Column::Name("time".into())),
+        };
+        assert_eq!(
+            message(&header, &given(0, 2)),
+            "data.txt:1: field 0 is both the input and the time column"
+        );
+        assert_eq!(
+            message(&header, &given(2, 2)),
+            "data.txt:1: field 2 is both the input and the output column"
+        );
+        let by_rate = options(Column::Index(1), Column::Index(1), Sampling::Rate(100.0));
+        assert_eq!(
+            message(&rows("", 40), &by_rate),
+            "data.txt:1: field 1 is both the input and the output column"
         );
     }
 

@@ -809,3 +809,73 @@ fn a_second_session_is_read_from_the_fit_records_zero() {
         assert!(rms(&recorded) > 10.0, "{command}: {}", rms(&recorded));
     }
 }
+
+/// A user's file "time,volts,microns" fitted with only `--time time`: the
+/// input and output left to the defaults are the two columns after the time
+/// column, as the summary says, and the fit is the one with the columns named;
+/// naming the time column as the input is refused.
+#[test]
+fn columns_left_to_the_defaults_are_not_the_time_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("record.csv");
+    write_good_record(&path);
+    let file = path.to_str().unwrap();
+    let quick = ["--starts", "2", "--max-iterations", "40", "--split", "0.5"];
+    let defaults = run(&[&["inverse-pi", file, "--time", "time"][..], &quick[..]].concat());
+    assert!(defaults.status.success(), "{}", stderr(&defaults));
+    let summary = stdout(&defaults);
+    assert!(
+        summary.contains(
+            "columns: input column 1 \"volts\", output column 2 \"microns\", time column 0 \"time\""
+        ),
+        "{summary}"
+    );
+    let named = quick_split_fit(&path, "time", "volts", "microns");
+    let errors = |text: &str| -> Vec<String> {
+        text.lines()
+            .filter(|l| l.trim_start().starts_with("proposed ") && l.contains("RMS"))
+            .map(str::to_owned)
+            .collect()
+    };
+    assert!(!errors(&named).is_empty(), "{named}");
+    assert_eq!(errors(&summary), errors(&named));
+    let twice = run(&["inverse-pi", file, "--time", "time", "--input", "0"]);
+    assert!(!twice.status.success());
+    assert_eq!(
+        stderr(&twice).trim_end(),
+        format!("{file}:2: field 0 is both the input and the time column")
+    );
+}
+
+/// `decoupling` says which columns it read.
+#[test]
+fn decoupling_names_its_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("coupling.csv");
+    let mut text = String::from("time,demand,error\n");
+    for n in 0..100 {
+        let demand = 0.1 * n as f64;
+        text.push_str(&format!(
+            "{},{demand},{}\n",
+            0.01 * n as f64,
+            0.2 * demand - 0.5
+        ));
+    }
+    std::fs::write(&path, text).unwrap();
+    let done = run(&[
+        "decoupling",
+        path.to_str().unwrap(),
+        "--demand",
+        "demand",
+        "--error",
+        "error",
+    ]);
+    assert!(done.status.success(), "{}", stderr(&done));
+    let out = stdout(&done);
+    assert!(
+        out.contains("columns: demand column 1 \"demand\", coupling error column 2 \"error\""),
+        "{out}"
+    );
+    assert!(out.contains("clamp(0.200000*f -0.500000"), "{out}");
+    assert!(!out.contains("note:"), "{out}");
+}

@@ -99,12 +99,14 @@ pub(crate) fn auto_or<T>(
 
 #[derive(Args)]
 pub(crate) struct ColumnArgs {
-    /// Input (command voltage) column: 0-based index or header name.
-    #[arg(long, default_value = "0")]
-    pub(crate) input: String,
-    /// Output (displacement) column: 0-based index or header name.
-    #[arg(long, default_value = "1")]
-    pub(crate) output: String,
+    /// Input (command voltage) column: 0-based index or header name [default: the first column
+    /// that is not the time column]
+    #[arg(long)]
+    pub(crate) input: Option<String>,
+    /// Output (displacement) column: 0-based index or header name [default: the next column
+    /// that is neither the time column nor the input]
+    #[arg(long)]
+    pub(crate) output: Option<String>,
     /// Sample rate [Hz] (or give --time).
     #[arg(long, conflicts_with = "time")]
     pub(crate) rate: Option<f64>,
@@ -121,8 +123,8 @@ impl ColumnArgs {
             _ => return Err("give the sampling: --rate HZ or --time COLUMN".to_owned()),
         };
         Ok(ReadOptions {
-            input: Column::parse(&self.input),
-            output: Column::parse(&self.output),
+            input: self.input.as_deref().map(Column::parse),
+            output: self.output.as_deref().map(Column::parse),
             sampling,
         })
     }
