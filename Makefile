@@ -141,7 +141,7 @@ demo: fmus venv systems fingerprints-tool
 stage-preset: fmus
 	$(CARGO) build --release --locked -p piezo-identify
 	mkdir -p out/stage
-	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu --rounds 3 \
+	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu \
 	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
 
@@ -158,7 +158,7 @@ xy200s-controller-preset: fmus
 	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu \
 	  --plant-parameters $(DIST)/presets/FlexureStage.xy200s.json --scale 11.3320 --no-rotation \
 	  --held 72.19,74.64 --command-range 0,10 --gain-scale 0.085 \
-	  --rounds 3 --out piezo-models/presets/piezo_controller_xy200s.json \
+	  --out piezo-models/presets/piezo_controller_xy200s.json \
 	  --report out/stage/xy200s_identification.json
 	$(MAKE) fmus
 

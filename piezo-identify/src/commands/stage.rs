@@ -5,11 +5,12 @@ use std::path::PathBuf;
 
 use clap::Args;
 
+use piezo_identify::data::read_record_with_columns;
 use piezo_identify::decoupling::fit_compensation;
 use piezo_identify::stage::{StageConditions, identify_stage};
 use piezo_identify::{Column, ReadOptions, Sampling};
 
-use super::arguments::{SearchArgs, open_plant, read};
+use super::arguments::{SearchArgs, open_plant};
 use super::progress::progress_bar;
 
 #[derive(Args)]
@@ -46,8 +47,9 @@ pub(crate) struct StageArgs {
     /// 000's stage; the inverse of the stage's um per volt relative to it).
     #[arg(long, default_value_t = 1.0)]
     pub(crate) gain_scale: f64,
-    /// Rounds of decoupling runs: the second refits what the first leaves.
-    #[arg(long, default_value_t = 2)]
+    /// Rounds of decoupling runs: each after the first refits what the previous left (the
+    /// shipped presets are made with the default).
+    #[arg(long, default_value_t = 3)]
     pub(crate) rounds: usize,
     /// Write the controller preset (JSON) here.
     #[arg(long)]
@@ -164,12 +166,17 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
 
 pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
     let options = ReadOptions {
-        input: Column::parse(&args.demand),
-        output: Column::parse(&args.error),
+        input: Some(Column::parse(&args.demand)),
+        output: Some(Column::parse(&args.error)),
         // The fit is static: the sampling does not matter.
         sampling: Sampling::Rate(1.0),
     };
-    let record = read(&args.file, &options)?;
+    let (record, used) =
+        read_record_with_columns(&args.file, &options).map_err(|e| e.to_string())?;
+    println!(
+        "columns: demand {}, coupling error {}",
+        used.input, used.output
+    );
     let c = fit_compensation(&record.input, &record.output)
         .map_err(|e| format!("{}: {e}", args.file.display()))?;
     println!(
@@ -185,5 +192,12 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
         "coupling error span {:.6} um; residual span {:.6} um, RMS {:.6} um",
         c.error_span, c.residual_span, c.residual_rms
     );
+    if c.residual_span >= c.error_span {
+        // A compensation that leaves the span as wide as it found it has
+        // nothing to cancel in these columns: most often the wrong ones.
+        println!(
+            "note: the compensation does not narrow the coupling error; check that the demand and error columns are the ones meant (--demand, --error)"
+        );
+    }
     Ok(())
 }
