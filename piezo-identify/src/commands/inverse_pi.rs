@@ -217,8 +217,9 @@ pub(crate) fn print_inverse_pi_choices(
         if h == 0 {
             "none".to_owned()
         } else {
+            // The window and the half width that --smooth takes.
             format!(
-                "{} samples ({:.1} ms)",
+                "{} samples, half width {h} ({:.1} ms)",
                 2 * h + 1,
                 1e3 * (2 * h + 1) as f64 * dt
             )
@@ -233,12 +234,12 @@ pub(crate) fn print_inverse_pi_choices(
             cv.validation_samples
         );
         println!(
-            "  {:<28} {:<16} {:>12}",
+            "  {:<36} {:<16} {:>12}",
             "moving average", "backlash weights", "RMS [V]"
         );
         for c in &cv.proposed {
             println!(
-                "  {:<28} {:<16} {:>12.6}",
+                "  {:<36} {:<16} {:>12.6}",
                 smoothing(c.smoothing),
                 weights(c.rate_dependent),
                 c.validation_rms
@@ -246,7 +247,7 @@ pub(crate) fn print_inverse_pi_choices(
         }
         for c in &cv.classical {
             println!(
-                "  {:<28} {:<16} {:>12.6}",
+                "  {:<36} {:<16} {:>12.6}",
                 smoothing(c.smoothing),
                 "classical P-I",
                 c.validation_rms
