@@ -25,8 +25,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from fmpy.fmi1 import FMICallException
 
-from demo.fmu import Fmu, Instance, RealPort  # noqa: F401 (the demo's and tests' import path)
+from demo.fmu import Fmu, FmuCallError, Instance, RealPort  # noqa: F401 (the demo's and tests' import path)
 
 
 #: The closed loop's wiring, the one table every master that builds the loop
@@ -124,6 +125,7 @@ def simulate(
     except BaseException:
         p.free()
         raise
+    completed = False
     try:
         plant_in = p.real_port(tuple(command for _, command in COMMANDS))
         plant_out = p.real_port(PLANT_OUTPUTS)
@@ -151,9 +153,14 @@ def simulate(
                 progress(1000)
         if progress is not None:
             progress(steps % 1000)
+        completed = True
+    except FMICallException as error:
+        raise FmuCallError(error, p, c) from error
     finally:
-        c.free(terminate=True)
-        p.free(terminate=True)
+        # An instance that returned fmi2Error may only be freed (or reset):
+        # fmi2Terminate is for a run that ended well.
+        c.free(terminate=completed)
+        p.free(terminate=completed)
     return Run(
         t=t,
         references=references,

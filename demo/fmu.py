@@ -19,6 +19,7 @@ from pathlib import Path
 import fmpy
 import numpy as np
 from fmpy import fmi2
+from fmpy.fmi1 import FMICallException
 
 STATUS_NAMES = {
     fmi2.fmi2OK: "fmi2OK",
@@ -86,6 +87,19 @@ class LogCapture:
         return "\n".join(str(r) for r in self.records) or "(no log messages)"
 
 
+class FmuCallError(FMICallException):
+    """fmpy's FMICallException with what the FMU logged about it: the
+    messages of status fmi2Warning and above of the instances concerned
+    (the status alone does not say which parameter, or why)."""
+
+    def __init__(self, error: FMICallException, *instances: "Instance"):
+        super().__init__(error.function, error.status)
+        self.messages = [str(r) for i in instances for r in i.log.records
+                         if r.status >= fmi2.fmi2Warning]
+        if self.messages:
+            self.args = (self.args[0] + " The FMUs logged:\n" + "\n".join(self.messages),)
+
+
 class Fmu:
     """An FMU extracted once (into `unzipdir`, or a fresh temporary folder that
     `close` removes), instantiated as often as needed."""
@@ -148,6 +162,9 @@ class Fmu:
         instance = self.instantiate(name)
         try:
             instance.initialize(start_values=parameters, in_initialization_mode=True)
+        except FMICallException as error:
+            instance.free()
+            raise FmuCallError(error, instance) from error
         except BaseException:
             instance.free()
             raise

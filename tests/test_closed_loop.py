@@ -102,3 +102,27 @@ def test_the_single_axis_runs_start_from_rest_with_the_held_axes_at_zero(results
     for name, axis, key, (paper_without, _) in TABLE_3:
         without = results[f"fig7_{axis}_ffpi"][key]
         assert 0.5 * paper_without <= without <= 1.5 * paper_without, (name, without)
+
+
+@pytest.mark.parametrize("parameters, logged", [
+    ({"controller_parameters": {"translation.kp": -1.0}},
+     "[fmi2Error|logStatusError|controller] fmi2ExitInitializationMode: parameter "
+     "translation.kp = -1 is outside its allowed range [0, inf]"),
+    ({"plant_parameters": {"pzt[1].A": 1e6}},
+     "[fmi2Error|logStatusError|plant] fmi2DoStep: at t = 0: the stage diverged"),
+], ids=["refused parameter", "diverging plant"])
+def test_a_failed_run_raises_with_what_the_fmu_logged(parameters, logged):
+    """demo.cosim.simulate, the master the README recommends, raises the FMU's
+    own reason (its log) with the failed call, and nothing after it: an
+    instance that returned fmi2Error is freed without fmi2Terminate, which it
+    would refuse."""
+    from demo.cosim import FmuCallError
+
+    def reference(t):
+        return np.column_stack([5 + 5 * np.sin(2 * np.pi * t), np.zeros_like(t), np.zeros_like(t)])
+
+    with Fmu(PLANT) as plant, Fmu(CONTROLLER) as controller:
+        with pytest.raises(FmuCallError) as raised:
+            simulate(plant, controller, reference, 0.2, **parameters)
+    assert logged in str(raised.value), str(raised.value)
+    assert "fmi2Terminate" not in str(raised.value)
