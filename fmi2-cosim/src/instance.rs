@@ -683,7 +683,9 @@ impl<M: CoSimModel> Instance<M> {
                                 function,
                                 format_args!(
                                     "tunable parameter {} = {value} is outside its allowed \
-                                     range {range}; the value is kept",
+                                     range {range}; it keeps its value, and the instance is in \
+                                     the error state (fmi2Reset, or fmi2SetFMUstate of a saved \
+                                     state, continues)",
                                     var.name
                                 ),
                             ))
