@@ -206,6 +206,24 @@ def test_a_malformed_scenario_names_file_line_and_problem(tmp_path):
     assert "unknown field `paramters`" in done.stderr
 
 
+def test_a_misspelt_variable_names_the_scenarios_file_and_line(tmp_path):
+    """The FMUs, not the parser, know that `feedbak_y` or `x_reff` is no
+    variable: the message still names the scenario's file and the line the
+    name is written on (README: exit 2 names the file, line and problem)."""
+    path = tmp_path / "typo.toml"
+    path.write_text(f'duration = 0.01\n[fmu.plant]\npath = "{PLANT}"\n[fmu.controller]\n'
+                    f'path = "{CONTROLLER}"\nparameters = {{ feedbak_y = true }}\n')
+    done = run_cli("run", str(path))
+    assert done.returncode == 2
+    assert done.stderr.startswith(f"{path}:6: controller.feedbak_y: "), done.stderr
+    assert 'has no variable "feedbak_y"' in done.stderr
+    path.write_text(f'duration = 0.01\n[fmu.plant]\npath = "{PLANT}"\n[fmu.controller]\n'
+                    f'path = "{CONTROLLER}"\n\n[signal."controller.x_reff"]\noffset = 1.0\n')
+    done = run_cli("check", str(path))
+    assert done.returncode == 2
+    assert done.stderr.startswith(f"{path}:7: controller.x_reff: "), done.stderr
+
+
 def test_an_unknown_parameter_is_refused_by_name(tmp_path):
     scenario = {"duration": 0.01, "fmu": {
         "plant": {"path": str(PLANT), "parameters": {"pzt[4].A": 1.0}},

@@ -93,6 +93,28 @@ fn load(path: &Path) -> Result<Scenario, String> {
     }
 }
 
+/// The 1-based line of a scenario's text where the port an error message
+/// starts with (`instance.variable: ...`) is written: the port itself (a
+/// signal or a connection), else its variable as a key or a name (a
+/// parameter of the instance's table). None when neither is written.
+fn line_of_port(text: &str, message: &str) -> Option<usize> {
+    let port = message.split(": ").next()?;
+    let (_, variable) = port.split_once('.')?;
+    let is_name_char = |c: char| c.is_alphanumeric() || c == '_';
+    let written_at = |needle: &str| {
+        text.lines().position(|line| {
+            line.match_indices(needle).any(|(at, _)| {
+                let before = line[..at].chars().next_back();
+                let after = line[at + needle.len()..].chars().next();
+                !before.is_some_and(is_name_char) && !after.is_some_and(is_name_char)
+            })
+        })
+    };
+    written_at(port)
+        .or_else(|| written_at(variable))
+        .map(|i| i + 1)
+}
+
 /// Where the results go: the process's standard output, moved to a
 /// descriptor of its own, with standard output itself pointed at the error
 /// stream (Linux). An FMU may print (a C runtime's printf, a tool's log):
@@ -238,7 +260,8 @@ fn main() -> ExitCode {
         );
         return ExitCode::from(2);
     }
-    let scenario = match load(&scenario) {
+    let scenario_path = scenario;
+    let scenario = match load(&scenario_path) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("{e}");
@@ -252,7 +275,15 @@ fn main() -> ExitCode {
     let output = match run(&scenario, options) {
         Ok(output) => output,
         Err(e) => {
-            eprintln!("{e}");
+            match (&e, std::fs::read_to_string(&scenario_path)) {
+                // A scenario problem found against the FMUs (a misspelt
+                // variable, an unknown instance) is named where it is written.
+                (RunError::Scenario(message), Ok(text)) => match line_of_port(&text, message) {
+                    Some(line) => eprintln!("{}:{line}: {message}", scenario_path.display()),
+                    None => eprintln!("{}: {message}", scenario_path.display()),
+                },
+                _ => eprintln!("{e}"),
+            }
             return ExitCode::from(exit_code(&e));
         }
     };
