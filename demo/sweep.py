@@ -144,9 +144,14 @@ class Spec:
 
 
 def _line_of(text: str, needle: str) -> int | None:
-    for number, line in enumerate(text.splitlines(), 1):
-        if needle in line:
-            return number
+    """The first line holding `needle` as a whole name (`relativ` is not
+    found in `relative`), else as any part of a line."""
+    lines = text.splitlines()
+    whole = re.compile(rf"(?<![\w]){re.escape(needle)}(?![\w])")
+    for found in (lambda line: whole.search(line), lambda line: needle in line):
+        for number, line in enumerate(lines, 1):
+            if found(line):
+                return number
     return None
 
 
@@ -158,6 +163,10 @@ def _fail(spec_path: Path, text: str, needle: str | None, problem: str) -> SpecE
 
 SPEC_KEYS = {"study", "title", "report", "seed", "timeout", "template", "variable", "exclude",
              "monte_carlo", "report_options", "runs_per_task"}
+#: What [report_options] may set, with the envelope report's defaults: the
+#: largest tracking RMS as a share of the demanded amplitude, the smallest
+#: reduction of a coupling span by decoupling for a point to hold.
+REPORT_OPTIONS = {"tracking_limit": 0.05, "reduction_limit": 2.0}
 
 
 def load_spec(path: str | Path) -> Spec:
@@ -234,6 +243,13 @@ def load_spec(path: str | Path) -> Spec:
             raise fail(sorted(bad)[0], f"monte_carlo: unknown key {sorted(bad)[0]!r}")
         vary = []
         for group in m.get("vary", []):
+            bad = set(group) - {"match", "relative"}
+            if bad:
+                raise fail(sorted(bad)[0], f"monte_carlo.vary: unknown key {sorted(bad)[0]!r} "
+                                           "(a group has match and relative)")
+            if "relative" not in group:
+                raise fail(group.get("match"), "monte_carlo.vary: every group needs `relative`, "
+                                               "the half width of its factors' range")
             try:
                 pattern = re.compile(group["match"])
             except (KeyError, re.error) as e:
@@ -248,6 +264,14 @@ def load_spec(path: str | Path) -> Spec:
             raise fail("samples", "monte_carlo.samples must be at least 1")
         mc = MonteCarlo(samples, m.get("instance", master.PLANT_INSTANCE), vary,
                         m.get("seed_parameter"))
+    report_options = data.get("report_options", {})
+    bad = set(report_options) - set(REPORT_OPTIONS)
+    if bad:
+        raise fail(sorted(bad)[0], f"report_options: unknown key {sorted(bad)[0]!r} (known: "
+                                   f"{', '.join(sorted(REPORT_OPTIONS))})")
+    for key, value in report_options.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
+            raise fail(key, f"report_options.{key} {value!r}: a positive number")
     timeout = data.get("timeout")
     runs_per_task = data.get("runs_per_task", RUNS_PER_TASK)
     if not isinstance(runs_per_task, int) or isinstance(runs_per_task, bool) or runs_per_task < 1:
@@ -256,7 +280,7 @@ def load_spec(path: str | Path) -> Spec:
                 report=data.get("report", "none"), seed=int(data.get("seed", 0)),
                 timeout=float(timeout) if timeout is not None else None,
                 template=data["template"], variables=variables, exclude=exclude,
-                monte_carlo=mc, report_options=data.get("report_options", {}),
+                monte_carlo=mc, report_options=report_options,
                 runs_per_task=runs_per_task)
 
 
@@ -394,6 +418,10 @@ def _plant_parameters(fmu_path: Path) -> dict:
             if v.causality == "parameter" and v.type == "Real" and v.start is not None}
 
 
+def _bound_text(bound, open_end: str) -> str:
+    return open_end if bound is None else f"{bound:g}"
+
+
 def perturbed(nominal: float, factor: float, low, high) -> float:
     """nominal x factor, kept within the parameter's declared range: outside
     it the model is not defined (the FMU refuses the value), e.g. a Bouc-Wen
@@ -474,6 +502,13 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                 for name, factor in factors.items():
                     start, low, high = nominal_start[name]
                     nominal = parameters.get(name, start)
+                    if (low is not None and nominal < low) or (high is not None and nominal > high):
+                        # Perturbed, it would be held at the bound without a
+                        # word: the value the spec gives is itself refused.
+                        raise _fail(spec.path, spec.text, name,
+                                    f"{mc.instance}.{name} = {nominal:g} (the nominal value the "
+                                    f"Monte Carlo perturbs) is outside its declared range "
+                                    f"[{_bound_text(low, '-inf')}, {_bound_text(high, 'inf')}]")
                     parameters[name] = perturbed(nominal, factor, low, high)
                     # The factor applied, after the range (the swept value).
                     applied[name] = parameters[name] / nominal if nominal else factor

@@ -24,6 +24,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import LogNorm  # noqa: E402
 
+from .sweep import REPORT_OPTIONS  # noqa: E402
+
 #: Share of a run's samples with a command at its limit above which the run
 #: measures the command range more than the plant.
 SATURATED_SHARE = 0.01
@@ -149,8 +151,8 @@ def reductions(axis: str, off: dict, on: dict) -> dict:
 
 def envelope_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
     options = json.loads(meta.get("report_options", "{}"))
-    tracking_limit = float(options.get("tracking_limit", 0.05))
-    reduction_limit = float(options.get("reduction_limit", 2.0))
+    tracking_limit = float(options.get("tracking_limit", REPORT_OPTIONS["tracking_limit"]))
+    reduction_limit = float(options.get("reduction_limit", REPORT_OPTIONS["reduction_limit"]))
     points = envelope_points(rows)
     lines = [f"## {meta.get('title', 'Operating envelope')}", "",
              spec_comment(meta.get("spec", "")), "", run_summary(rows), "",

@@ -386,6 +386,20 @@ def test_spec_errors_name_the_file_and_line(tmp_path):
                    "valuess = [1.0]\n")
     with pytest.raises(sweep.SpecError, match=rf"^{bad}:6: variable 'f': unknown key 'valuess'"):
         sweep.load_spec(bad)
+    # Inside a Monte Carlo group and the report's options too: a misspelt
+    # `relative` would have left its parameters unperturbed, a misspelt limit
+    # the report's default in force.
+    typo = SPEC.replace("relative = 0.03", "relativ = 0.03")
+    bad.write_text(typo)
+    line = typo.splitlines().index("relativ = 0.03") + 1
+    with pytest.raises(sweep.SpecError,
+                       match=rf"^{bad}:{line}: monte_carlo.vary: unknown key 'relativ'"):
+        sweep.load_spec(bad)
+    bad.write_text(SPEC + "[report_options]\ntracking_limt = 0.02\n")
+    line = len(SPEC.splitlines()) + 2
+    with pytest.raises(sweep.SpecError,
+                       match=rf"^{bad}:{line}: report_options: unknown key 'tracking_limt'"):
+        sweep.load_spec(bad)
 
 
 def test_runs_go_to_tasks_in_order_and_keep_every_worker_busy(tmp_path):
@@ -442,3 +456,23 @@ def test_the_robustness_report_says_whether_commands_saturated():
     summary = saturation_summary(saturated)
     assert "preset theta, decoupling on: 1 of 2 runs" in summary, summary
     assert "theta, decoupling off" not in summary and "preset x" not in summary, summary
+
+
+def test_a_nominal_value_outside_its_range_is_refused_not_held_at_the_bound(spec_path,
+                                                                            tmp_path):
+    """A Monte Carlo perturbs the template's value; one the FMU would refuse
+    (a gain of -1) was held at the bound of its declared range before, and
+    the run reported a value the spec never gave. It is refused, by name."""
+    bad = tmp_path / "bad.toml"
+    text = spec_path.read_text().replace('parameters = { "noise.enabled" = true }',
+                                         'parameters = { "noise.enabled" = true, '
+                                         '"amplifier.gain" = -1.0 }')
+    assert "amplifier.gain" in text
+    bad.write_text(text)
+    line = next(i for i, row in enumerate(text.splitlines(), 1) if "amplifier.gain" in row
+                and "-1.0" in row)
+    with pytest.raises(sweep.SpecError) as e:
+        sweep.expand(sweep.load_spec(bad))
+    assert str(e.value) == (f"{bad}:{line}: plant.amplifier.gain = -1 (the nominal value the "
+                            "Monte Carlo perturbs) is outside its declared range [0, inf]")
+
