@@ -151,6 +151,10 @@ pub enum Problem {
     UnknownColumn { name: String, header: String },
     #[error("column \"{name}\" is named twice in the header")]
     DuplicateColumn { name: String },
+    #[error(
+        "no column is left for the {role}: the header names {width} and the others are taken (give --{role})"
+    )]
+    NoDefaultColumn { role: &'static str, width: usize },
     #[error("field {field} is both the {first} and the {second} column")]
     SameColumn {
         field: usize,
@@ -835,16 +839,32 @@ fn resolve_columns(
         Sampling::TimeColumn(column) => Some(resolve(column)?),
         Sampling::Rate(_) => None,
     };
-    // A column left to the default is the first one no other role takes, so
-    // `--time 0` with a header "time,u,y" reads u and y, not time and u.
-    let first_free = |taken: &[Option<usize>]| (0..).find(|i| !taken.contains(&Some(*i)));
-    let input = match &options.input {
-        Some(column) => resolve(column)?,
-        None => first_free(&[time]).expect("a free column index"),
+    // A column left to the default is the first one that no other role
+    // takes, given or defaulted before it: `--time 0` with a header
+    // "time,u,y" reads u and y, not time and u; `--output 0` alone reads the
+    // input from column 1.
+    let given_input = options.input.as_ref().map(&resolve).transpose()?;
+    let given_output = options.output.as_ref().map(&resolve).transpose()?;
+    let width = header.map(|(_, names)| names.len());
+    let default = |role: &'static str, taken: &[Option<usize>]| {
+        let free = (0..)
+            .find(|i| !taken.contains(&Some(*i)))
+            .expect("a free column index");
+        match width {
+            Some(width) if free >= width => Err((
+                header.map(|(line, _)| *line),
+                Problem::NoDefaultColumn { role, width },
+            )),
+            _ => Ok(free),
+        }
     };
-    let output = match &options.output {
-        Some(column) => resolve(column)?,
-        None => first_free(&[time, Some(input)]).expect("a free column index"),
+    let input = match given_input {
+        Some(input) => input,
+        None => default("input", &[time, given_output])?,
+    };
+    let output = match given_output {
+        Some(output) => output,
+        None => default("output", &[time, Some(input)])?,
     };
     let line = header.map(|(line, _)| *line);
     let roles = [
@@ -1379,6 +1399,41 @@ mod tests {
             .collect();
         let (_, used) = parse_record_with_columns(&text, Path::new("data.txt"), &last).unwrap();
         assert_eq!((used.input.index, used.output.index), (0, 1));
+    }
+
+    #[test]
+    fn a_default_column_skips_a_given_one_and_says_when_none_is_left() {
+        let mut text = "time,y,u\n".to_owned();
+        for n in 0..40 {
+            text.push_str(&format!(
+                "{},{},{}\n",
+                n as f64 * 0.01,
+                2.0 * n as f64,
+                n as f64
+            ));
+        }
+        let output_given = ReadOptions {
+            input: None,
+            output: Some(Column::Name("y".into())),
+            sampling: Sampling::TimeColumn(Column::Index(0)),
+        };
+        let (_, used) =
+            parse_record_with_columns(&text, Path::new("data.txt"), &output_given).unwrap();
+        assert_eq!((used.input.index, used.output.index), (2, 1));
+        let narrow: String = text
+            .lines()
+            .map(|l| l.rsplit_once(',').unwrap().0.to_owned() + "\n")
+            .collect();
+        let defaults = ReadOptions {
+            input: None,
+            output: None,
+            sampling: Sampling::TimeColumn(Column::Index(0)),
+        };
+        assert_eq!(
+            message(&narrow, &defaults),
+            "data.txt:1: no column is left for the output: the header names 2 and the others \
+             are taken (give --output)"
+        );
     }
 
     #[test]

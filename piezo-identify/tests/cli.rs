@@ -878,4 +878,17 @@ fn decoupling_names_its_columns() {
     );
     assert!(out.contains("clamp(0.200000*f -0.500000"), "{out}");
     assert!(!out.contains("note:"), "{out}");
+    let same = run(&[
+        "decoupling",
+        path.to_str().unwrap(),
+        "--demand",
+        "1",
+        "--error",
+        "1",
+    ]);
+    assert!(!same.status.success());
+    assert_eq!(
+        stderr(&same).trim_end(),
+        "--demand and --error both name column 1: give the coupling error's own column"
+    );
 }

@@ -100,10 +100,10 @@ pub(crate) fn auto_or<T>(
 #[derive(Args)]
 pub(crate) struct ColumnArgs {
     /// Input (command voltage) column: 0-based index or header name [default: the first column
-    /// that is not the time column]
+    /// that is neither the time column nor a given --output]
     #[arg(long)]
     pub(crate) input: Option<String>,
-    /// Output (displacement) column: 0-based index or header name [default: the next column
+    /// Output (displacement) column: 0-based index or header name [default: the first column
     /// that is neither the time column nor the input]
     #[arg(long)]
     pub(crate) output: Option<String>,

@@ -217,7 +217,7 @@ pub(crate) fn print_inverse_pi_choices(
         if h == 0 {
             "none".to_owned()
         } else {
-            // The window and the half width that --smooth takes.
+            // The half width too: it is what --smooth takes, the window is not.
             format!(
                 "{} samples, half width {h} ({:.1} ms)",
                 2 * h + 1,

@@ -63,7 +63,8 @@ pub(crate) struct StageArgs {
 pub(crate) struct DecouplingArgs {
     /// Record with a driving-demand column and a coupling-error column.
     pub(crate) file: PathBuf,
-    /// Driving demand column (y_d or x_d [um], theta_zd [mdeg]): index or header.
+    /// Driving demand column (y_d or x_d [um], theta_zd [mdeg]): index or header (a file whose
+    /// first column is its time: name both columns).
     #[arg(long, default_value = "0")]
     pub(crate) demand: String,
     /// Coupling error column (demand - measurement of the coupled channel) [um].
@@ -165,6 +166,12 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
 }
 
 pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
+    if args.demand.trim() == args.error.trim() {
+        return Err(format!(
+            "--demand and --error both name column {}: give the coupling error's own column",
+            args.demand.trim()
+        ));
+    }
     let options = ReadOptions {
         input: Some(Column::parse(&args.demand)),
         output: Some(Column::parse(&args.error)),
@@ -196,7 +203,8 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
         // A compensation that leaves the span as wide as it found it has
         // nothing to cancel in these columns: most often the wrong ones.
         println!(
-            "note: the compensation does not narrow the coupling error; check that the demand and error columns are the ones meant (--demand, --error)"
+            "note: the compensation does not narrow the coupling error; check that the demand \
+             and error columns are the ones meant (--demand, --error)"
         );
     }
     Ok(())
