@@ -94,25 +94,49 @@ fn load(path: &Path) -> Result<Scenario, String> {
 }
 
 /// The 1-based line of a scenario's text where the port an error message
-/// starts with (`instance.variable: ...`) is written: the port itself (a
-/// signal or a connection), else its variable as a key or a name (a
-/// parameter of the instance's table). None when neither is written.
-fn line_of_port(text: &str, message: &str) -> Option<usize> {
+/// starts with (`instance.variable: ...`, `instance` one of `instances`) is
+/// written: the port in quotes (a signal or a connection), else the variable
+/// as a whole name inside the instance's `[fmu.instance]` tables (a
+/// parameter). None for any other message, or a port written nowhere (a
+/// value from a parameter set, which names its own file).
+fn line_of_port<'a>(
+    text: &str,
+    message: &str,
+    mut instances: impl Iterator<Item = &'a str>,
+) -> Option<usize> {
     let port = message.split(": ").next()?;
-    let (_, variable) = port.split_once('.')?;
+    let (instance, variable) = port.split_once('.')?;
+    if !instances.any(|name| name == instance) {
+        return None;
+    }
     let is_name_char = |c: char| c.is_alphanumeric() || c == '_';
-    let written_at = |needle: &str| {
-        text.lines().position(|line| {
-            line.match_indices(needle).any(|(at, _)| {
-                let before = line[..at].chars().next_back();
-                let after = line[at + needle.len()..].chars().next();
-                !before.is_some_and(is_name_char) && !after.is_some_and(is_name_char)
-            })
+    let holds = |line: &str, needle: &str| {
+        line.match_indices(needle).any(|(at, _)| {
+            let before = line[..at].chars().next_back();
+            let after = line[at + needle.len()..].chars().next();
+            !before.is_some_and(is_name_char) && !after.is_some_and(is_name_char)
         })
     };
-    written_at(port)
-        .or_else(|| written_at(variable))
-        .map(|i| i + 1)
+    let lines: Vec<&str> = text.lines().collect();
+    let quoted = format!("\"{port}\"");
+    if let Some(at) = lines.iter().position(|line| line.contains(&quoted)) {
+        return Some(at + 1);
+    }
+    let own_table = [format!("[fmu.{instance}"), format!("[fmu.\"{instance}\"")];
+    let mut inside = false;
+    for (at, line) in lines.iter().enumerate() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            inside = own_table.iter().any(|table| {
+                trimmed
+                    .strip_prefix(table.as_str())
+                    .is_some_and(|rest| rest.starts_with(']') || rest.starts_with('.'))
+            });
+        } else if inside && holds(line.split('#').next().unwrap_or(""), variable) {
+            return Some(at + 1);
+        }
+    }
+    None
 }
 
 /// Where the results go: the process's standard output, moved to a
@@ -278,10 +302,12 @@ fn main() -> ExitCode {
             match (&e, std::fs::read_to_string(&scenario_path)) {
                 // A scenario problem found against the FMUs (a misspelt
                 // variable, an unknown instance) is named where it is written.
-                (RunError::Scenario(message), Ok(text)) => match line_of_port(&text, message) {
-                    Some(line) => eprintln!("{}:{line}: {message}", scenario_path.display()),
-                    None => eprintln!("{}: {message}", scenario_path.display()),
-                },
+                (RunError::Scenario(message), Ok(text)) => {
+                    match line_of_port(&text, message, scenario.fmu.keys().map(String::as_str)) {
+                        Some(line) => eprintln!("{}:{line}: {message}", scenario_path.display()),
+                        None => eprintln!("{e}"),
+                    }
+                }
                 _ => eprintln!("{e}"),
             }
             return ExitCode::from(exit_code(&e));
@@ -316,4 +342,42 @@ fn main() -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::line_of_port;
+
+    const SCENARIO: &str = r#"duration = 1.0
+# feedbak_y in a comment is not where it is written
+[fmu.plant]
+path = "p.fmu"
+parameters = { feedbak_y = 1.0 }
+
+[fmu.controller]
+path = "c.fmu"
+parameters = { feedforward = true,
+  feedbak_y = true }
+
+[signal."controller.x_reff"]
+offset = 0.0
+"#;
+
+    fn line(message: &str) -> Option<usize> {
+        line_of_port(SCENARIO, message, ["plant", "controller"].into_iter())
+    }
+
+    #[test]
+    fn a_port_is_found_in_its_instances_table_or_quoted() {
+        assert_eq!(
+            line("controller.feedbak_y: c.fmu has no variable"),
+            Some(10)
+        );
+        assert_eq!(line("plant.feedbak_y: p.fmu has no variable"), Some(5));
+        assert_eq!(line("controller.x_reff: c.fmu has no variable"), Some(12));
+        // Written nowhere (a parameter set's value), another instance, not a port.
+        assert_eq!(line("controller.gain: c.fmu has no variable"), None);
+        assert_eq!(line("stage.feedbak_y: no FMU instance"), None);
+        assert_eq!(line("/tmp/c.fmu: cannot be opened"), None);
+    }
 }
