@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 from fmpy.fmi1 import FMICallException
 
-from demo.fmu import Fmu, FmuCallError, Instance, RealPort  # noqa: F401 (the demo's and tests' import path)
+# The demo's and the tests' import path for these names.
+from demo.fmu import Fmu, FmuCallError, Instance, RealPort  # noqa: F401
 
 
 #: The closed loop's wiring, the one table every master that builds the loop
@@ -158,9 +159,16 @@ def simulate(
         raise FmuCallError(error, p, c) from error
     finally:
         # An instance that returned fmi2Error may only be freed (or reset):
-        # fmi2Terminate is for a run that ended well.
-        c.free(terminate=completed)
-        p.free(terminate=completed)
+        # fmi2Terminate is for a run that ended well. Both are freed, and a
+        # refused fmi2Terminate is raised with what the FMUs logged.
+        refused = []
+        for instance in (c, p):
+            try:
+                instance.free(terminate=completed)
+            except FMICallException as error:
+                refused.append(error)
+        if refused:
+            raise FmuCallError(refused[0], p, c) from refused[0]
     return Run(
         t=t,
         references=references,

@@ -65,8 +65,8 @@ def lost_task_hint(error: BaseException) -> str:
     """What to do about a task that could not run, where the error says."""
     text = str(error)
     if "deserializ" in text or "No module named 'demo'" in text:
-        return ("\n  The scheduler and every worker must be able to import this repository's "
-                "`demo` package: start `dask scheduler` and `dask worker` from a checkout with "
+        return ("\n  If the scheduler or a worker cannot import this repository's `demo` package "
+                "(the usual cause), start `dask scheduler` and `dask worker` from a checkout with "
                 "PYTHONPATH set to it (README, \"Sweeps on dask\").")
     return ""
 
@@ -144,8 +144,9 @@ class Spec:
 
 
 def _line_of(text: str, needle: str) -> int | None:
-    """The first line holding `needle` as a whole name (`relativ` is not
-    found in `relative`), else as any part of a line."""
+    """The first line holding `needle` as a whole name (so a line with
+    `relativ` wins over an earlier one with `relative`), else the first line
+    holding it at all."""
     lines = text.splitlines()
     whole = re.compile(rf"(?<![\w]){re.escape(needle)}(?![\w])")
     for found in (lambda line: whole.search(line), lambda line: needle in line):
@@ -255,7 +256,7 @@ def load_spec(path: str | Path) -> Spec:
             except (KeyError, re.error) as e:
                 raise fail("match", f"monte_carlo.vary: a regular expression `match` is "
                                     f"needed ({e})") from None
-            relative = float(group.get("relative", 0.0))
+            relative = float(group["relative"])
             if not 0.0 <= relative < 1.0:
                 raise fail("relative", f"monte_carlo.vary: relative {relative} outside [0, 1)")
             vary.append(Vary(pattern, relative))
@@ -489,11 +490,15 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
     filled_points = []
     for point, env, patch in points:
         scenario = _fill(_merge(spec.template, patch), {**env}, spec)
-        filled_points.append((point, _resolve_fmus(scenario, spec, fmus, sets)))
+        # Where the perturbed instance's values come from, to name it when
+        # one of them is refused: the spec's own parameters, else its sets.
+        own = scenario.get("fmu", {}).get(mc.instance, {}) if mc else {}
+        origin = (dict(own.get("parameters", {})), list(own.get("parameter_sets", [])))
+        filled_points.append((point, _resolve_fmus(scenario, spec, fmus, sets), origin))
     for sample in samples:
         factors, seed = (sample_factors(spec, sample, vary_names) if sample is not None
                          else ({}, None))
-        for point, resolved in filled_points:
+        for point, resolved, origin in filled_points:
             scenario = copy.deepcopy(resolved)
             values = dict(point)
             if sample is not None:
@@ -504,11 +509,17 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                     nominal = parameters.get(name, start)
                     if (low is not None and nominal < low) or (high is not None and nominal > high):
                         # Perturbed, it would be held at the bound without a
-                        # word: the value the spec gives is itself refused.
-                        raise _fail(spec.path, spec.text, name,
-                                    f"{mc.instance}.{name} = {nominal:g} (the nominal value the "
-                                    f"Monte Carlo perturbs) is outside its declared range "
-                                    f"[{_bound_text(low, '-inf')}, {_bound_text(high, 'inf')}]")
+                        # word: the nominal value is itself refused.
+                        problem = (f"{mc.instance}.{name} = {nominal:g} (the nominal value the "
+                                   f"Monte Carlo perturbs) is outside its declared range "
+                                   f"[{_bound_text(low, '-inf')}, {_bound_text(high, 'inf')}]")
+                        own_values, set_names = origin
+                        given_in = [n for n in set_names if name in
+                                    sets[(spec.path.parent / n).resolve()]]
+                        if name not in own_values and given_in:
+                            set_path = (spec.path.parent / given_in[-1]).resolve()
+                            raise _fail(set_path, set_path.read_text(), f'"{name}"', problem)
+                        raise _fail(spec.path, spec.text, name, problem)
                     parameters[name] = perturbed(nominal, factor, low, high)
                     # The factor applied, after the range (the swept value).
                     applied[name] = parameters[name] / nominal if nominal else factor
