@@ -142,6 +142,10 @@ class Spec:
     #: Most runs one task (one master process) executes.
     runs_per_task: int = RUNS_PER_TASK
 
+    def file(self, name: str) -> Path:
+        """A file the spec names (an FMU, a parameter set), relative to its folder."""
+        return (self.path.parent / name).resolve()
+
 
 def _line_of(text: str, needle: str) -> int | None:
     """The first line holding `needle` as a whole name (so a line with
@@ -379,7 +383,7 @@ def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict) -> dict:
     folds parameter sets into the parameter values."""
     scenario = copy.deepcopy(scenario)
     for instance, entry in scenario.get("fmu", {}).items():
-        path = (spec.path.parent / entry["path"]).resolve()
+        path = spec.file(entry["path"])
         if path not in fmus:
             if not path.is_file():
                 raise _fail(spec.path, spec.text, entry["path"],
@@ -388,7 +392,7 @@ def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict) -> dict:
         entry["path"] = f"fmu:{fmus[path]}"
         values = {}
         for name in entry.pop("parameter_sets", []):
-            set_path = (spec.path.parent / name).resolve()
+            set_path = spec.file(name)
             if set_path not in sets:
                 try:
                     sets[set_path] = json.loads(set_path.read_text())
@@ -476,7 +480,7 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
         if plant_entry is None:
             raise _fail(spec.path, spec.text, "monte_carlo",
                         f"monte_carlo.instance {mc.instance!r} is not an FMU of the template")
-        plant_path = (spec.path.parent / plant_entry["path"]).resolve()
+        plant_path = spec.file(plant_entry["path"])
         nominal_start = _plant_parameters(plant_path)
         for g, group in enumerate(mc.vary):
             vary_names[g] = sorted(n for n in nominal_start if group.pattern.search(n))
@@ -514,10 +518,9 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                                    f"Monte Carlo perturbs) is outside its declared range "
                                    f"[{_bound_text(low, '-inf')}, {_bound_text(high, 'inf')}]")
                         own_values, set_names = origin
-                        given_in = [n for n in set_names if name in
-                                    sets[(spec.path.parent / n).resolve()]]
+                        given_in = [n for n in set_names if name in sets[spec.file(n)]]
                         if name not in own_values and given_in:
-                            set_path = (spec.path.parent / given_in[-1]).resolve()
+                            set_path = spec.file(given_in[-1])
                             raise _fail(set_path, set_path.read_text(), f'"{name}"', problem)
                         raise _fail(spec.path, spec.text, name, problem)
                     parameters[name] = perturbed(nominal, factor, low, high)

@@ -95,11 +95,11 @@ pub enum Sampling {
 /// Which columns to read and how the samples are spaced.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReadOptions {
-    /// The actuator command [V]; None: the first column that is not the
-    /// time column.
+    /// The actuator command [V]; None: the first column that neither the
+    /// time column nor a given output takes.
     pub input: Option<Column>,
-    /// The measured displacement [µm]; None: the first column that is
-    /// neither the time column nor the input.
+    /// The measured displacement [µm]; None: the first column that neither
+    /// the time column nor the input takes.
     pub output: Option<Column>,
     pub sampling: Sampling,
 }
@@ -845,16 +845,14 @@ fn resolve_columns(
     // input from column 1.
     let given_input = options.input.as_ref().map(&resolve).transpose()?;
     let given_output = options.output.as_ref().map(&resolve).transpose()?;
+    let line = header.map(|(line, _)| *line);
     let width = header.map(|(_, names)| names.len());
     let default = |role: &'static str, taken: &[Option<usize>]| {
         let free = (0..)
             .find(|i| !taken.contains(&Some(*i)))
             .expect("a free column index");
         match width {
-            Some(width) if free >= width => Err((
-                header.map(|(line, _)| *line),
-                Problem::NoDefaultColumn { role, width },
-            )),
+            Some(width) if free >= width => Err((line, Problem::NoDefaultColumn { role, width })),
             _ => Ok(free),
         }
     };
@@ -866,7 +864,6 @@ fn resolve_columns(
         Some(output) => output,
         None => default("output", &[time, Some(input)])?,
     };
-    let line = header.map(|(line, _)| *line);
     let roles = [
         ("input", Some(input)),
         ("output", Some(output)),
@@ -1360,17 +1357,25 @@ mod tests {
         );
     }
 
+    /// `header` above 40 comma-separated rows: time n·0.01 s, u = n, y = 2n
+    /// in the order `order` gives ("tuy" is time, u, y).
+    fn time_u_y(header: &str, order: &str) -> String {
+        let mut text = format!("{header}\n");
+        for n in 0..40 {
+            let field = |c| match c {
+                't' => n as f64 * 0.01,
+                'u' => n as f64,
+                _ => 2.0 * n as f64,
+            };
+            let row: Vec<String> = order.chars().map(|c| field(c).to_string()).collect();
+            text.push_str(&(row.join(",") + "\n"));
+        }
+        text
+    }
+
     #[test]
     fn columns_left_to_the_default_skip_the_time_column() {
-        let mut text = "time,u,y\n".to_owned();
-        for n in 0..40 {
-            text.push_str(&format!(
-                "{},{},{}\n",
-                n as f64 * 0.01,
-                n as f64,
-                2.0 * n as f64
-            ));
-        }
+        let text = time_u_y("time,u,y", "tuy");
         let defaults = |time: Column| ReadOptions {
             input: None,
             output: None,
@@ -1389,29 +1394,14 @@ mod tests {
             sampling: Sampling::TimeColumn(Column::Index(2)),
             ..defaults(Column::Index(0))
         };
-        let text: String = text
-            .lines()
-            .skip(1)
-            .map(|l| {
-                let f: Vec<&str> = l.split(',').collect();
-                format!("{},{},{}\n", f[1], f[2], f[0])
-            })
-            .collect();
+        let text = time_u_y("u,y,time", "uyt");
         let (_, used) = parse_record_with_columns(&text, Path::new("data.txt"), &last).unwrap();
         assert_eq!((used.input.index, used.output.index), (0, 1));
     }
 
     #[test]
     fn a_default_column_skips_a_given_one_and_says_when_none_is_left() {
-        let mut text = "time,y,u\n".to_owned();
-        for n in 0..40 {
-            text.push_str(&format!(
-                "{},{},{}\n",
-                n as f64 * 0.01,
-                2.0 * n as f64,
-                n as f64
-            ));
-        }
+        let text = time_u_y("time,y,u", "tyu");
         let output_given = ReadOptions {
             input: None,
             output: Some(Column::Name("y".into())),
