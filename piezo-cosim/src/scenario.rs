@@ -232,9 +232,13 @@ impl Scenario {
                 ))
             })?
         };
-        scenario
-            .validate()
-            .map_err(|e| ScenarioError(format!("{origin}: {e}")))?;
+        scenario.validate().map_err(|e| {
+            let line = e.line(text, json);
+            ScenarioError(match line {
+                Some(line) => format!("{origin}:{line}: {}", e.message),
+                None => format!("{origin}: {}", e.message),
+            })
+        })?;
         Ok(scenario)
     }
 
@@ -256,7 +260,7 @@ impl Scenario {
         })?;
         scenario
             .validate()
-            .map_err(|e| ScenarioError(format!("{origin}:{line}: {e}")))?;
+            .map_err(|e| ScenarioError(format!("{origin}:{line}: {}", e.message)))?;
         Ok(scenario)
     }
 
@@ -289,46 +293,62 @@ impl Scenario {
     }
 
     /// Checks what does not need the FMUs.
-    fn validate(&self) -> Result<(), String> {
+    fn validate(&self) -> Result<(), Invalid> {
         if !(self.step.is_finite() && self.step > 0.0) {
-            return Err(format!(
-                "step must be a positive number of seconds, not {}",
-                self.step
+            return Err(Invalid::key(
+                "step",
+                format!(
+                    "step must be a positive number of seconds, not {}",
+                    self.step
+                ),
             ));
         }
         if !(self.duration.is_finite() && self.duration >= self.step) {
-            return Err(format!(
-                "duration must be at least one step ({} s), not {}",
-                self.step, self.duration
+            return Err(Invalid::key(
+                "duration",
+                format!(
+                    "duration must be at least one step ({} s), not {}",
+                    self.step, self.duration
+                ),
             ));
         }
         if self.duration / self.step > 1e9 {
-            return Err(format!(
-                "{} s at {} s per step is more than 1e9 steps",
-                self.duration, self.step
+            return Err(Invalid::key(
+                "duration",
+                format!(
+                    "{} s at {} s per step is more than 1e9 steps",
+                    self.duration, self.step
+                ),
             ));
         }
         // The signals are sampled up to t_(steps + preview): a preview past
         // the run's end previews nothing the run uses.
         if self.preview as usize > self.steps() {
-            return Err(format!(
-                "preview ({} samples) must not exceed the run's {} steps",
-                self.preview,
-                self.steps()
+            return Err(Invalid::key(
+                "preview",
+                format!(
+                    "preview ({} samples) must not exceed the run's {} steps",
+                    self.preview,
+                    self.steps()
+                ),
             ));
         }
         if self.fmu.is_empty() {
-            return Err("no [fmu.<instance>] table".to_owned());
+            return Err(Invalid::anywhere("no [fmu.<instance>] table".to_owned()));
         }
-        let instance_of = |port: &str, what: &str| -> Result<(), String> {
-            let (instance, _) = split_port(port)
-                .ok_or_else(|| format!("{what} {port:?} is not `instance.variable`"))?;
+        let instance_of = |port: &str, what: &str| -> Result<(), Invalid> {
+            let (instance, _) = split_port(port).ok_or_else(|| {
+                Invalid::port(port, format!("{what} {port:?} is not `instance.variable`"))
+            })?;
             if self.fmu.contains_key(instance) {
                 Ok(())
             } else {
-                Err(format!(
-                    "{what} {port:?}: no FMU instance {instance:?} (instances: {})",
-                    self.fmu.keys().cloned().collect::<Vec<_>>().join(", ")
+                Err(Invalid::port(
+                    port,
+                    format!(
+                        "{what} {port:?}: no FMU instance {instance:?} (instances: {})",
+                        self.fmu.keys().cloned().collect::<Vec<_>>().join(", ")
+                    ),
                 ))
             }
         };
@@ -340,26 +360,110 @@ impl Scenario {
             instance_of(port, "signal")?;
             trajectory
                 .validate()
-                .map_err(|e| format!("signal {port:?}: {e}"))?;
+                .map_err(|e| Invalid::port(port, format!("signal {port:?}: {e}")))?;
         }
         for port in &self.record {
             instance_of(port, "recorded variable")?;
         }
         if let Some(metrics) = &self.metrics {
             if !metrics.from.is_finite() || metrics.from > self.duration {
-                return Err(format!(
-                    "metrics.from ({}) must lie within the run (duration {} s)",
-                    metrics.from, self.duration
+                return Err(Invalid::table_key(
+                    "metrics",
+                    "from",
+                    format!(
+                        "metrics.from ({}) must lie within the run (duration {} s)",
+                        metrics.from, self.duration
+                    ),
                 ));
             }
             if metrics.driven == Driven::Xy && metrics.contour.is_none() {
-                return Err(
+                return Err(Invalid::table_key(
+                    "metrics",
+                    "driven",
                     "metrics of an xy run need the demanded contour: contour = { centre = [x, y], radius = r }"
                         .to_owned(),
-                );
+                ));
             }
         }
         Ok(())
+    }
+}
+
+/// A problem [`Scenario::validate`] found, and where it is written.
+#[derive(Debug)]
+struct Invalid {
+    message: String,
+    written: Written,
+}
+
+/// What locates a problem in a scenario's text.
+#[derive(Debug)]
+enum Written {
+    /// A port, written in quotes: a signal's key, a connection's end, a
+    /// recorded variable.
+    Port(String),
+    /// A key of a table (`""`: the top level, before any table header).
+    Key {
+        table: &'static str,
+        key: &'static str,
+    },
+    /// The whole scenario.
+    Anywhere,
+}
+
+impl Invalid {
+    fn port(port: &str, message: String) -> Invalid {
+        Invalid {
+            message,
+            written: Written::Port(port.to_owned()),
+        }
+    }
+
+    fn key(key: &'static str, message: String) -> Invalid {
+        Invalid::table_key("", key, message)
+    }
+
+    fn table_key(table: &'static str, key: &'static str, message: String) -> Invalid {
+        Invalid {
+            message,
+            written: Written::Key { table, key },
+        }
+    }
+
+    fn anywhere(message: String) -> Invalid {
+        Invalid {
+            message,
+            written: Written::Anywhere,
+        }
+    }
+
+    /// The 1-based line of `text` where the problem is written, if it can be
+    /// found: the first line holding the quoted port (TOML or JSON), or the
+    /// key's line inside its table (TOML).
+    fn line(&self, text: &str, json: bool) -> Option<usize> {
+        match &self.written {
+            Written::Port(port) => {
+                let quoted = format!("\"{port}\"");
+                text.lines().position(|line| line.contains(&quoted))
+            }
+            Written::Key { .. } if json => None,
+            Written::Key { table, key } => {
+                let mut current = "";
+                text.lines().position(|line| {
+                    let line = line.split('#').next().unwrap_or("").trim();
+                    if let Some(header) = line.strip_prefix('[') {
+                        current = header.trim_end_matches(']').trim();
+                        return false;
+                    }
+                    current == *table
+                        && line
+                            .strip_prefix(*key)
+                            .is_some_and(|rest| rest.trim_start().starts_with('='))
+                })
+            }
+            Written::Anywhere => None,
+        }
+        .map(|at| at + 1)
     }
 }
 
@@ -468,9 +572,9 @@ path = "c.fmu"
     fn a_preview_longer_than_the_run_is_refused() {
         let text = MINIMAL.replace("duration = 1.0", "duration = 1.0\npreview = 10001");
         let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
-        assert!(
-            e.contains("preview (10001 samples) must not exceed the run's 10000 steps"),
-            "{e}"
+        assert_eq!(
+            e,
+            "s.toml:3: preview (10001 samples) must not exceed the run's 10000 steps"
         );
         let text = MINIMAL.replace("duration = 1.0", "duration = 1.0\npreview = 10000");
         assert!(Scenario::parse(&text, false, "s.toml").is_ok());
@@ -492,11 +596,55 @@ path = "c.fmu"
         assert!(e.starts_with("s.json:3:"), "{e}");
     }
 
+    /// A port of an unknown instance is named at the line that writes it:
+    /// a signal's table, a connection's end, a recorded variable, in TOML
+    /// and in JSON.
     #[test]
     fn ports_must_name_an_instance() {
         let text = format!("{MINIMAL}\n[signal.\"ctrl.y_ref\"]\noffset = 1.0\n");
         let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
-        assert!(e.contains("no FMU instance \"ctrl\""), "{e}");
+        assert_eq!(
+            e,
+            "s.toml:8: signal \"ctrl.y_ref\": no FMU instance \"ctrl\" (instances: controller, plant)"
+        );
+        let text = MINIMAL.replace(
+            "duration = 1.0",
+            "duration = 1.0\nrecord = [\"plant.x\",\n  \"plant.y\", \"stage.y\"]",
+        ) + "[[connection]]\nfrom = \"plant.y\"\nto = \"ctrl.y\"\n";
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(
+            e.starts_with("s.toml:11: connection destination \"ctrl.y\""),
+            "{e}"
+        );
+        let text = text.replace("\"ctrl.y\"", "\"controller.y\"");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(
+            e.starts_with("s.toml:4: recorded variable \"stage.y\""),
+            "{e}"
+        );
+        let json = "{\n \"duration\": 1.0,\n \"fmu\": {\"plant\": {\"path\": \"p.fmu\"}, \"controller\": {\"path\": \"c.fmu\"}},\n \
+                    \"record\": [\"plant.x\",\n  \"plant_x\"]\n}";
+        let e = Scenario::parse(json, true, "s.json").unwrap_err().0;
+        assert_eq!(
+            e,
+            "s.json:5: recorded variable \"plant_x\" is not `instance.variable`"
+        );
+    }
+
+    /// A top-level or [metrics] value out of range is named at its line;
+    /// in JSON, where keys are not located, at the file.
+    #[test]
+    fn a_value_out_of_range_names_its_line() {
+        let text = MINIMAL.replace("duration = 1.0", "# a run\nstep = -1e-4\nduration = 1.0");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(e.starts_with("s.toml:3: step must be a positive"), "{e}");
+        let text = format!("{MINIMAL}\n[metrics]\ndriven = \"y\"\nfrom = 1.5 # after the end\n");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(e.starts_with("s.toml:10: metrics.from (1.5)"), "{e}");
+        let json =
+            "{\n \"duration\": 1.0,\n \"step\": 0,\n \"fmu\": {\"p\": {\"path\": \"p.fmu\"}}\n}";
+        let e = Scenario::parse(json, true, "s.json").unwrap_err().0;
+        assert!(e.starts_with("s.json: step must be a positive"), "{e}");
     }
 
     #[test]

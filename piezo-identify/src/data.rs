@@ -90,6 +90,11 @@ pub enum Sampling {
     TimeColumn(Column),
     /// A fixed sample rate [Hz].
     Rate(f64),
+    /// The spacing does not matter (a static fit, such as a decoupling
+    /// compensation): the record's sample period is 1 s by convention. A time
+    /// column, if named, is only skipped by the defaulted columns and must
+    /// increase strictly; its spacing is not checked.
+    Unspaced { time: Option<Column> },
 }
 
 /// Which columns to read and how the samples are spaced.
@@ -102,6 +107,24 @@ pub struct ReadOptions {
     /// the time column nor the input takes.
     pub output: Option<Column>,
     pub sampling: Sampling,
+    /// What the input and output columns are called in messages.
+    pub roles: Roles,
+}
+
+/// The names of the input and output columns' roles, as a command's options
+/// name them: a message says "give --{role}".
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Roles {
+    pub input: &'static str,
+    pub output: &'static str,
+}
+
+impl Roles {
+    /// A hysteresis record: the actuator command and the displacement.
+    pub const INPUT_OUTPUT: Roles = Roles {
+        input: "input",
+        output: "output",
+    };
 }
 
 /// A voltage/displacement record sampled at a fixed period.
@@ -668,6 +691,7 @@ pub fn parse_record_with_columns(
     let sample_period = match options.sampling {
         Sampling::Rate(rate) => 1.0 / rate,
         Sampling::TimeColumn(_) => uniform_period(&times).map_err(|(l, p)| malformed(l, p))?,
+        Sampling::Unspaced { .. } => 1.0,
     };
     let used = |index: usize| UsedColumn {
         index,
@@ -780,6 +804,7 @@ struct ResolvedColumns {
     input: usize,
     output: usize,
     time: Option<usize>,
+    roles: Roles,
 }
 
 impl ResolvedColumns {
@@ -790,9 +815,9 @@ impl ResolvedColumns {
     /// What a column is read as, if anything.
     fn role(&self, column: usize) -> Option<&'static str> {
         if column == self.input {
-            Some("input")
+            Some(self.roles.input)
         } else if column == self.output {
-            Some("output")
+            Some(self.roles.output)
         } else if Some(column) == self.time {
             Some("time")
         } else {
@@ -836,8 +861,10 @@ fn resolve_columns(
         }
     };
     let time = match &options.sampling {
-        Sampling::TimeColumn(column) => Some(resolve(column)?),
-        Sampling::Rate(_) => None,
+        Sampling::TimeColumn(column) | Sampling::Unspaced { time: Some(column) } => {
+            Some(resolve(column)?)
+        }
+        Sampling::Rate(_) | Sampling::Unspaced { time: None } => None,
     };
     // A column left to the default is the first one that no other role
     // takes, given or defaulted before it: `--time 0` with a header
@@ -858,15 +885,15 @@ fn resolve_columns(
     };
     let input = match given_input {
         Some(input) => input,
-        None => default("input", &[time, given_output])?,
+        None => default(options.roles.input, &[time, given_output])?,
     };
     let output = match given_output {
         Some(output) => output,
-        None => default("output", &[time, Some(input)])?,
+        None => default(options.roles.output, &[time, Some(input)])?,
     };
     let roles = [
-        ("input", Some(input)),
-        ("output", Some(output)),
+        (options.roles.input, Some(input)),
+        (options.roles.output, Some(output)),
         ("time", time),
     ];
     for (i, (first, a)) in roles.iter().enumerate() {
@@ -887,6 +914,7 @@ fn resolve_columns(
         input,
         output,
         time,
+        roles: options.roles,
     })
 }
 
@@ -913,6 +941,7 @@ mod tests {
             input: Some(input),
             output: Some(output),
             sampling,
+            roles: Roles::INPUT_OUTPUT,
         }
     }
 
@@ -1380,6 +1409,7 @@ mod tests {
             input: None,
             output: None,
             sampling: Sampling::TimeColumn(time),
+            roles: Roles::INPUT_OUTPUT,
         };
         for time in [Column::Index(0), Column::Name("time".into())] {
             let (record, used) =
@@ -1392,6 +1422,7 @@ mod tests {
         // The time column last: the defaults are the first two columns.
         let last = ReadOptions {
             sampling: Sampling::TimeColumn(Column::Index(2)),
+            roles: Roles::INPUT_OUTPUT,
             ..defaults(Column::Index(0))
         };
         let text = time_u_y("u,y,time", "uyt");
@@ -1406,6 +1437,7 @@ mod tests {
             input: None,
             output: Some(Column::Name("y".into())),
             sampling: Sampling::TimeColumn(Column::Index(0)),
+            roles: Roles::INPUT_OUTPUT,
         };
         let (_, used) =
             parse_record_with_columns(&text, Path::new("data.txt"), &output_given).unwrap();
@@ -1418,6 +1450,7 @@ mod tests {
             input: None,
             output: None,
             sampling: Sampling::TimeColumn(Column::Index(0)),
+            roles: Roles::INPUT_OUTPUT,
         };
         assert_eq!(
             message(&narrow, &defaults),
@@ -1433,6 +1466,7 @@ mod tests {
             input: Some(Column::Index(input)),
             output: Some(Column::Index(output)),
             sampling: Sampling::TimeColumn(Column::Name("time".into())),
+            roles: Roles::INPUT_OUTPUT,
         };
         assert_eq!(
             message(&header, &given(0, 2)),

@@ -59,7 +59,7 @@ pub mod stage;
 pub mod validation;
 pub mod xy200s;
 
-pub use data::{Column, DataError, ReadOptions, Record, Sampling, read_record};
+pub use data::{Column, DataError, ReadOptions, Record, Roles, Sampling, read_record};
 pub use fit::{
     Fit, FitError, FitOptions, FitQuality, StartResult, fit_classical_pi, fit_modified_inverse_pi,
     fit_modified_inverse_pi_with_progress, fit_traditional_inverse_pi,

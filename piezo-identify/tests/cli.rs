@@ -890,3 +890,59 @@ fn decoupling_names_its_columns() {
         "--demand and --error both name column 1: give the coupling error's own column"
     );
 }
+
+/// `decoupling --time` skips the time column when choosing the default
+/// columns, and takes a record whose samples are not evenly spaced (the fit
+/// is static); without it, the time column is read as the demand.
+#[test]
+fn decoupling_skips_a_named_time_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("coupling.csv");
+    let mut text = String::from("time,demand,error\n");
+    for n in 0..100 {
+        let demand = 0.1 * n as f64;
+        // Jittered, as a PC's logger spaces them: 10 ms +- 3 ms.
+        let time = 0.01 * n as f64 + 0.003 * ((n % 3) as f64 - 1.0);
+        text.push_str(&format!("{time},{demand},{}\n", -0.3 * demand + 0.2));
+    }
+    std::fs::write(&path, text).unwrap();
+    let file = path.to_str().unwrap();
+    let timed = run(&["decoupling", file, "--time", "time"]);
+    assert!(timed.status.success(), "{}", stderr(&timed));
+    let out = stdout(&timed);
+    assert!(
+        out.contains("columns: demand column 1 \"demand\", coupling error column 2 \"error\""),
+        "{out}"
+    );
+    assert!(out.contains("clamp(-0.300000*f +0.200000"), "{out}");
+    let untimed = run(&["decoupling", file]);
+    assert!(untimed.status.success(), "{}", stderr(&untimed));
+    assert!(
+        stdout(&untimed)
+            .contains("columns: demand column 0 \"time\", coupling error column 1 \"demand\""),
+        "{}",
+        stdout(&untimed)
+    );
+    let clash = run(&["decoupling", file, "--time", "time", "--demand", "0"]);
+    assert!(!clash.status.success());
+    assert_eq!(
+        stderr(&clash).trim_end(),
+        format!("{file}:1: field 0 is both the demand and the time column")
+    );
+    let past_the_end = run(&["decoupling", file, "--time", "0", "--error", "3"]);
+    assert!(!past_the_end.status.success());
+    assert_eq!(
+        stderr(&past_the_end).trim_end(),
+        format!("{file}:2: row has 3 columns, column 3 (0-based) is needed")
+    );
+    let only_two = dir.path().join("two.csv");
+    std::fs::write(&only_two, "time,demand\n0,1\n1,2\n2,3\n").unwrap();
+    let short = run(&["decoupling", only_two.to_str().unwrap(), "--time", "time"]);
+    assert!(!short.status.success());
+    assert!(
+        stderr(&short).contains("no column is left for the error")
+            && stderr(&short).contains("give --error"),
+        "{}",
+        stderr(&short)
+    );
+}

@@ -10,7 +10,7 @@ use piezo_identify::plant::{PlantFmu, read_parameter_set};
 use piezo_identify::protocol::{Plan, PlanOptions, ZeroAlignment};
 use piezo_identify::segments::{SegmentOptions, Segments};
 use piezo_identify::validation::displacement_offset;
-use piezo_identify::{Column, FitOptions, ReadOptions, Record, Sampling, read_record};
+use piezo_identify::{Column, FitOptions, ReadOptions, Record, Roles, Sampling, read_record};
 use serde::Serialize;
 
 /// Where the record is cut, what is left out of fit and score, and the
@@ -126,6 +126,7 @@ impl ColumnArgs {
             input: self.input.as_deref().map(Column::parse),
             output: self.output.as_deref().map(Column::parse),
             sampling,
+            roles: Roles::INPUT_OUTPUT,
         })
     }
 }

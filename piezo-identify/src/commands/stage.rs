@@ -8,7 +8,7 @@ use clap::Args;
 use piezo_identify::data::read_record_with_columns;
 use piezo_identify::decoupling::fit_compensation;
 use piezo_identify::stage::{StageConditions, identify_stage};
-use piezo_identify::{Column, ReadOptions, Sampling};
+use piezo_identify::{Column, ReadOptions, Roles, Sampling};
 
 use super::arguments::{SearchArgs, open_plant};
 use super::progress::progress_bar;
@@ -63,13 +63,18 @@ pub(crate) struct StageArgs {
 pub(crate) struct DecouplingArgs {
     /// Record with a driving-demand column and a coupling-error column.
     pub(crate) file: PathBuf,
-    /// Driving demand column (y_d or x_d [um], theta_zd [mdeg]): index or header (a file whose
-    /// first column is its time: name both columns).
-    #[arg(long, default_value = "0")]
-    pub(crate) demand: String,
-    /// Coupling error column (demand - measurement of the coupled channel) [um].
-    #[arg(long, default_value = "1")]
-    pub(crate) error: String,
+    /// Driving demand column (y_d or x_d [um], theta_zd [mdeg]): index or header [default: the
+    /// first column that is neither the time column nor a given --error]
+    #[arg(long)]
+    pub(crate) demand: Option<String>,
+    /// Coupling error column (demand - measurement of the coupled channel) [um]: index or
+    /// header [default: the first column that is neither the time column nor the demand]
+    #[arg(long)]
+    pub(crate) error: Option<String>,
+    /// Time column, if the record has one: skipped by the defaults above (the fit is static, so
+    /// the spacing of the samples does not matter)
+    #[arg(long)]
+    pub(crate) time: Option<String>,
 }
 
 /// Decimation of the plant's 10 kHz eq. (6) records for the search (500 Hz).
@@ -166,17 +171,24 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
 }
 
 pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
-    if args.demand.trim() == args.error.trim() {
+    if let (Some(demand), Some(error)) = (&args.demand, &args.error)
+        && demand.trim() == error.trim()
+    {
         return Err(format!(
             "--demand and --error both name column {}: give the coupling error's own column",
-            args.demand.trim()
+            demand.trim()
         ));
     }
     let options = ReadOptions {
-        input: Some(Column::parse(&args.demand)),
-        output: Some(Column::parse(&args.error)),
-        // The fit is static: the sampling does not matter.
-        sampling: Sampling::Rate(1.0),
+        input: args.demand.as_deref().map(Column::parse),
+        output: args.error.as_deref().map(Column::parse),
+        sampling: Sampling::Unspaced {
+            time: args.time.as_deref().map(Column::parse),
+        },
+        roles: Roles {
+            input: "demand",
+            output: "error",
+        },
     };
     let (record, used) =
         read_record_with_columns(&args.file, &options).map_err(|e| e.to_string())?;
