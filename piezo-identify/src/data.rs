@@ -2,9 +2,14 @@
 //!
 //! The format is the common one of measurement exports: one sample per line,
 //! columns separated by tabs, semicolons, commas or spaces ([`Separator`]
-//! says how the file's first lines decide), an optional header row of
-//! column names (with a separator character, names may contain spaces), `#`
-//! starting a comment (whole line or trailing) and blank lines ignored.
+//! says how the file's first lines decide, unless an Excel `sep=;` line
+//! states it), an optional header row of column names (with a separator
+//! character, names may contain spaces, and a field in double quotes may
+//! hold the separator), `#` starting a comment (whole line or trailing), `%`
+//! starting a comment line (MATLAB, Octave) and blank lines ignored. A UTF-8
+//! byte-order mark is dropped, UTF-16 with its mark is decoded, and a file
+//! whose lines end in a lone CR is read by those. A column in m, mm or nm, or
+//! in mV or kV, is read in µm or V ([`Conversion`]).
 //! Options pick the input (voltage) and output (displacement) columns by
 //! 0-based index or by header name, and give the sampling either as a time
 //! column or as a sample rate. A header must have as many names as the rows
@@ -22,8 +27,8 @@
 //! fields as the header, each empty or unit-like ([`unit_like`]; a row of
 //! typos or missing values is a bad data row). The time column's unit, from
 //! that row or else from the end of its name (`Time (ms)`, `t [us]`,
-//! `t/ms`), scales it to seconds ([`seconds_per`]: s, ms, us, µs, ns and
-//! their common spellings, in any case); a units row that gives the time
+//! `t/ms`, `time_ms`), scales it to seconds ([`seconds_per`]: h, min, s, ms,
+//! us, µs, ns and their common spellings, in any case); a units row that gives the time
 //! column another unit, or disagrees with its name, is refused, since the
 //! rates and the sampling period would be off by that factor. The summary
 //! names the units it read, and where the time unit came from.
@@ -49,8 +54,35 @@ use std::path::{Path, PathBuf};
 /// rival), so that even an unsampled fit is over-determined.
 pub const MINIMUM_ROWS: usize = 32;
 
-/// Largest relative deviation of one time step from the mean step before the
-/// sampling counts as non-uniform (1 %): the hysteresis operators are
+/// A number in messages, to 6 significant digits: `0.01` rather than the
+/// `0.010000000000001563` a difference of two times prints.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Short(pub f64);
+
+impl fmt::Display for Short {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let value = self.0;
+        if value == 0.0 || !value.is_finite() {
+            return write!(f, "{value}");
+        }
+        let magnitude = value.abs().log10().floor() as i32;
+        if (-4..6).contains(&magnitude) {
+            let decimals = (5 - magnitude).max(0) as usize;
+            let text = format!("{value:.decimals$}");
+            let text = if text.contains('.') {
+                text.trim_end_matches('0').trim_end_matches('.')
+            } else {
+                &text
+            };
+            write!(f, "{text}")
+        } else {
+            write!(f, "{value:.5e}")
+        }
+    }
+}
+
+/// Largest relative deviation of one time step from the usual (median) step
+/// before the sampling counts as non-uniform (1 %): the hysteresis operators are
 /// discrete-time (seed 000 eq. 1, sampling period T) and the rates are
 /// backward differences, both of which assume one fixed period.
 pub const UNIFORM_SAMPLING_TOLERANCE: f64 = 0.01;
@@ -175,7 +207,7 @@ pub enum Problem {
     #[error("column \"{name}\" is named twice in the header")]
     DuplicateColumn { name: String },
     #[error(
-        "no column is left for the {role}: the header names {width} and the others are taken (give --{role})"
+        "no column is left for the {role}: the header names {width}, and the others are taken or name a time (give --{role})"
     )]
     NoDefaultColumn { role: &'static str, width: usize },
     #[error("field {field} is both the {first} and the {second} column")]
@@ -200,9 +232,21 @@ pub enum Problem {
     #[error("time {time} s does not increase (previous row: {previous} s)")]
     TimeNotIncreasing { previous: f64, time: f64 },
     #[error(
-        "time step {step} s differs from the mean step {mean} s by more than 1 % (non-uniform sampling: resample the record, or give --rate instead of --time to take its rows as evenly spaced)"
+        "time step {step} s differs from the usual step {usual} s by more than 1 % (non-uniform sampling: resample the record, or give --rate instead of --time to take its rows as evenly spaced)"
     )]
-    NonUniformSampling { step: f64, mean: f64 },
+    NonUniformSampling { step: Short, usual: Short },
+    #[error(
+        "the time jumps by {step} s, {steps} times the usual step of {usual} s: samples are missing, and the record is not continuous here (fit the part before or after the gap, each as its own file)"
+    )]
+    TimeGap {
+        step: Short,
+        usual: Short,
+        steps: Short,
+    },
+    #[error(
+        "the time column steps by {step} per row and names no unit, so it would be read in seconds: slower than one sample a second, too slow for a hysteresis record; name its unit in the header (\"time [ms]\", \"time_ms\") or give --rate"
+    )]
+    SlowInSeconds { step: Short },
     #[error("only {found} data rows, at least {minimum} are needed")]
     TooFewRows { found: usize, minimum: usize },
 }
@@ -319,6 +363,21 @@ impl Separator {
         })
     }
 
+    /// The separator an Excel `sep=X` line states.
+    fn stated(content: &str) -> Option<Separator> {
+        let rest = content
+            .trim_start()
+            .get(..4)
+            .filter(|key| key.eq_ignore_ascii_case("sep="))
+            .map(|_| &content.trim_start()[4..])?;
+        match rest.trim_end_matches(['\r', ' ']) {
+            "," => Some(Separator::Comma),
+            ";" => Some(Separator::Semicolon),
+            "\t" | "" if rest.starts_with('\t') => Some(Separator::Tab),
+            _ => None,
+        }
+    }
+
     /// The name used in messages.
     pub fn name(self) -> &'static str {
         match self {
@@ -347,8 +406,34 @@ impl Separator {
             .map(|value| (value, true))
     }
 
+    /// The fields of a line. A field in double quotes (RFC 4180: R's
+    /// write.csv, a name holding the separator) may hold the separator, and
+    /// is read without its quotes.
     fn split(self, content: &str) -> Vec<&str> {
-        let by = |c: char| content.split(c).map(|f| f.trim_matches(' ')).collect();
+        fn unquoted(field: &str) -> &str {
+            let field = field.trim_matches(' ');
+            match field.strip_prefix('"').and_then(|f| f.strip_suffix('"')) {
+                Some(inner) => inner,
+                None => field,
+            }
+        }
+        let by = |c: char| -> Vec<&str> {
+            if !content.contains('"') {
+                return content.split(c).map(unquoted).collect();
+            }
+            let mut fields = Vec::new();
+            let (mut start, mut quoted) = (0, false);
+            for (at, character) in content.char_indices() {
+                if character == '"' {
+                    quoted = !quoted;
+                } else if character == c && !quoted {
+                    fields.push(unquoted(&content[start..at]));
+                    start = at + c.len_utf8();
+                }
+            }
+            fields.push(unquoted(&content[start..]));
+            fields
+        };
         match self {
             Separator::Tab => by('\t'),
             Separator::Comma => by(','),
@@ -358,25 +443,84 @@ impl Separator {
     }
 }
 
-/// One column as it was used: its 0-based index, its header name and its
-/// unit (from a units row).
-#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+/// One column as it was used: its 0-based index, its header name, its unit
+/// (from a units row) and the conversion its values were read with.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct UsedColumn {
     pub index: usize,
     pub name: Option<String>,
     pub unit: Option<String>,
+    pub converted: Option<Conversion>,
 }
 
+/// A length or voltage column written in another unit than the tool's (µm,
+/// V), from its units row or its name (`Displacement [m]`), and read in the
+/// tool's: every value times `factor`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Conversion {
+    pub from: String,
+    pub to: &'static str,
+    pub factor: f64,
+}
+
+/// The tool's unit for a length or voltage unit, and the factor to it; None
+/// for any other unit (a column in mdeg or % is read as written).
+fn conversion_of(unit: &str) -> Option<(f64, &'static str)> {
+    Some(match unit {
+        "m" => (1e6, "um"),
+        "mm" => (1e3, "um"),
+        "um" | "µm" | "μm" | "micron" | "microns" => (1.0, "um"),
+        "nm" => (1e-3, "um"),
+        "V" | "v" => (1.0, "V"),
+        "mV" => (1e-3, "V"),
+        "kV" => (1e3, "V"),
+        _ => return None,
+    })
+}
+
+/// Slowest sampling [s] a time column with no unit is read in seconds at:
+/// once a second, far below what a loop of a 0.1-10 Hz drive needs.
+const SLOWEST_ASSUMED_PERIOD: f64 = 1.0;
+
 /// Seconds per unit of a time column's unit (`ms`, `(ms)`, `[ms]`, ...);
-/// None when it is not one of s, ms, us (µs) and ns.
+/// None when it is not one of h, min, s, ms, us (µs) and ns.
 fn seconds_per(unit: &str) -> Option<f64> {
     match bare_unit(unit).to_lowercase().as_str() {
+        "h" | "hr" | "hrs" | "hour" | "hours" => Some(3600.0),
+        "min" | "mins" | "minute" | "minutes" => Some(60.0),
         "s" | "sec" | "secs" | "second" | "seconds" => Some(1.0),
         "ms" | "msec" | "millisecond" | "milliseconds" => Some(1e-3),
         "us" | "µs" | "μs" | "usec" | "microsecond" | "microseconds" => Some(1e-6),
         "ns" | "nsec" | "nanosecond" | "nanoseconds" => Some(1e-9),
         _ => None,
     }
+}
+
+/// A time unit written as the last word of a column name (`time_ms`,
+/// `Time ms`, `time in ms`, `Zeit, ms`): only a known time unit counts, so
+/// `time_stamp` has none.
+fn time_unit_word(name: &str) -> Option<&str> {
+    let name = name.trim_end();
+    let at = name.rfind(|c: char| c == '_' || c == ',' || c == '-' || c.is_whitespace())?;
+    let word = &name[at + 1..];
+    (at > 0 && seconds_per(word).is_some()).then_some(word)
+}
+
+/// Whether a header name says its column is a time: a time unit in it
+/// (`Time [s]`, `t/ms`, `time_ms`), or a first word that names time (`t`,
+/// `time`, `Zeit`, `timestamp`).
+fn names_a_time(name: &str) -> bool {
+    let first_word = name
+        .split(|c: char| !c.is_alphanumeric())
+        .find(|word| !word.is_empty())
+        .unwrap_or("")
+        .to_lowercase();
+    unit_in_name(name).and_then(seconds_per).is_some()
+        || time_unit_word(name).is_some()
+        || matches!(
+            first_word.as_str(),
+            "t" | "time" | "zeit" | "timestamp" | "temps"
+        )
 }
 
 /// Whether a field of a row below the header reads as a unit (`V`, `(ms)`,
@@ -426,8 +570,17 @@ impl fmt::Display for UsedColumn {
             Some(name) => write!(f, "column {} \"{name}\"", self.index)?,
             None => write!(f, "column {}", self.index)?,
         }
-        match &self.unit {
-            Some(unit) => write!(f, " [{unit}]"),
+        if let Some(unit) = &self.unit {
+            write!(f, " [{unit}]")?;
+        }
+        match &self.converted {
+            Some(c) => write!(
+                f,
+                " (in {}, read as {}: x{})",
+                c.from,
+                c.to,
+                Short(c.factor)
+            ),
             None => Ok(()),
         }
     }
@@ -466,11 +619,26 @@ pub fn read_record_with_columns(
         path: path.to_owned(),
         source,
     })?;
+    // Excel's "Unicode text" is UTF-16 with a byte-order mark.
+    let utf16 = match bytes.as_slice() {
+        [0xFF, 0xFE, rest @ ..] => Some((rest, u16::from_le_bytes as fn([u8; 2]) -> u16)),
+        [0xFE, 0xFF, rest @ ..] => Some((rest, u16::from_be_bytes as fn([u8; 2]) -> u16)),
+        _ => None,
+    };
     // A Windows export in Latin-1 (or CP1252, the same for µ and °) is read
     // byte for byte: every byte is a Latin-1 character.
-    let (text, latin1) = match String::from_utf8(bytes) {
-        Ok(text) => (text, false),
-        Err(e) => (e.into_bytes().iter().map(|&b| b as char).collect(), true),
+    let (text, latin1) = match utf16 {
+        Some((rest, unit)) => {
+            let units: Vec<u16> = rest
+                .chunks(2)
+                .map(|c| unit([c[0], *c.get(1).unwrap_or(&0)]))
+                .collect();
+            (String::from_utf16_lossy(&units), false)
+        }
+        None => match String::from_utf8(bytes) {
+            Ok(text) => (text, false),
+            Err(e) => (e.into_bytes().iter().map(|&b| b as char).collect(), true),
+        },
     };
     let (record, mut used) = parse_record_with_columns(&text, path, options)?;
     used.latin1 = latin1;
@@ -499,6 +667,16 @@ pub fn parse_record_with_columns(
         return Err(DataError::InvalidRate { rate });
     }
 
+    // A byte-order mark (Excel's "CSV UTF-8") is no part of the first name;
+    // a file whose lines end in a lone CR (classic Mac exports) has lines.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let lines_by_cr;
+    let text = if text.contains('\r') && !text.contains('\n') {
+        lines_by_cr = text.replace('\r', "\n");
+        lines_by_cr.as_str()
+    } else {
+        text
+    };
     let mut separator: Option<Separator> = None;
     let mut header: Option<(usize, Vec<String>)> = None;
     let mut resolved: Option<ResolvedColumns> = None;
@@ -510,7 +688,11 @@ pub fn parse_record_with_columns(
 
     // Only the line end and spaces are trimmed: a leading tab is an empty
     // first field.
+    // A line starting with % is a comment too (MATLAB and Octave write them).
     let content_of = |raw: &str| -> String {
+        if raw.trim_start().starts_with('%') {
+            return String::new();
+        }
         raw.split('#')
             .next()
             .unwrap_or("")
@@ -518,10 +700,21 @@ pub fn parse_record_with_columns(
             .trim_start_matches(' ')
             .to_owned()
     };
+    // Excel's `sep=;` first line states the separator.
+    let stated = text
+        .lines()
+        .map(content_of)
+        .enumerate()
+        .find(|(_, content)| !content.trim().is_empty())
+        .and_then(|(index, content)| Separator::stated(&content).map(|s| (index + 1, s)));
     let mut first_lines = text
         .lines()
         .map(content_of)
-        .filter(|content| !content.trim().is_empty());
+        .enumerate()
+        .filter(|(index, content)| {
+            !content.trim().is_empty() && stated.is_none_or(|(line, _)| line != index + 1)
+        })
+        .map(|(_, content)| content);
     let first = first_lines.next();
     let next: Vec<String> = first_lines.take(2).collect();
     let mut units: Option<(usize, Vec<String>)> = None;
@@ -536,12 +729,14 @@ pub fn parse_record_with_columns(
         last_line = line;
         let content = content_of(raw);
         let content = content.as_str();
-        if content.trim().is_empty() {
+        if content.trim().is_empty() || stated.is_some_and(|(at, _)| at == line) {
             continue;
         }
         let first_content_row = separator.is_none();
-        let separator = *separator
-            .get_or_insert_with(|| Separator::detect(first.as_deref().unwrap_or(content), &next));
+        let separator = *separator.get_or_insert_with(|| match stated {
+            Some((_, stated)) => stated,
+            None => Separator::detect(first.as_deref().unwrap_or(content), &next),
+        });
         let fields = separator.split(content);
         if first_content_row {
             let numeric = fields
@@ -693,23 +888,56 @@ pub fn parse_record_with_columns(
         Sampling::TimeColumn(_) => uniform_period(&times).map_err(|(l, p)| malformed(l, p))?,
         Sampling::Unspaced { .. } => 1.0,
     };
-    let used = |index: usize| UsedColumn {
-        index,
-        name: header
+    // Times with no unit named are read as seconds; a hysteresis record
+    // sampled more slowly than once a second is far likelier milliseconds.
+    if let (Sampling::TimeColumn(_), Some(unit)) = (&options.sampling, &time_unit)
+        && unit.source.starts_with("assumed")
+        && sample_period > SLOWEST_ASSUMED_PERIOD
+    {
+        return Err(malformed(
+            times[1].0,
+            Problem::SlowInSeconds {
+                step: Short(sample_period),
+            },
+        ));
+    }
+    let used = |index: usize| {
+        let name = header
             .as_ref()
             .and_then(|(_, names)| names.get(index))
             .filter(|name| !name.is_empty())
-            .cloned(),
-        unit: units
+            .cloned();
+        let unit = units
             .as_ref()
             .and_then(|(_, row)| row.get(index))
             .map(|unit| bare_unit(unit))
             .filter(|unit| !unit.is_empty())
-            .map(str::to_owned),
+            .map(str::to_owned);
+        let written_in = unit.clone().or_else(|| {
+            name.as_deref()
+                .and_then(unit_in_name)
+                .map(|u| bare_unit(u).to_owned())
+        });
+        let converted = written_in.and_then(|from| {
+            let (factor, to) = conversion_of(&from)?;
+            (factor != 1.0).then_some(Conversion { from, to, factor })
+        });
+        UsedColumn {
+            index,
+            name,
+            unit,
+            converted,
+        }
     };
+    let (input_used, output_used) = (used(columns.input), used(columns.output));
+    for (samples, column) in [(&mut input, &input_used), (&mut output, &output_used)] {
+        if let Some(conversion) = &column.converted {
+            samples.iter_mut().for_each(|v| *v *= conversion.factor);
+        }
+    }
     let columns_used = ColumnsUsed {
-        input: used(columns.input),
-        output: used(columns.output),
+        input: input_used,
+        output: output_used,
         time: columns.time.map(used),
         separator,
         decimal_comma,
@@ -737,7 +965,8 @@ fn time_unit_of(
     units: Option<&(usize, Vec<String>)>,
 ) -> Result<TimeUnit, (usize, Problem)> {
     let named = header.and_then(|(line, names)| {
-        let unit = unit_in_name(names.get(time)?)?;
+        let name = names.get(time)?;
+        let unit = unit_in_name(name).or_else(|| time_unit_word(name))?;
         Some((*line, unit.to_owned(), seconds_per(unit)))
     });
     if let Some((line, row)) = units
@@ -874,9 +1103,14 @@ fn resolve_columns(
     let given_output = options.output.as_ref().map(&resolve).transpose()?;
     let line = header.map(|(line, _)| *line);
     let width = header.map(|(_, names)| names.len());
+    // A column whose header names a time (`Time [s]`) is no default input or
+    // output either: with --rate given, it would be fitted as a voltage.
+    let names_time = |i: usize| {
+        header.is_some_and(|(_, names)| names.get(i).is_some_and(|name| names_a_time(name)))
+    };
     let default = |role: &'static str, taken: &[Option<usize>]| {
         let free = (0..)
-            .find(|i| !taken.contains(&Some(*i)))
+            .find(|i| !taken.contains(&Some(*i)) && !names_time(*i))
             .expect("a free column index");
         match width {
             Some(width) if free >= width => Err((line, Problem::NoDefaultColumn { role, width })),
@@ -919,18 +1153,43 @@ fn resolve_columns(
 }
 
 /// The mean period of a strictly increasing time column, refusing a step that
-/// deviates from it by more than [`UNIFORM_SAMPLING_TOLERANCE`].
+/// deviates from the usual (median) step by more than
+/// [`UNIFORM_SAMPLING_TOLERANCE`]: a gap is named at the row after it (the
+/// median, unlike the mean, is not moved by the gap itself).
 fn uniform_period(times: &[(usize, f64)]) -> Result<f64, (usize, Problem)> {
     let (first, last) = (times[0].1, times[times.len() - 1].1);
     let mean = (last - first) / (times.len() - 1) as f64;
+    let mut steps: Vec<f64> = times.windows(2).map(|pair| pair[1].1 - pair[0].1).collect();
+    let middle = steps.len() / 2;
+    let usual = *steps.select_nth_unstable_by(middle, f64::total_cmp).1;
     for pair in times.windows(2) {
         let step = pair[1].1 - pair[0].1;
-        if (step - mean).abs() > UNIFORM_SAMPLING_TOLERANCE * mean {
-            return Err((pair[1].0, Problem::NonUniformSampling { step, mean }));
+        if step > GAP_STEPS * usual {
+            return Err((
+                pair[1].0,
+                Problem::TimeGap {
+                    step: Short(step),
+                    usual: Short(usual),
+                    steps: Short(step / usual),
+                },
+            ));
+        }
+        if (step - usual).abs() > UNIFORM_SAMPLING_TOLERANCE * usual {
+            return Err((
+                pair[1].0,
+                Problem::NonUniformSampling {
+                    step: Short(step),
+                    usual: Short(usual),
+                },
+            ));
         }
     }
     Ok(mean)
 }
+
+/// A step this many times the usual one is a gap (samples missing), not
+/// jitter: half a sample more than a whole one.
+const GAP_STEPS: f64 = 1.5;
 
 #[cfg(test)]
 mod tests {
@@ -1454,8 +1713,8 @@ mod tests {
         };
         assert_eq!(
             message(&narrow, &defaults),
-            "data.txt:1: no column is left for the output: the header names 2 and the others \
-             are taken (give --output)"
+            "data.txt:1: no column is left for the output: the header names 2, and the others \
+             are taken or name a time (give --output)"
         );
     }
 
@@ -1541,14 +1800,53 @@ mod tests {
             message.starts_with("data.txt:21: time step 0.0102"),
             "{message}"
         );
-        assert!(
-            message.ends_with(
-                "differs from the mean step 0.01 s by more than 1 % (non-uniform sampling: \
-                 resample the record, or give --rate instead of --time to take its rows as \
-                 evenly spaced)"
-            ),
-            "{message}"
+        assert_eq!(
+            message,
+            "data.txt:21: time step 0.0102 s differs from the usual step 0.01 s by more than 1 % \
+             (non-uniform sampling: resample the record, or give --rate instead of --time to \
+             take its rows as evenly spaced)"
         );
+    }
+
+    /// A gap is named at the row after it, whatever its length: the median
+    /// step is not moved by the gap, as the mean was (a gap of 2 % of the
+    /// record was reported at line 2, a correct step).
+    #[test]
+    fn a_gap_is_named_where_it_is() {
+        for missing in [1usize, 10, 100] {
+            let mut text = String::new();
+            for n in 0..400 {
+                let t = 0.005 * (n + if n >= 240 { missing } else { 0 }) as f64;
+                text.push_str(&format!("{t} {n} {n}\n"));
+            }
+            let options = options(
+                Column::Index(1),
+                Column::Index(2),
+                Sampling::TimeColumn(Column::Index(0)),
+            );
+            let step = 0.005 * (missing + 1) as f64;
+            assert_eq!(
+                message(&text, &options),
+                format!(
+                    "data.txt:241: the time jumps by {} s, {} times the usual step of 0.005 s: \
+                     samples are missing, and the record is not continuous here (fit the part \
+                     before or after the gap, each as its own file)",
+                    Short(step),
+                    missing + 1
+                )
+            );
+        }
+    }
+
+    #[test]
+    fn short_numbers_keep_six_significant_digits() {
+        let text = |v: f64| Short(v).to_string();
+        assert_eq!(text(0.010000000000001563), "0.01");
+        assert_eq!(text(0.0050847601), "0.00508476");
+        assert_eq!(text(200.0), "200");
+        assert_eq!(text(1e6), "1.00000e6");
+        assert_eq!(text(-2.5e-7), "-2.50000e-7");
+        assert_eq!(text(0.0), "0");
     }
 
     #[test]
@@ -1576,6 +1874,222 @@ mod tests {
         assert!(
             error.to_string().starts_with("/nonexistent/record.dat: "),
             "{error}"
+        );
+    }
+    fn time_u_y_rows(header: &str, step: f64, separator: &str) -> String {
+        let mut text = format!("{header}\n");
+        for n in 0..50 {
+            let t = n as f64 * step;
+            text.push_str(&format!(
+                "{t}{separator}{}{separator}{}\n",
+                0.1 * n as f64,
+                0.3 * n as f64
+            ));
+        }
+        text
+    }
+
+    fn timed_defaults() -> ReadOptions {
+        ReadOptions {
+            input: None,
+            output: None,
+            sampling: Sampling::TimeColumn(Column::Index(0)),
+            roles: Roles::INPUT_OUTPUT,
+        }
+    }
+
+    /// A time unit written as the name's last word, or in minutes or hours,
+    /// scales the time column; a word that is no unit is not taken for one.
+    #[test]
+    fn a_time_unit_as_the_names_last_word_scales_the_times() {
+        for (name, step, period) in [
+            ("time_ms", 5.0, 0.005),
+            ("t_ms", 5.0, 0.005),
+            ("Time ms", 5.0, 0.005),
+            ("time in ms", 5.0, 0.005),
+            ("Zeit, ms", 5.0, 0.005),
+            ("Time [min]", 5.0 / 60_000.0, 0.005),
+            ("Time [h]", 0.005 / 3600.0, 0.005),
+            ("time_us", 200.0, 2e-4),
+        ] {
+            let text = time_u_y_rows(&format!("{name};u;y"), step, ";");
+            let (record, used) =
+                parse_record_with_columns(&text, Path::new("d.csv"), &timed_defaults())
+                    .unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert!(
+                (record.sample_period - period).abs() < 1e-9 * period,
+                "{name}"
+            );
+            assert!(
+                !used.time_unit.unwrap().source.starts_with("assumed"),
+                "{name}"
+            );
+        }
+        // No unit in the name and slower than 1 Hz in seconds: refused.
+        let text = time_u_y_rows("time_stamp;u;y", 5.0, ";");
+        assert_eq!(
+            message(&text, &timed_defaults()),
+            "data.txt:3: the time column steps by 5 per row and names no unit, so it would be \
+             read in seconds: slower than one sample a second, too slow for a hysteresis \
+             record; name its unit in the header (\"time [ms]\", \"time_ms\") or give --rate"
+        );
+        let text = time_u_y_rows("time_stamp;u;y", 0.005, ";");
+        assert!(parse_record(&text, Path::new("d.csv"), &timed_defaults()).is_ok());
+    }
+
+    /// With --rate, a column whose name says it is a time is not taken as
+    /// the default input or output.
+    #[test]
+    fn a_time_named_column_is_no_default_input() {
+        for name in ["Time [s]", "t", "time_ms", "Zeit, s", "timestamp"] {
+            let text = time_u_y_rows(&format!("{name};Voltage [V];Displacement [um]"), 0.005, ";");
+            let (_, used) =
+                parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults()).unwrap();
+            assert_eq!((used.input.index, used.output.index), (1, 2), "{name}");
+        }
+        let text = time_u_y_rows("tension;Voltage [V];Displacement [um]", 0.005, ";");
+        let (_, used) =
+            parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults()).unwrap();
+        assert_eq!((used.input.index, used.output.index), (0, 1));
+    }
+
+    fn by_rate_defaults() -> ReadOptions {
+        ReadOptions {
+            input: None,
+            output: None,
+            sampling: Sampling::Rate(200.0),
+            roles: Roles::INPUT_OUTPUT,
+        }
+    }
+
+    /// A byte-order mark, UTF-16, lone-CR line ends, % comments, Excel's
+    /// sep= line and quoted fields all read as the plain file does.
+    #[test]
+    fn lab_export_variants_read_as_the_plain_file() {
+        let plain = time_u_y_rows("time,u,y", 0.005, ",");
+        let options = |time: Column| ReadOptions {
+            input: Some(Column::Name("u".into())),
+            output: Some(Column::Name("y".into())),
+            sampling: Sampling::TimeColumn(time),
+            roles: Roles::INPUT_OUTPUT,
+        };
+        let expected = parse_record(
+            &plain,
+            Path::new("d.csv"),
+            &options(Column::Name("time".into())),
+        )
+        .unwrap();
+        let quoted: String = {
+            let mut text = String::from("\"\",\"time\",\"u\",\"y\"\n");
+            for (n, line) in plain.lines().skip(1).enumerate() {
+                text.push_str(&format!("\"{}\",{line}\n", n + 1));
+            }
+            text
+        };
+        let variants = [
+            ("bom", format!("\u{feff}{plain}")),
+            ("cr", plain.replace('\n', "\r")),
+            (
+                "percent",
+                format!("% Lab C, fs = 200 Hz\n%\tcolumns: t u y\n{plain}"),
+            ),
+            ("sep", format!("sep=,\n{plain}")),
+            ("quoted", quoted),
+            (
+                "quoted name",
+                plain.replacen("time,u,y", "\"time, s\",u,y", 1),
+            ),
+        ];
+        for (what, text) in variants {
+            let time = if what == "quoted name" {
+                "time, s"
+            } else {
+                "time"
+            };
+            let record = parse_record(
+                &text,
+                Path::new("d.csv"),
+                &options(Column::Name(time.into())),
+            )
+            .unwrap_or_else(|e| panic!("{what}: {e}"));
+            assert_eq!(record, expected, "{what}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        for (what, bytes) in [
+            (
+                "utf-16le",
+                [
+                    vec![0xFF, 0xFE],
+                    plain.encode_utf16().flat_map(u16::to_le_bytes).collect(),
+                ]
+                .concat(),
+            ),
+            (
+                "utf-16be",
+                [
+                    vec![0xFE, 0xFF],
+                    plain.encode_utf16().flat_map(u16::to_be_bytes).collect(),
+                ]
+                .concat(),
+            ),
+        ] {
+            let path = dir.path().join(what);
+            std::fs::write(&path, bytes).unwrap();
+            let record = read_record(&path, &options(Column::Name("time".into())))
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
+            assert_eq!(record, expected, "{what}");
+        }
+    }
+
+    /// A displacement in m, mm or nm and a voltage in mV are read in um and
+    /// V, and the columns say so; other units are read as written.
+    #[test]
+    fn lengths_and_voltages_are_read_in_um_and_volts() {
+        let plain = time_u_y_rows("time;u;y", 0.005, ";");
+        let expected = parse_record(&plain, Path::new("d.csv"), &timed_defaults()).unwrap();
+        for (header, input_factor, output_factor) in [
+            ("time;u [V];y [m]", 1.0, 1e-6),
+            ("time;u (mV);y (mm)", 1e3, 1e-3),
+            ("time;u/kV;y/nm", 1e-3, 1e3),
+            ("time;u [%];y [mdeg]", 1.0, 1.0),
+        ] {
+            let text = plain.replacen("time;u;y", header, 1);
+            let scaled: String = text
+                .lines()
+                .enumerate()
+                .map(|(i, line)| {
+                    if i == 0 {
+                        return format!("{line}\n");
+                    }
+                    let f: Vec<f64> = line.split(';').map(|v| v.parse().unwrap()).collect();
+                    format!(
+                        "{};{};{}\n",
+                        f[0],
+                        f[1] * input_factor,
+                        f[2] * output_factor
+                    )
+                })
+                .collect();
+            let (record, used) =
+                parse_record_with_columns(&scaled, Path::new("d.csv"), &timed_defaults()).unwrap();
+            for (got, want) in record.output.iter().zip(&expected.output) {
+                assert!((got - want).abs() < 1e-9 * want.abs().max(1.0), "{header}");
+            }
+            for (got, want) in record.input.iter().zip(&expected.input) {
+                assert!((got - want).abs() < 1e-9 * want.abs().max(1.0), "{header}");
+            }
+            assert_eq!(
+                used.output.converted.is_some(),
+                output_factor != 1.0,
+                "{header}"
+            );
+        }
+        let text = plain.replacen("time;u;y", "time;u;Displacement [m]", 1);
+        let (_, used) =
+            parse_record_with_columns(&text, Path::new("d.csv"), &timed_defaults()).unwrap();
+        assert_eq!(
+            used.output.to_string(),
+            "column 2 \"Displacement [m]\" (in m, read as um: x1.00000e6)"
         );
     }
 }

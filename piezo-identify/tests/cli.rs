@@ -893,7 +893,7 @@ fn decoupling_names_its_columns() {
 
 /// `decoupling --time` skips the time column when choosing the default
 /// columns, and takes a record whose samples are not evenly spaced (the fit
-/// is static); without it, the time column is read as the demand.
+/// is static).
 #[test]
 fn decoupling_skips_a_named_time_column() {
     let dir = tempfile::tempdir().unwrap();
@@ -915,14 +915,10 @@ fn decoupling_skips_a_named_time_column() {
         "{out}"
     );
     assert!(out.contains("clamp(-0.300000*f +0.200000"), "{out}");
+    // Without --time, a column named as a time is no default either.
     let untimed = run(&["decoupling", file]);
     assert!(untimed.status.success(), "{}", stderr(&untimed));
-    assert!(
-        stdout(&untimed)
-            .contains("columns: demand column 0 \"time\", coupling error column 1 \"demand\""),
-        "{}",
-        stdout(&untimed)
-    );
+    assert_eq!(stdout(&untimed), out);
     let clash = run(&["decoupling", file, "--time", "time", "--demand", "0"]);
     assert!(!clash.status.success());
     assert_eq!(
@@ -945,4 +941,45 @@ fn decoupling_skips_a_named_time_column() {
         "{}",
         stderr(&short)
     );
+}
+
+/// A `--validate` file sampled at another rate than the fitted one is
+/// refused before the fit, naming both rates (its rate terms, smoothing and
+/// settling count samples); the same file at the fitted rate is taken.
+#[test]
+fn a_validation_file_at_another_rate_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let fitted = dir.path().join("fit.csv");
+    write_good_record(&fitted);
+    let faster = dir.path().join("faster.csv");
+    let text = std::fs::read_to_string(&fitted).unwrap();
+    // The same rows, their times halved: 200 Hz against the fit's 100 Hz.
+    let halved: String = text
+        .lines()
+        .map(|line| match line.split_once(',') {
+            Some((t, rest)) if t.parse::<f64>().is_ok() => {
+                format!("{},{rest}\n", t.parse::<f64>().unwrap() / 2.0)
+            }
+            _ => format!("{line}\n"),
+        })
+        .collect();
+    std::fs::write(&faster, halved).unwrap();
+    let (fit, faster) = (fitted.to_str().unwrap(), faster.to_str().unwrap());
+    for model in ["inverse-pi", "bouc-wen"] {
+        let refused = run(&[model, fit, "--time", "time", "--validate", faster]);
+        assert!(!refused.status.success(), "{model}");
+        assert_eq!(
+            stderr(&refused).trim_end(),
+            format!(
+                "{faster}: sampled at 200 Hz, and {fit} at 100 Hz: the fitted model counts its \
+                 rate terms, smoothing and settling in samples, so resample the validation file \
+                 to 100 Hz"
+            ),
+            "{model}"
+        );
+        assert!(
+            stdout(&refused).is_empty(),
+            "{model}: refused before the fit"
+        );
+    }
 }

@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 
-use piezo_identify::data::{ColumnsUsed, read_record_with_columns};
+use piezo_identify::data::{
+    ColumnsUsed, Short, UNIFORM_SAMPLING_TOLERANCE, read_record_with_columns,
+};
 use piezo_identify::plant::{PlantFmu, read_parameter_set};
 use piezo_identify::protocol::{Plan, PlanOptions, ZeroAlignment};
 use piezo_identify::segments::{SegmentOptions, Segments};
@@ -204,6 +206,30 @@ pub(crate) fn load(path: &Path, columns: &ColumnArgs) -> Result<Loaded, String> 
         record,
         columns: Some(used),
     })
+}
+
+/// Loads the `--validate` file of `fitted`, refusing one sampled at another
+/// rate: the rate-dependent weights, the smoothing and the settling times
+/// count samples, so they would mean other times there.
+pub(crate) fn load_validation(
+    path: &Path,
+    columns: &ColumnArgs,
+    fitted: &Loaded,
+) -> Result<Loaded, String> {
+    let validation = load(path, columns)?;
+    let (fit_period, period) = (fitted.record.sample_period, validation.record.sample_period);
+    if (period - fit_period).abs() > UNIFORM_SAMPLING_TOLERANCE * fit_period {
+        return Err(format!(
+            "{}: sampled at {} Hz, and {} at {} Hz: the fitted model counts its rate terms, \
+             smoothing and settling in samples, so resample the validation file to {} Hz",
+            validation.name,
+            Short(1.0 / period),
+            fitted.name,
+            Short(1.0 / fit_period),
+            Short(1.0 / fit_period)
+        ));
+    }
+    Ok(validation)
 }
 
 impl ProtocolArgs {

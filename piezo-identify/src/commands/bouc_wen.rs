@@ -12,7 +12,7 @@ use piezo_identify::protocol::{
     BoucWenProtocolFit, BoucWenSettings, ForwardErrors, identify_bouc_wen_protocol,
 };
 
-use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, open_plant};
+use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, load_validation, open_plant};
 use super::progress::Reporter;
 use super::report::{
     describe, describe_columns, pad, print_extrapolation, print_figure, print_plan, range_excess,
@@ -226,7 +226,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
     let (loaded, default_decimation, default_warm_up) = bouc_wen_record(args)?;
     // The validation file is read before the fit: a typo costs nothing.
     let validation = match &args.protocol.validate {
-        Some(path) => Some(load(path, &args.columns)?),
+        Some(path) => Some(load_validation(path, &args.columns, &loaded)?),
         None => None,
     };
     let plan = args.protocol.plan(&loaded, default_warm_up)?;

@@ -10,7 +10,7 @@ use piezo_identify::protocol::{
 };
 use piezo_identify::validation::centred_moving_average;
 
-use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load};
+use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load, load_validation};
 use super::progress::Reporter;
 use super::report::{
     describe, describe_columns, pad, print_extrapolation, print_figure, print_plan, range_excess,
@@ -65,7 +65,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
     let loaded = load(&args.file, &args.columns)?;
     // The validation file is read before the fit: a typo costs nothing.
     let validation = match &args.protocol.validate {
-        Some(path) => Some(load(path, &args.columns)?),
+        Some(path) => Some(load_validation(path, &args.columns, &loaded)?),
         None => None,
     };
     let plan = args.protocol.plan(&loaded, None)?;
