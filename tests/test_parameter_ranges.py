@@ -107,6 +107,54 @@ def outside(v) -> list:
     return values
 
 
+def rust_real(x: float) -> str:
+    """A number as the FMU writes it (format_real: shortest digits, with an
+    exponent outside 1e-4..1e7)."""
+    if x == 0 or 1e-4 <= abs(x) < 1e7:
+        text = repr(float(x))
+        return text[:-2] if text.endswith(".0") else text
+    mantissa, exponent = f"{x!r}".replace("E", "e").split("e") if "e" in repr(x) else (
+        repr(x), "0")
+    mantissa = mantissa[:-2] if mantissa.endswith(".0") else mantissa
+    return f"{mantissa}e{int(exponent)}"
+
+
+def interval(v) -> str:
+    """The declared range as the FMU's message writes it: an open end, which
+    FMI's inclusive min and max declare as the nearest double inside it (5e-324
+    for > 0), in a round bracket at the round value next to it."""
+    def end(bound, toward: float, closed: str, opened: str) -> str:
+        value = float(bound)
+        outside = math.nextafter(value, toward)
+        if len(rust_real(outside)) < len(rust_real(value)):
+            return opened.format(rust_real(outside))
+        return closed.format(rust_real(value))
+    low = "[-inf" if v.min is None else end(v.min, -math.inf, "[{}", "({}")
+    high = "inf]" if v.max is None else end(v.max, math.inf, "{}]", "{})")
+    return f"{low}, {high}"
+
+
+def test_open_ends_are_declared_inside_and_their_values_taken(envs):
+    """FMI's min and max are inclusive: a parameter that must be > 0 declares
+    the nearest double above 0, and the FMU takes that value (a tool that
+    samples at the declared bounds gets no refusal); 0 itself is refused, as
+    the description says."""
+    cases = {"FlexureStage": ("mode.x.damping", "L"), "PiezoController": ("x.c", "L")}
+    for model, names in cases.items():
+        env = envs[model]
+        for name in names:
+            v = next(v for v in env.md.modelVariables if v.name == name)
+            assert float(v.min) == 5e-324, (name, v.min)
+            assert "> 0" in v.description or "0 <" in v.description, v.description
+            assert not refused_at_exit_initialization(env, {name: 0.0}) == [], name
+    damping = next(v for v in envs["FlexureStage"].md.modelVariables if v.name == "mode.x.damping")
+    assert float(damping.max) == math.nextafter(1.0, 0.0), damping.max
+    slave = envs["FlexureStage"].instantiate("bounds")
+    slave.initialize(start_values={"mode.x.damping": float(damping.max), "amplifier.gain": 5e-324})
+    assert step_status(slave, 1e-4) == fmi2.fmi2OK, slave.log.dump()
+    slave.free()
+
+
 def test_every_declared_range_is_enforced(envs):
     checked = 0
     names = set()
@@ -117,10 +165,8 @@ def test_every_declared_range_is_enforced(envs):
             for value in outside(v):
                 errors = refused_at_exit_initialization(env, {v.name: value})
                 text = " ".join(r.text for r in errors)
-                low = "-inf" if v.min is None else f"{float(v.min):g}"
-                high = "inf" if v.max is None else f"{float(v.max):g}"
                 assert v.name in text, text
-                assert f"= {value:g} is outside its allowed range [{low}, {high}]" in text, text
+                assert f"= {value:g} is outside its allowed range {interval(v)}" in text, text
                 checked += 1
                 names.add(v.name)
     print(f"{checked} out-of-range values refused at fmi2ExitInitializationMode")
@@ -135,11 +181,12 @@ def test_every_declared_range_is_enforced(envs):
 # name and value.
 PHYSICAL_RANGE_CASES = [
     # negative thresholds (seed 000 eq. 5: d = c·[0,1,3,5,7,9], r = u1max·[…])
-    ("PiezoController", {"x.c": -0.5}, "x.c", "-0.5", "[0, inf]"),
-    ("PiezoController", {"y.u1max": -11.0}, "y.u1max", "-11", "[0, inf]"),
-    # c = 0 makes every dead-zone threshold 0: not increasing
-    ("PiezoController", {"x.c": 0.0}, "x.c", "= 0", "c > 0"),
-    ("PiezoController", {"y.u1max": 0.0}, "y.u1max", "= 0", "u1max > 0"),
+    ("PiezoController", {"x.c": -0.5}, "x.c", "-0.5", "(0, inf]"),
+    ("PiezoController", {"y.u1max": -11.0}, "y.u1max", "-11", "(0, inf]"),
+    # c = 0 makes every dead-zone threshold 0: not increasing (an open end:
+    # the declared min is the double next above 0)
+    ("PiezoController", {"x.c": 0.0}, "x.c", "= 0", "(0, inf]"),
+    ("PiezoController", {"y.u1max": 0.0}, "y.u1max", "= 0", "(0, inf]"),
     # Bouc-Wen n below 1 (|h|^(n-1) must stay finite at h = 0)
     ("FlexureStage", {"pzt[2].n": 0.5}, "pzt[2].n", "0.5", "[1, inf]"),
     ("FlexureStage", {"coupling.y_from_pzt3.n": 0.99}, "coupling.y_from_pzt3.n", "0.99",
@@ -148,20 +195,20 @@ PHYSICAL_RANGE_CASES = [
     # negative and zero gains
     ("PiezoController", {"translation.kp": -0.05}, "translation.kp", "-0.05", "[0, inf]"),
     ("PiezoController", {"rotation.ki": -70.0}, "rotation.ki", "-70", "[0, inf]"),
-    ("FlexureStage", {"amplifier.gain": -10.0}, "amplifier.gain", "-10", "[0, inf]"),
-    ("FlexureStage", {"amplifier.gain": 0.0}, "amplifier.gain", "= 0", "gain > 0"),
+    ("FlexureStage", {"amplifier.gain": -10.0}, "amplifier.gain", "-10", "(0, inf]"),
+    ("FlexureStage", {"amplifier.gain": 0.0}, "amplifier.gain", "= 0", "(0, inf]"),
     # a zero sensor spacing L (theta = (s2 - s3) / L)
-    ("PiezoController", {"L": 0.0}, "L", "= 0", "> 0"),
-    ("FlexureStage", {"L": 0.0}, "L", "= 0", "> 0"),
+    ("PiezoController", {"L": 0.0}, "L", "= 0", "(0, inf]"),
+    ("FlexureStage", {"L": 0.0}, "L", "= 0", "(0, inf]"),
     # bounds that depend on another parameter
     ("PiezoController", {"command_min": 5.0, "command_max": 5.0}, "command_max", "= 5",
      "> command_min"),
     ("FlexureStage", {"amplifier.v_max": -40.0}, "amplifier.v_max", "= -40", "v_max > v_min"),
     ("FlexureStage", {"pzt[1].creep_time": 1e-5}, "pzt[1].creep_time", "0.00001",
      "creep_time > 10 x amplifier time constant"),
-    # no mode without a frequency; damping within its declared [0, 1]
-    ("FlexureStage", {"mode.theta.frequency": 0.0}, "mode.theta.frequency", "= 0", "> 0"),
-    ("FlexureStage", {"mode.x.damping": 1.5}, "mode.x.damping", "1.5", "[0, 1]"),
+    # no mode without a frequency; damping within (0, 1)
+    ("FlexureStage", {"mode.theta.frequency": 0.0}, "mode.theta.frequency", "= 0", "(0, inf]"),
+    ("FlexureStage", {"mode.x.damping": 1.5}, "mode.x.damping", "1.5", "(0, 1)"),
     # selectors
     ("PiezoController", {"hysteresis_model": 3}, "hysteresis_model", "3", "[1, 2]"),
 ]
@@ -198,22 +245,27 @@ def test_controller_sample_period_must_be_positive(envs, step):
 
 
 def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
-    """beta + gamma < 0 passes every parameter check (softening hysteresis is a
-    legitimate shape over a short travel) but with n = 2 the state escapes to
-    infinity within ~21 V of travel: dh/du = A + 0.68·h². The step where it
-    happens must fail, naming the state and the time."""
+    """beta + gamma < 0 passes every parameter check where the model stays
+    bounded over the amplifier's range (softening hysteresis is a legitimate
+    shape over a short travel), but with n = 2 and delta = 0 the state escapes
+    to infinity at u* = pi / (2 sqrt(A c)) of travel: dh/du = A + c·h², here
+    c = 6.8e-5 and A = 0.008, so u* = 2130 V, past the 1 kV the build checks
+    and inside a 10 kV amplifier's range. The step where it happens must fail,
+    naming the state, the time and the likely cause."""
     env = envs["FlexureStage"]
     slave = env.instantiate("diverging")
-    # From a de-energized, never-cycled stack: the ramp below is the first
-    # travel (the default rest, after a 0-100-0 V cycle, would already have
-    # escaped; the test after this one covers that).
+    # From a de-energized, never-cycled stack: the ramp below is its first
+    # travel.
     slave.initialize(start_values={
         "rest_cycle_voltage": 0.0,
-        "coupling.x_from_pzt1.beta": -0.55,
-        "coupling.x_from_pzt1.gamma": -0.13,
+        "amplifier.gain": 1000.0,
+        "amplifier.v_max": 1e4,
+        "coupling.x_from_pzt1.beta": -5.5e-5,
+        "coupling.x_from_pzt1.gamma": -1.3e-5,
+        "coupling.x_from_pzt1.delta": 0.0,
     })
-    # A ramp of the command, 5 V/s: the escape near 21 V of amplifier output
-    # (2.1 V of command) comes after some 4000 steps, not in the first.
+    # A ramp of the command, 5 V/s (5 kV/s of amplifier output): the escape
+    # near 2130 V comes after some 4300 steps, not in the first.
     status = fmi2.fmi2OK
     steps = 0
     while status == fmi2.fmi2OK and steps < 20_000:
@@ -225,6 +277,7 @@ def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
     failed_at = slave.time
     message = " ".join(r.text for r in slave.log.matching("diverged", status=fmi2.fmi2Error))
     assert "coupling x from PZT1" in message, slave.log.dump()
+    assert "likely cause: a Bouc-Wen model whose state runs away" in message, message
     reported = re.search(r"to t = ([-+0-9.e]+)", message)
     assert reported and abs(float(reported.group(1)) - failed_at) < 1e-9, (failed_at, message)
     # The instance is in the error state: stepping on is refused, not NaN.
@@ -237,27 +290,32 @@ def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
     slave.free()
 
 
-def test_diverging_hysteresis_at_the_exercised_rest_is_refused(envs):
-    """The same parameters with the default rest: the 0-100-0 V cycle the
-    stacks rest after (`rest_cycle_voltage`) already escapes. Initialization
-    is refused, naming the rest cycle and the model that diverges on it, and
-    the instance does not step (no NaN reaches an output)."""
-    slave = envs["FlexureStage"].instantiate("diverging-rest")
-    status = fmi2.fmi2OK
-    try:
-        slave.initialize(start_values={
-            "coupling.x_from_pzt1.beta": -0.55,
-            "coupling.x_from_pzt1.gamma": -0.13,
-        })
-        status = step_status(slave, 1e-4)
-    except FMICallException as failed:
-        status = failed.status
-    assert status == fmi2.fmi2Error, slave.log.dump()
-    message = " ".join(r.text for r in slave.log.matching("diverges", status=fmi2.fmi2Error))
-    assert "rest_cycle_voltage" in message and "coupling.x_from_pzt1" in message, slave.log.dump()
-    assert step_status(slave, 1e-4) == fmi2.fmi2Error
-    print(message)
-    slave.free()
+def test_a_model_that_runs_away_in_the_amplifier_range_is_refused(envs):
+    """beta + gamma = -0.68 with n = 2 escapes within 21 V of travel, inside
+    the amplifier's -30..130 V: initialization is refused, naming the
+    parameter by its FMI name (a stack's as pzt[k], not the model's internal
+    path) and the runaway, and the instance does not step (no NaN reaches an
+    output)."""
+    for changed, named in (
+        ({"coupling.x_from_pzt1.beta": -0.55, "coupling.x_from_pzt1.gamma": -0.13},
+         "coupling.x_from_pzt1.gamma"),
+        ({"pzt[1].beta": -1.0}, "pzt[1].beta"),
+    ):
+        slave = envs["FlexureStage"].instantiate("runaway")
+        status = fmi2.fmi2OK
+        try:
+            slave.initialize(start_values=changed)
+            status = step_status(slave, 1e-4)
+        except FMICallException as failed:
+            status = failed.status
+        assert status == fmi2.fmi2Error, slave.log.dump()
+        message = " ".join(r.text for r in slave.log.matching("runs away", status=fmi2.fmi2Error))
+        assert f"parameter {named} (" in message, slave.log.dump()
+        assert "output range -30..130 V" in message and "actuators[" not in message.split(
+            ") = ")[1], message
+        assert step_status(slave, 1e-4) == fmi2.fmi2Error
+        print(message)
+        slave.free()
 
 
 def test_sound_parameters_never_trip_the_divergence_check(envs):
@@ -302,10 +360,11 @@ def readme_log(after: str) -> list[str]:
 
 
 def test_the_readmes_refusals_are_what_the_fmus_log(envs):
-    """README.md shows two refusals at fmi2ExitInitializationMode: each line is
+    """README.md shows three refusals at fmi2ExitInitializationMode: each line is
     the one the FMU logs for that value, word for word."""
     shown = readme_log("offence, and `fmi2Reset` brings back the start values")
-    cases = [("FlexureStage", {"pzt[2].n": 0.5}), ("PiezoController", {"x.c": 0.0})]
+    cases = [("FlexureStage", {"pzt[2].n": 0.5}), ("PiezoController", {"x.c": 0.0}),
+             ("FlexureStage", {"pzt[1].creep_time": 1e-5})]
     assert len(shown) == len(cases), shown
     for line, (name, values) in zip(shown, cases):
         logged = [r.text for r in refused_at_exit_initialization(envs[name], values)]

@@ -6,18 +6,30 @@ use std::io;
 use std::path::Path;
 
 use crate::model::CoSimModel;
-use crate::model_description::{guid, model_description, variables_html};
+use crate::model_description::{guid, model_description, start_text, variables_html};
 
 /// Fills a documentation template. Placeholders: `{{model_identifier}}`,
-/// `{{version}}`, `{{guid}}` and `{{variables}}` (the table of every variable
-/// with unit, start value and range, generated from the variable table).
+/// `{{version}}`, `{{guid}}`, `{{variables}}` (the table of every variable
+/// with unit, start value and range, generated from the variable table) and
+/// `{{start:NAME}}` (variable NAME's start value, so that prose quoting a
+/// default never goes stale).
 pub fn documentation_html<M: CoSimModel>(template: &str) -> Result<String, String> {
     let guid = guid::<M>()?;
-    let html = template
+    let mut html = template
         .replace("{{model_identifier}}", M::INFO.model_identifier)
         .replace("{{version}}", M::INFO.version)
         .replace("{{guid}}", &guid)
         .replace("{{variables}}", &variables_html::<M>());
+    while let Some(at) = html.find("{{start:") {
+        let rest = &html[at + "{{start:".len()..];
+        let name = rest.find("}}").map(|end| &rest[..end]).ok_or_else(|| {
+            "an unclosed {{start: placeholder in the documentation template".to_owned()
+        })?;
+        let value = start_text::<M>(name).ok_or_else(|| {
+            format!("{{{{start:{name}}}}} in the documentation template: no variable {name} with a start value")
+        })?;
+        html.replace_range(at..at + "{{start:".len() + name.len() + 2, &value);
+    }
     if let Some(start) = html.find("{{") {
         let end = html[start..]
             .find("}}")

@@ -23,8 +23,9 @@ const FILE_MAGIC: &[u8; 8] = b"FMI2RSST";
 /// 2: the snapshot carries the start time, the interface and the machine
 /// state (version 1 carried an "initialized" flag instead). 3: the machine
 /// states of asynchronous steps are gone (the state's encoding changed) and
-/// the snapshot carries whether the model asked to terminate.
-const FORMAT_VERSION: u32 = 3;
+/// the snapshot carries whether the model asked to terminate. 4: the
+/// snapshot carries the stop time.
+const FORMAT_VERSION: u32 = 4;
 const GUID_LEN: usize = 38;
 const HEADER_LEN: usize = FILE_MAGIC.len() + 4 + GUID_LEN + 8;
 const CRC_LEN: usize = 4;
@@ -36,6 +37,9 @@ pub struct SnapshotData<M> {
     pub time: f64,
     /// The `startTime` of `fmi2SetupExperiment` (0 until it is called).
     pub start_time: f64,
+    /// Its `stopTime`, infinite when it defined none: a restored instance
+    /// steps no further than the experiment it was saved in.
+    pub stop_time: f64,
     /// The interface of the instance it was taken from.
     pub interface: Interface,
     /// The state of the FMI state machine it was taken in.
@@ -149,6 +153,7 @@ mod tests {
             model: vec![1.0, -0.1, f64::MIN_POSITIVE, 1e300],
             time: 0.123,
             start_time: -2.5,
+            stop_time: f64::INFINITY,
             interface: Interface::ModelExchange,
             state: FmiState::ContinuousTimeMode,
             terminate_requested: false,

@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use crate::fmu_state::SnapshotData;
 use crate::logging::{LogCategory, Logger};
 use crate::model::{CoSimModel, Context, Environment, StepOutcome};
+use crate::model_description::format_real;
 use crate::status::{FmiFunction, FmiState, Interface, Status};
 use crate::variables::{Causality, Value, Variability, Variable};
 
@@ -55,6 +56,10 @@ impl<M: CoSimModel> Magic<M> {
     };
 }
 
+/// Share of a step by which it may end past stopTime (rounding of summed
+/// communication points, not a step more).
+const STOP_TIME_SLACK: f64 = 1e-3;
+
 /// `repr(C)` with the magic number first, so that a pointer can be recognised
 /// by reading its first eight bytes before it is used as an instance.
 #[repr(C)]
@@ -68,6 +73,9 @@ pub struct Instance<M: CoSimModel> {
     /// successful time (`fmi2LastSuccessfulTime`).
     pub(crate) time: f64,
     pub(crate) start_time: f64,
+    /// The end fmi2SetupExperiment defined (infinite when it defined none):
+    /// a co-simulation step must not end past it (FMI 2.0.4 §2.1.6).
+    pub(crate) stop_time: f64,
     /// The model asked to end the simulation in its last step
     /// (`fmi2GetBooleanStatus(fmi2Terminated)`).
     pub(crate) terminate_requested: bool,
@@ -318,6 +326,7 @@ impl<M: CoSimModel> Instance<M> {
             },
             time: 0.0,
             start_time: 0.0,
+            stop_time: f64::INFINITY,
             terminate_requested: false,
             model,
             guid,
@@ -446,6 +455,7 @@ impl<M: CoSimModel> Instance<M> {
             );
         }
         self.start_time = start_time;
+        self.stop_time = stop_time.unwrap_or(f64::INFINITY);
         self.time = start_time;
         Status::Ok
     }
@@ -513,6 +523,7 @@ impl<M: CoSimModel> Instance<M> {
         self.state = FmiState::Instantiated;
         self.time = 0.0;
         self.start_time = 0.0;
+        self.stop_time = f64::INFINITY;
         self.terminate_requested = false;
         self.event(FmiFunction::Reset, format_args!("reset to start values"));
         Status::Ok
@@ -809,17 +820,23 @@ impl<M: CoSimModel> Instance<M> {
         // point), so a start equal to it is finite, and a positive step from
         // it ends above -inf: `end < inf` is all that is left of the end's
         // finiteness. A NaN fails every compare.
-        let sound = (step_size > 0.0) & (end < f64::INFINITY) & (current_time == self.time);
+        // A step may end past stopTime by rounding only (below).
+        let sound = (step_size > 0.0)
+            & (end < f64::INFINITY)
+            & (current_time == self.time)
+            & (end <= self.stop_time);
         if !sound && let Err(status) = self.check_step(current_time, step_size) {
             return status;
         }
         // The time moves to the end before the model's step, so that the end
         // need not be kept across it; a step that does not complete (an
-        // error, a discard, a panic) puts it back to the start on the way.
+        // error, a discard, a panic) puts back the FMU's own time on the way
+        // (not the communication point, which may miss it by rounding).
+        let before = self.time;
         self.time = end;
         let rewind = Rewind {
             time: &mut self.time,
-            start: current_time,
+            start: before,
         };
         let mut ctx = Context {
             env: &self.env,
@@ -941,6 +958,19 @@ impl<M: CoSimModel> Instance<M> {
                 ),
             ));
         }
+        // Communication points summed step by step round: a step that ends
+        // within 0.1 % of its size past stopTime ends at it.
+        let end = current_time + step_size;
+        if end > self.stop_time + STOP_TIME_SLACK * step_size {
+            return Err(self.error(
+                function,
+                format_args!(
+                    "the step from {current_time} to {end} ends past stopTime {} \
+                     (fmi2SetupExperiment defined it); set up a later stopTime, or none",
+                    self.stop_time
+                ),
+            ));
+        }
         Ok(())
     }
 
@@ -949,6 +979,7 @@ impl<M: CoSimModel> Instance<M> {
             model: self.model.clone(),
             time: self.time,
             start_time: self.start_time,
+            stop_time: self.stop_time,
             interface: self.env.interface,
             state: self.state,
             terminate_requested: self.terminate_requested,
@@ -980,6 +1011,13 @@ impl<M: CoSimModel> Instance<M> {
             return Err(refuse(format_args!(
                 "the state's time {} (start time {}) is not finite",
                 data.time, data.start_time
+            )));
+        }
+        // A NaN stop time is refused too.
+        if data.stop_time.is_nan() || data.stop_time < data.start_time {
+            return Err(refuse(format_args!(
+                "the state's stop time {} is before its start time {}",
+                data.stop_time, data.start_time
             )));
         }
         if !can_be_saved_in(data.interface, data.state) {
@@ -1103,6 +1141,7 @@ impl<M: CoSimModel> Instance<M> {
         self.model = data.model.clone();
         self.time = data.time;
         self.start_time = data.start_time;
+        self.stop_time = data.stop_time;
         self.state = data.state;
         self.terminate_requested = data.terminate_requested;
         self.event(
@@ -1140,6 +1179,28 @@ fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
     state != FmiState::Fatal && !other.own_states().contains(state)
 }
 
+/// A declared minimum as the lower end of an interval: `(0` for the double
+/// next above 0 (an open end, declared as the nearest value inside it, since
+/// FMI's bounds are inclusive), `[1e-4` for a closed one.
+fn lower_end(min: f64) -> String {
+    let outside = min.next_down();
+    if format_real(outside).len() < format_real(min).len() {
+        format!("({}", format_real(outside))
+    } else {
+        format!("[{}", format_real(min))
+    }
+}
+
+/// A declared maximum as the upper end of an interval (see [`lower_end`]).
+fn upper_end(max: f64) -> String {
+    let outside = max.next_up();
+    if format_real(outside).len() < format_real(max).len() {
+        format!("{})", format_real(outside))
+    } else {
+        format!("{}]", format_real(max))
+    }
+}
+
 /// Why the parameter `var` of `model` is outside its declared range, if it
 /// is a parameter and is outside (a NaN is outside every range).
 fn parameter_out_of_range<M>(var: &Variable<M>, model: &M) -> Option<String> {
@@ -1154,10 +1215,10 @@ fn parameter_out_of_range<M>(var: &Variable<M>, model: &M) -> Option<String> {
             let above = r.max.is_some_and(|max| value.is_nan() || value > max);
             (below || above).then(|| {
                 format!(
-                    "parameter {} = {value} is outside its allowed range [{}, {}]",
+                    "parameter {} = {value} is outside its allowed range {}, {}",
                     var.name,
-                    bound(r.min.map(|v| v.to_string()), "-inf"),
-                    bound(r.max.map(|v| v.to_string()), "inf")
+                    r.min.map_or("[-inf".to_owned(), lower_end),
+                    r.max.map_or("inf]".to_owned(), upper_end)
                 )
             })
         }

@@ -37,6 +37,16 @@ pub fn format_real(x: f64) -> String {
     }
 }
 
+/// The start value of the variable named `name`, as modelDescription.xml
+/// writes it; None for an unknown name or a variable without one.
+pub fn start_text<M: CoSimModel>(name: &str) -> Option<String> {
+    let model = M::new();
+    M::variables()
+        .iter()
+        .find(|v| v.name == name)
+        .and_then(|v| start_value(v, &model))
+}
+
 /// The start value modelDescription declares for `var` (those that have
 /// one: [`Variable::has_start`]), read from the start-up `model`.
 fn start_value<M>(var: &Variable<M>, model: &M) -> Option<String> {

@@ -537,6 +537,14 @@ impl<M> Variable<M> {
         self
     }
 
+    /// A state whose initial value the model computes from the parameters (a
+    /// rest it settles into): it initially depends on every known, as an
+    /// InitialUnknown without a `dependencies` list says (FMI 2.0.4 §2.2.8).
+    pub const fn initially_depends_on_every_known(mut self) -> Self {
+        self.initial_dependencies = None;
+        self
+    }
+
     /// Marks a continuous Real variable as the time derivative of the state
     /// `state` (by name), and declares what it is computed from (inputs and
     /// states by name, for ModelStructure/Derivatives). After initialization

@@ -170,3 +170,49 @@ fn a_healthy_model_integrates() {
     assert_eq!(status, OK);
     assert!((y - 2.0).abs() < 1e-12, "y = {y}");
 }
+
+/// A co-simulation step past the stopTime fmi2SetupExperiment defined is
+/// refused with fmi2Error (FMI 2.0.4 §2.1.6); communication points summed
+/// step by step, which round past it, reach it; fmi2Reset forgets it.
+#[test]
+fn a_step_past_the_defined_stop_time_is_an_error() {
+    let setup = |inst: &Slave<Faulty>, stop: Option<f64>| {
+        // SAFETY: `inst.0` is a live instance of Faulty.
+        unsafe {
+            assert_eq!(
+                fmi2_cosim::abi::setup_experiment::<Faulty>(
+                    inst.0,
+                    0,
+                    0.0,
+                    0.0,
+                    stop.is_some() as i32,
+                    stop.unwrap_or(0.0),
+                ),
+                OK
+            );
+            assert_eq!(
+                fmi2_cosim::abi::enter_initialization_mode::<Faulty>(inst.0),
+                OK
+            );
+        }
+        assert_eq!(inst.exit_initialization(), OK);
+    };
+    let inst = instance(0);
+    setup(&inst, Some(1.0));
+    // Ten steps of 0.1 sum to 0.9999999999999999 and then past 1.0 by
+    // rounding only: each is taken, and the tenth ends at the stop.
+    let mut t = 0.0;
+    for _ in 0..10 {
+        assert_eq!(inst.step(t, 0.1), OK, "t = {t}");
+        t += 0.1;
+    }
+    assert_eq!(inst.step(t, 0.1), ERROR, "a step past stopTime");
+    assert_eq!(inst.reset(), OK);
+    setup(&inst, None);
+    for k in 0..20 {
+        assert_eq!(inst.step(k as f64 * 0.1, 0.1), OK);
+    }
+    assert_eq!(inst.reset(), OK);
+    setup(&inst, Some(0.05));
+    assert_eq!(inst.step(0.0, 0.1), ERROR, "a first step past stopTime");
+}

@@ -759,7 +759,7 @@ impl PiezoControllerFmu {
     fn non_finite_step(&self, current_time: f64, step_size: f64) -> ModelError {
         let (name, value) = self.non_finite_output().unwrap_or(("an output", f64::NAN));
         ModelError(format!(
-            "t = {current_time}: {name} became {value} in a step of {step_size} s: the \
+            "{name} became {value} in the step of {step_size} s from t = {current_time}: the \
              control law cannot be computed over this step (restore an FMU state or reset)"
         ))
     }

@@ -21,5 +21,6 @@ fn declared_ranges_agree_with_the_model() {
         PiezoControllerFmu::variables(),
         || PiezoControllerFmu::with_params(ControllerParams::default()).unwrap(),
         |m| m.params().validate(),
+        &[],
     );
 }

@@ -8,6 +8,7 @@
 //! `CoSimModel` and `ModelExchange` implementations that forward to
 //! [`FlexureStage`] (its step, and its ODE form `piezo_models::flexure_stage::ode`).
 
+use fmi2_cosim::model_description::format_real;
 use fmi2_cosim::{
     BaseUnit, CoSimModel, Context, DefaultExperiment, EventUpdate, FmiState, Interface, ModelError,
     ModelExchange, ModelExchangeInfo, ModelInfo, Status, StepOutcome, UnitDefinition, Variability,
@@ -71,8 +72,9 @@ impl FlexureStageFmu {
                      clipped (reported once per channel)",
                     channel + 1,
                     channel + 1,
-                    self.commands[channel],
-                    amp.gain * self.commands[channel],
+                    // 1e308 in 6 characters, not 309 digits.
+                    format_real(self.commands[channel]),
+                    format_real(amp.gain * self.commands[channel]),
                     amp.input_min,
                     amp.input_max,
                     amp.v_min,
@@ -90,14 +92,8 @@ impl FlexureStageFmu {
     fn supervise(&mut self, ctx: &Context<'_>, time: f64) -> Result<Status, ModelError> {
         if let Some(fault) = self.stage.check_state() {
             return Err(ModelError(format!(
-                "the stage diverged: {} = {} (non-finite, or beyond {} um / {} rad) with \
-                 commands u1..u3 = {:?} V; check the hysteresis parameters (a Bouc-Wen model \
-                 with beta + gamma < 0 grows without bound)",
-                fault.variable,
-                fault.value,
-                piezo_models::flexure_stage::DIVERGED_DISPLACEMENT_UM,
-                piezo_models::flexure_stage::DIVERGED_ROTATION_RAD,
-                self.commands
+                "the stage diverged: {}",
+                self.divergence(fault, Interface::ModelExchange)
             )));
         }
         let amplifier = self.params.amplifier;
@@ -213,19 +209,29 @@ const PORTS: &[Variable<FlexureStageFmu>] = &[
         |m: &FlexureStageFmu| m.stage.sensors()[2],
     )
     .depends_on(&["x", "theta_z"]),
-    Variable::real_output("x", "True platform x (no sensor noise)", "um", |m| {
-        m.stage.pose().x_um
-    }),
-    Variable::real_output("y", "True platform y (no sensor noise)", "um", |m| {
-        m.stage.pose().y_um
-    }),
+    // The pose outputs are the pose states: each depends on itself.
+    Variable::real_output(
+        "x",
+        "True platform x (no sensor noise)",
+        "um",
+        |m: &FlexureStageFmu| m.stage.pose().x_um,
+    )
+    .depends_on(&["x"]),
+    Variable::real_output(
+        "y",
+        "True platform y (no sensor noise)",
+        "um",
+        |m: &FlexureStageFmu| m.stage.pose().y_um,
+    )
+    .depends_on(&["y"]),
     Variable::<FlexureStageFmu>::real_output(
         "theta_z",
         "True platform rotation about z (no sensor noise)",
         "rad",
         |m| m.stage.pose().theta_rad,
     )
-    .display_unit("deg"),
+    .display_unit("deg")
+    .depends_on(&["theta_z"]),
     Variable::real_local(
         "amplifier.voltage[1]",
         "PZT1 amplifier output voltage",
@@ -477,49 +483,59 @@ const APPENDED: &[Variable<FlexureStageFmu>] = &[
 
 /// The continuous states that are not ports, amplifier voltages or velocities
 /// (Model Exchange integrates them; Co-Simulation shows them as diagnostics).
+///
+/// The hysteretic states start at the rest their parameters settle them into
+/// (`rest_cycle_voltage`, A, beta, ...): they initially depend on every known.
 const STATES: &[Variable<FlexureStageFmu>] = &[
     Variable::real_local(
         "pzt[1].h",
         "PZT1 hysteretic state h (ABW-XY eq. 3)",
         "um",
-        |m| m.stage.continuous_states()[3],
-    ),
+        |m: &FlexureStageFmu| m.stage.continuous_states()[3],
+    )
+    .initially_depends_on_every_known(),
     Variable::real_local(
         "pzt[2].h",
         "PZT2 hysteretic state h (ABW-XY eq. 3)",
         "um",
-        |m| m.stage.continuous_states()[4],
-    ),
+        |m: &FlexureStageFmu| m.stage.continuous_states()[4],
+    )
+    .initially_depends_on_every_known(),
     Variable::real_local(
         "pzt[3].h",
         "PZT3 hysteretic state h (ABW-XY eq. 3)",
         "um",
-        |m| m.stage.continuous_states()[5],
-    ),
+        |m: &FlexureStageFmu| m.stage.continuous_states()[5],
+    )
+    .initially_depends_on_every_known(),
     Variable::real_local(
         "coupling.x_from_pzt1.h",
         "Hysteretic state of the coupling PZT1 voltage -> x",
         "um",
-        |m| m.stage.continuous_states()[6],
-    ),
+        |m: &FlexureStageFmu| m.stage.continuous_states()[6],
+    )
+    .initially_depends_on_every_known(),
     Variable::real_local(
         "coupling.rot_from_pzt1.h",
         "Hysteretic state of the coupling PZT1 voltage -> s2 − s3",
         "um",
-        |m| m.stage.continuous_states()[7],
-    ),
+        |m: &FlexureStageFmu| m.stage.continuous_states()[7],
+    )
+    .initially_depends_on_every_known(),
     Variable::real_local(
         "coupling.y_from_pzt2.h",
         "Hysteretic state of the coupling PZT2 voltage -> y",
         "um",
-        |m| m.stage.continuous_states()[8],
-    ),
+        |m: &FlexureStageFmu| m.stage.continuous_states()[8],
+    )
+    .initially_depends_on_every_known(),
     Variable::real_local(
         "coupling.y_from_pzt3.h",
         "Hysteretic state of the coupling PZT3 voltage -> y",
         "um",
-        |m| m.stage.continuous_states()[9],
-    ),
+        |m: &FlexureStageFmu| m.stage.continuous_states()[9],
+    )
+    .initially_depends_on_every_known(),
     Variable::real_local("pzt[1].creep", "PZT1 creep displacement", "um", |m| {
         m.stage.continuous_states()[10]
     }),
@@ -878,17 +894,61 @@ impl FlexureStageFmu {
         fault: piezo_models::flexure_stage::StateFault,
     ) -> ModelError {
         ModelError(format!(
-            "the stage diverged in the step from t = {current_time} to t = {}: {} = {} \
-             (non-finite, or beyond {} um / {} rad) with commands u1..u3 = {:?} V; check \
-             the hysteresis parameters (a Bouc-Wen model with beta + gamma < 0 grows \
-             without bound)",
+            "the stage diverged in the step from t = {current_time} to t = {}: {}",
             current_time + step_size,
+            self.divergence(fault, Interface::CoSimulation)
+        ))
+    }
+
+    /// What diverged, with the commands, and the likely cause: the modes are
+    /// stable and the amplifier bounded, so a state leaves the physical
+    /// domain only through a Bouc-Wen model that runs away past the ±1 kV its
+    /// build checks, a sensor spacing too small for the platform's rotation,
+    /// or, in Model Exchange, an integrator step too long for the modes.
+    fn divergence(
+        &self,
+        fault: piezo_models::flexure_stage::StateFault,
+        interface: Interface,
+    ) -> String {
+        let modes = &self.params.modes;
+        let fastest = [modes.x, modes.y, modes.theta]
+            .into_iter()
+            .max_by(|a, b| a.frequency_hz.total_cmp(&b.frequency_hz))
+            .expect("three modes");
+        let omega = 2.0 * std::f64::consts::PI * fastest.frequency_hz;
+        let cause = if fault.variable.starts_with("hysteretic state") {
+            "a Bouc-Wen model whose state runs away beyond the ±1 kV of voltage its build \
+             checks (beta + gamma < 0 steepens its loading branch); check that model's \
+             parameters"
+                .to_owned()
+        } else if fault.variable.contains("theta_z") && interface == Interface::CoSimulation {
+            format!(
+                "a rotation beyond {} rad: theta_z is the stacks' differential motion over the \
+                 sensor spacing L = {} mm, too small for it",
+                piezo_models::flexure_stage::DIVERGED_ROTATION_RAD,
+                self.params.sensor_spacing_mm
+            )
+        } else if interface == Interface::ModelExchange {
+            format!(
+                "an integrator step too long for the stage's modes: the fastest, {} Hz with \
+                 damping ratio {}, keeps explicit Euler stable only below 2·zeta/omega = {:.3e} \
+                 s; use a variable-step solver (CVode) or a shorter step",
+                fastest.frequency_hz,
+                fastest.damping_ratio,
+                2.0 * fastest.damping_ratio / omega
+            )
+        } else {
+            "non-finite commands".to_owned()
+        };
+        format!(
+            "{} = {} (non-finite, or beyond {} um / {} rad) with commands u1..u3 = {:?} V; \
+             likely cause: {cause}",
             fault.variable,
             fault.value,
             piezo_models::flexure_stage::DIVERGED_DISPLACEMENT_UM,
             piezo_models::flexure_stage::DIVERGED_ROTATION_RAD,
             self.commands
-        ))
+        )
     }
 }
 

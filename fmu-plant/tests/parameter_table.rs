@@ -21,5 +21,7 @@ fn declared_ranges_agree_with_the_model() {
         FlexureStageFmu::variables(),
         || FlexureStageFmu::with_params(FlexureStageParams::default()).unwrap(),
         |m| m.params().validate(),
+        // T > 10 amplifier time constants, which the bandwidth sets.
+        &[".creep_time"],
     );
 }

@@ -48,9 +48,11 @@ pub const MICROMETRE_PER_VOLT_SQUARED: UnitDefinition = UnitDefinition {
 };
 
 /// `variable` with the declared `range` as its FMI min and max. FMI's bounds
-/// are inclusive: an open end is stated as its value, enforced by the
-/// model's validation (which reads the same declaration) and said in the
-/// variable's description ([`check_declared_ranges`] tests both).
+/// are inclusive: an open end is declared as the nearest double inside it (a
+/// tool that samples at the declared bounds gets values the model takes),
+/// stated in the variable's description as the open condition, and
+/// enforced by the model's validation, which reads the same declaration
+/// ([`check_declared_ranges`] tests all three).
 pub const fn with_range<M>(variable: Variable<M>, range: Range) -> Variable<M> {
     variable.range(range.min_value(), range.max_value())
 }
@@ -70,8 +72,31 @@ pub fn refused_parameter<M>(variables: &[Variable<M>], error: &ParamError) -> Mo
     let name = fmi_name(variables, &error.parameter).unwrap_or("a parameter");
     ModelError(format!(
         "parameter {name} ({}) = {} is not allowed: {}",
-        error.parameter, error.value, error.allowed
+        error.parameter,
+        error.value,
+        with_fmi_names(variables, &error.allowed)
     ))
+}
+
+/// `text` with every model path of a group of parameters (a serde path up
+/// to its last field, `actuators[0].hysteresis`) written as the importer
+/// knows the group (`pzt[1]`), longest paths first so that
+/// `actuators[0].hysteresis` is not read as `actuators[0]` and a field.
+fn with_fmi_names<M>(variables: &[Variable<M>], text: &str) -> String {
+    let mut groups: Vec<(String, &str)> = variables
+        .iter()
+        .filter_map(|v| {
+            let path = v.model_path?.replace(' ', "");
+            let (group, _) = path.rsplit_once('.')?;
+            let (name_group, _) = v.name.rsplit_once('.')?;
+            (group != name_group).then(|| (group.to_owned(), name_group))
+        })
+        .collect();
+    groups.sort_by(|a, b| b.0.len().cmp(&a.0.len()).then_with(|| a.0.cmp(&b.0)));
+    groups.dedup();
+    groups.iter().fold(text.to_owned(), |text, (group, name)| {
+        text.replace(group.as_str(), name)
+    })
 }
 
 /// How many variables `blocks` hold together: the length of the table
@@ -174,16 +199,22 @@ macro_rules! bouc_wen_blocks {
 }
 
 /// Checks, for every Real parameter of `variables` that declares a min or a
-/// max, that the model's validation agrees with the table: a value just
-/// beyond the bound is refused by name (its `model_path`), and a value at the
-/// bound is either accepted (a closed end) or refused with the strict bound
-/// stated in the description (`> 0`, `0 <`, `< 1`), since FMI's min and max
-/// can only say inclusive. `fresh` gives a model with valid parameters,
-/// `validate` runs the model's validation on a model's parameters.
+/// max, that the model's validation agrees with the table: a value at the
+/// bound is accepted (FMI's min and max are inclusive), a value just beyond
+/// it is refused by name (its `model_path`), and an open end (declared as
+/// the double next to a round value: 5e-324 for `> 0`) has the round value
+/// refused and its strict bound stated in the description (`> 0`, `0 <`,
+/// `< 1`). `fresh` gives a model with valid parameters, `validate` runs the
+/// model's validation on a model's parameters. A parameter whose name ends
+/// with one of `tied` has a rule against other parameters tighter than its
+/// own range (a creep time above ten amplifier time constants): its declared
+/// bound may be refused, by that rule, which its description must state
+/// (`more than`).
 pub fn check_declared_ranges<M>(
     variables: &[Variable<M>],
     fresh: impl Fn() -> M,
     validate: impl Fn(&M) -> Result<(), ParamError>,
+    tied: &[&str],
 ) {
     let refused_by_name = |model: &M, path: &str| match validate(model) {
         Ok(()) => false,
@@ -201,26 +232,25 @@ pub fn check_declared_ranges<M>(
         let path = variable
             .model_path
             .unwrap_or_else(|| panic!("{} has no model path", variable.name));
-        for (bound, outward, strict) in [
-            (
-                real.min,
-                -1.0,
-                [
-                    format!("> {}", fmt(real.min)),
-                    format!("{} <", fmt(real.min)),
-                ],
-            ),
-            (
-                real.max,
-                1.0,
-                [
-                    format!("< {}", fmt(real.max)),
-                    format!("{} >", fmt(real.max)),
-                ],
-            ),
-        ] {
+        for (bound, outward) in [(real.min, -1.0), (real.max, 1.0)] {
             let Some(bound) = bound else { continue };
             checked += 1;
+            let mut model = fresh();
+            set(&mut model, bound);
+            if tied.iter().any(|t| variable.name.ends_with(t)) {
+                assert!(
+                    variable.description.contains("more than"),
+                    "{}: a rule against other parameters must be stated: {:?}",
+                    variable.name,
+                    variable.description
+                );
+            } else {
+                assert!(
+                    !refused_by_name(&model, path),
+                    "{} = {bound} is its declared (inclusive) bound, but the model refuses it",
+                    variable.name
+                );
+            }
             let beyond = bound + outward * (bound.abs() * 1e-6).max(1e-9);
             let mut model = fresh();
             set(&mut model, beyond);
@@ -230,18 +260,32 @@ pub fn check_declared_ranges<M>(
                  validation does not refuse it by name",
                 variable.name
             );
-            let mut model = fresh();
-            set(&mut model, bound);
-            if refused_by_name(&model, path) {
+            let outside = if outward < 0.0 {
+                bound.next_down()
+            } else {
+                bound.next_up()
+            };
+            if fmt(outside).len() < fmt(bound).len() {
+                let strict = if outward < 0.0 {
+                    [format!("> {}", fmt(outside)), format!("{} <", fmt(outside))]
+                } else {
+                    [format!("< {}", fmt(outside)), format!("{} >", fmt(outside))]
+                };
                 assert!(
                     strict
                         .iter()
                         .any(|s| variable.description.contains(s.as_str())),
-                    "{}: the model refuses the bound {bound} (an open end), so the \
-                     description must say so ({:?}): {:?}",
+                    "{}: its declared bound {bound} stands for the open end {outside}, so the \
+                     description must say so ({strict:?}): {:?}",
                     variable.name,
-                    strict,
                     variable.description
+                );
+                let mut model = fresh();
+                set(&mut model, outside);
+                assert!(
+                    refused_by_name(&model, path),
+                    "{} = {outside} is the open end of its range, but the model takes it",
+                    variable.name
                 );
             }
         }
@@ -249,8 +293,8 @@ pub fn check_declared_ranges<M>(
     assert!(checked > 0, "no Real parameter declares a range");
 }
 
-fn fmt(value: Option<f64>) -> String {
-    value.map_or_else(String::new, |v| v.to_string())
+fn fmt(value: f64) -> String {
+    fmi2_cosim::model_description::format_real(value)
 }
 
 #[cfg(test)]

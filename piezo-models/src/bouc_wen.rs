@@ -159,6 +159,58 @@ impl BoucWenParams {
             .try_for_each(|parameter| parameter.check(prefix, self))
     }
 
+    /// Refuses a model whose hysteretic state runs away between `low` and
+    /// `high` [V] (`range` says what they are, for the message): from the
+    /// virgin state, up to `high`, down to `low` and up again, in substeps of
+    /// 0.1 V (the rest cycle's). Each parameter inside its own range can still
+    /// make eq. (3) run away (beta + gamma < 0 steepens the loading branch as
+    /// h grows, without bound for n > 1); a model built on such parameters
+    /// turns non-finite at its first large input, so the error, on `beta` or
+    /// `gamma` of `prefix` (the negative one), says so before any run.
+    pub fn check_bounded(
+        &self,
+        prefix: &str,
+        low: f64,
+        high: f64,
+        range: &str,
+    ) -> Result<(), ParamError> {
+        const SUBSTEP: f64 = 0.1;
+        // |h| beyond 1 m of displacement is no actuator's state.
+        const BOUND: f64 = 1e6;
+        let mut model = AsymmetricBoucWen::new(*self);
+        for end in [high, low, high] {
+            model.advance_to(end, SUBSTEP);
+            let h = model.hysteretic_state();
+            if !(h.is_finite() && h.abs() <= BOUND) {
+                let sum = self.beta + self.gamma;
+                // The negative one of the two is the likelier slip.
+                let (field, value) = if self.beta < 0.0 && self.gamma >= 0.0 {
+                    ("beta", self.beta)
+                } else {
+                    ("gamma", self.gamma)
+                };
+                return Err(ParamError {
+                    parameter: format!("{prefix}.{field}"),
+                    value,
+                    allowed: format!(
+                        "a Bouc-Wen model whose hysteretic state stays finite over {range} \
+                         {low}..{high} V; with beta = {}, gamma = {} (beta + gamma = {sum}) and \
+                         n = {}, its h runs away on the way to {end} V{}",
+                        self.beta,
+                        self.gamma,
+                        self.n,
+                        if sum < 0.0 {
+                            " (beta + gamma < 0 steepens the loading branch as h grows)"
+                        } else {
+                            ""
+                        }
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// dh/du of eq. (3) (this module's reading) at input `u`, state `h`, for
     /// an input moving in the direction of `direction` (its sign).
     pub fn state_slope(&self, u: f64, h: f64, direction: f64) -> f64 {

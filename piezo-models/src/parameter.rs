@@ -70,14 +70,25 @@ impl Range {
         }
     }
 
-    /// The lower bound's value (open or closed), as an inclusive minimum.
+    /// The smallest allowed value, as an inclusive minimum (FMI's `min`): a
+    /// closed bound's value, or the double next above an open one's (0 for
+    /// `> 0` is declared as 5e-324, which is allowed; 0 is not).
     pub const fn min_value(&self) -> Option<f64> {
-        self.min.value()
+        match self.min {
+            Bound::Unbounded => None,
+            Bound::Closed(v) => Some(v),
+            Bound::Open(v) => Some(v.next_up()),
+        }
     }
 
-    /// The upper bound's value (open or closed), as an inclusive maximum.
+    /// The largest allowed value, as an inclusive maximum (see
+    /// [`Range::min_value`]).
     pub const fn max_value(&self) -> Option<f64> {
-        self.max.value()
+        match self.max {
+            Bound::Unbounded => None,
+            Bound::Closed(v) => Some(v),
+            Bound::Open(v) => Some(v.next_down()),
+        }
     }
 
     /// Whether `value` is finite and within both ends.
@@ -203,10 +214,14 @@ mod tests {
         };
         assert!(step.contains(1e-4) && step.contains(10.0));
         assert!(!step.contains(0.99e-4) && !step.contains(10.0 + 1e-9));
+        // FMI's min and max are inclusive: the nearest values inside.
         assert_eq!(
             (damping.min_value(), damping.max_value()),
-            (Some(0.0), Some(1.0))
+            (Some(5e-324), Some(1.0 - f64::EPSILON / 2.0))
         );
+        assert!(damping.contains(damping.min_value().unwrap()));
+        assert!(damping.contains(damping.max_value().unwrap()));
+        assert_eq!(step.min_value(), Some(1e-4));
     }
 
     #[test]

@@ -197,6 +197,32 @@ impl ControllerParams {
             ("bouc_wen.y_from_x", &self.bouc_wen.y_from_x),
         ] {
             model.validate(name)?;
+            model.check_bounded(
+                name,
+                self.command_min,
+                self.command_max,
+                "the command range",
+            )?;
+        }
+        // Eq. (6) inverts y = p·u + q·h: the x and y models must rise with
+        // their command where they start (h = 0: slope p + q·A), or the
+        // inverse has no command to give for a rising demand.
+        for (name, model) in [
+            ("bouc_wen.x", &self.bouc_wen.x),
+            ("bouc_wen.y", &self.bouc_wen.y),
+        ] {
+            let slope = model.p + model.q * model.a;
+            if slope.is_nan() || slope <= 0.0 {
+                return Err(ParamError {
+                    parameter: format!("{name}.p"),
+                    value: model.p,
+                    allowed: format!(
+                        "a model that rises with its command, p + q·A > 0 (eq. 4 at h = 0), as \
+                         the inverse of eq. (6) needs; here p + q·A = {} + {}·{} = {slope}",
+                        model.p, model.q, model.a
+                    ),
+                });
+            }
         }
         BoucWenModels::REST_CYCLE.check("bouc_wen.rest_cycle", self.bouc_wen.rest_cycle)?;
         self.x_model.validate("x_model")?;
@@ -360,6 +386,15 @@ const THETA_DIRECTIONS: [f64; 3] = [0.0, 1.0, -1.0];
 /// sample at 10 kHz for any command the stage follows.
 const BOUC_WEN_MAX_DU: f64 = 0.01;
 
+/// The output before the first sample: the rest, 0 V, as far as the command
+/// range lets it (the commands are always inside it).
+fn rest_output(params: &ControllerParams) -> ControllerOutput {
+    ControllerOutput {
+        u: [0.0f64.clamp(params.command_min, params.command_max); 3],
+        ..ControllerOutput::default()
+    }
+}
+
 impl PiezoController {
     pub fn new(params: ControllerParams) -> Result<Self, ParamError> {
         params.validate()?;
@@ -374,6 +409,7 @@ impl PiezoController {
         let selected = |yes: bool| if yes { &params.bouc_wen } else { &unused };
         let feedforward_models = selected(params.hysteresis_model == HysteresisModel::BoucWen);
         let coupling_models = selected(params.decoupling_model == DecouplingModel::ModelBased);
+        let output = rest_output(&params);
         Ok(PiezoController {
             models: [
                 ModifiedInversePi::new(params.y_model),
@@ -388,7 +424,7 @@ impl PiezoController {
             pi_y: PiController::default(),
             pi_theta: PiController::default(),
             limited: [0; 3],
-            output: ControllerOutput::default(),
+            output,
         })
     }
 
@@ -535,7 +571,7 @@ impl PiezoController {
         self.pi_y.reset();
         self.pi_theta.reset();
         self.limited = [0; 3];
-        self.output = ControllerOutput::default();
+        self.output = rest_output(&self.params);
     }
 
     pub fn output(&self) -> &ControllerOutput {

@@ -315,3 +315,23 @@ fn set_value(sample: &mut piezo_models::piezo_controller::ControllerOutput, inde
     };
     *slot = v;
 }
+
+/// Before its first sample, and after a reset, the controller commands 0 V
+/// as far as the command range lets it: inside the range, always.
+#[test]
+fn the_commands_before_the_first_sample_are_inside_the_range() {
+    for (min, max, rest) in [(-2.0, 12.0, 0.0), (1.0, 10.0, 1.0), (-10.0, -1.0, -1.0)] {
+        let mut p = params();
+        p.command_min = min;
+        p.command_max = max;
+        let mut controller = PiezoController::new(p).unwrap();
+        assert_eq!(controller.output().u, [rest; 3], "{min}..{max}");
+        controller.step(1.0, 2.0, 0.0, [0.0; 3], DT);
+        controller.reset();
+        assert_eq!(
+            controller.output().u,
+            [rest; 3],
+            "{min}..{max} after a reset"
+        );
+    }
+}

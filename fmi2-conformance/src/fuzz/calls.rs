@@ -101,6 +101,7 @@ impl Fuzzer<'_> {
         if status == OK {
             let live = self.live_mut(slot);
             live.model.start_time = start;
+            live.model.stop_time = if stop_defined { stop } else { f64::INFINITY };
             live.model.time = start;
         }
     }
@@ -679,10 +680,16 @@ impl Fuzzer<'_> {
         // A step must be positive and finite, start at a finite point and end
         // at one: an end time that overflows leaves no time to continue from.
         let arguments_valid = h.is_finite() && h > 0.0 && t.is_finite() && (t + h).is_finite();
+        // A step may not end past the defined stopTime; the layer lets one end
+        // within 0.1 % of its size past it (rounding), the band left open here.
+        let stop_time = self.live(slot).model.stop_time;
+        let past_stop = t + h > stop_time + 2e-3 * h;
+        let near_stop = t + h > stop_time;
         let allowed: &[sys::fmi2Status] =
-            if !is_legal || !arguments_valid || (!tainted && miss > 2.0 * tolerance) {
+            if !is_legal || !arguments_valid || (!tainted && (miss > 2.0 * tolerance || past_stop))
+            {
                 &[ERROR]
-            } else if tainted || miss > 0.5 * tolerance {
+            } else if tainted || miss > 0.5 * tolerance || near_stop {
                 &[OK, WARNING, ERROR]
             } else if self.pristine(slot) && (1e-9..=1.0).contains(&h) {
                 // Steps from a nanosecond (the resolution of integer-nanosecond

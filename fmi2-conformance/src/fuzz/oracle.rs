@@ -16,6 +16,9 @@ pub(super) struct Shadow {
     pub(super) time: f64,
     /// The `startTime` of the last successful `fmi2SetupExperiment`.
     pub(super) start_time: f64,
+    /// Its `stopTime`, infinite when it defined none: a co-simulation step
+    /// must not end past it.
+    pub(super) stop_time: f64,
     /// In an FMU state: the machine state it was taken in and the interface of
     /// its instance (restoring it puts the instance there). In a live
     /// instance: the interface; the machine state is `Live::state`.

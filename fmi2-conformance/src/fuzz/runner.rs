@@ -129,6 +129,7 @@ impl<'a> Fuzzer<'a> {
                 strings,
                 time: 0.0,
                 start_time: 0.0,
+                stop_time: f64::INFINITY,
                 machine: State::Instantiated,
                 interface: Interface::CoSimulation,
                 wild_states: false,
