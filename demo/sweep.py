@@ -423,8 +423,19 @@ def _plant_parameters(fmu_path: Path) -> dict:
             if v.causality == "parameter" and v.type == "Real" and v.start is not None}
 
 
-def _bound_text(bound, open_end: str) -> str:
-    return open_end if bound is None else f"{bound:g}"
+def _range_text(low, high) -> str:
+    """A declared range as an interval. FMI's min and max are inclusive, so an
+    open end (> 0) is declared as the double next to it (5e-324): written back
+    as the open end, (0, inf]."""
+    def end(bound, toward: float, closed: str, opened: str, missing: str) -> str:
+        if bound is None:
+            return missing
+        outside = math.nextafter(bound, toward)
+        if len(f"{outside:g}") < len(f"{bound:g}") or (outside == 0 and bound != 0):
+            return opened.format(f"{outside:g}")
+        return closed.format(f"{bound:g}")
+    return (f"{end(low, -math.inf, '[{}', '({}', '[-inf')}, "
+            f"{end(high, math.inf, '{}]', '{})', 'inf]')}")
 
 
 def perturbed(nominal: float, factor: float, low, high) -> float:
@@ -516,7 +527,7 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                         # word: the nominal value is itself refused.
                         problem = (f"{mc.instance}.{name} = {nominal:g} (the nominal value the "
                                    f"Monte Carlo perturbs) is outside its declared range "
-                                   f"[{_bound_text(low, '-inf')}, {_bound_text(high, 'inf')}]")
+                                   f"{_range_text(low, high)}")
                         own_values, set_names = origin
                         given_in = [n for n in set_names if name in sets[spec.file(n)]]
                         if name not in own_values and given_in:

@@ -290,7 +290,7 @@ def test_diverging_hysteresis_is_reported_with_variable_and_time(envs):
     slave.free()
 
 
-def test_a_model_that_runs_away_in_the_amplifier_range_is_refused(envs):
+def test_diverging_hysteresis_in_the_amplifier_range_is_refused_at_initialization(envs):
     """beta + gamma = -0.68 with n = 2 escapes within 21 V of travel, inside
     the amplifier's -30..130 V: initialization is refused, naming the
     parameter by its FMI name (a stack's as pzt[k], not the model's internal

@@ -474,7 +474,7 @@ def test_a_nominal_value_outside_its_range_is_refused_not_held_at_the_bound(spec
     with pytest.raises(sweep.SpecError) as e:
         sweep.expand(sweep.load_spec(bad))
     assert str(e.value) == (f"{bad}:{line}: plant.amplifier.gain = -1 (the nominal value the "
-                            "Monte Carlo perturbs) is outside its declared range [0, inf]")
+                            "Monte Carlo perturbs) is outside its declared range (0, inf]")
     # From a parameter set, the set's file and line are named.
     parameter_set = tmp_path / "plant.json"
     parameter_set.write_text('{\n  "noise.rms": 0.001,\n  "amplifier.gain": -1.0\n}\n')

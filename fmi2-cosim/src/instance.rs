@@ -959,7 +959,7 @@ impl<M: CoSimModel> Instance<M> {
             ));
         }
         // Communication points summed step by step round: a step that ends
-        // within 0.1 % of its size past stopTime ends at it.
+        // within 0.1 % of its size past stopTime is taken (its end stands).
         let end = current_time + step_size;
         if end > self.stop_time + STOP_TIME_SLACK * step_size {
             return Err(self.error(

@@ -198,14 +198,15 @@ fn a_step_past_the_defined_stop_time_is_an_error() {
         assert_eq!(inst.exit_initialization(), OK);
     };
     let inst = instance(0);
-    setup(&inst, Some(1.0));
-    // Ten steps of 0.1 sum to 0.9999999999999999 and then past 1.0 by
-    // rounding only: each is taken, and the tenth ends at the stop.
+    setup(&inst, Some(0.3));
+    // Three steps of 0.1 sum to 0.30000000000000004, past 0.3 by rounding
+    // only: each is taken.
     let mut t = 0.0;
-    for _ in 0..10 {
+    for _ in 0..3 {
         assert_eq!(inst.step(t, 0.1), OK, "t = {t}");
         t += 0.1;
     }
+    assert!(t > 0.3, "the sum rounds past the stop: {t}");
     assert_eq!(inst.step(t, 0.1), ERROR, "a step past stopTime");
     assert_eq!(inst.reset(), OK);
     setup(&inst, None);

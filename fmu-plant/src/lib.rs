@@ -902,9 +902,10 @@ impl FlexureStageFmu {
 
     /// What diverged, with the commands, and the likely cause: the modes are
     /// stable and the amplifier bounded, so a state leaves the physical
-    /// domain only through a Bouc-Wen model that runs away past the ±1 kV its
-    /// build checks, a sensor spacing too small for the platform's rotation,
-    /// or, in Model Exchange, an integrator step too long for the modes.
+    /// domain only through a Bouc-Wen model that runs away on a path its
+    /// build did not check, a sensor spacing too small for the platform's
+    /// rotation, an absurd gain, or, in Model Exchange, an integrator step
+    /// too long for the modes.
     fn divergence(
         &self,
         fault: piezo_models::flexure_stage::StateFault,
@@ -917,9 +918,9 @@ impl FlexureStageFmu {
             .expect("three modes");
         let omega = 2.0 * std::f64::consts::PI * fastest.frequency_hz;
         let cause = if fault.variable.starts_with("hysteretic state") {
-            "a Bouc-Wen model whose state runs away beyond the ±1 kV of voltage its build \
-             checks (beta + gamma < 0 steepens its loading branch); check that model's \
-             parameters"
+            "a Bouc-Wen model whose state runs away on this run's input path (the build checks \
+             one cycle from the virgin state over the amplifier's range, within ±1 kV; beta + \
+             gamma < 0 steepens the loading branch); check that model's parameters"
                 .to_owned()
         } else if fault.variable.contains("theta_z") && interface == Interface::CoSimulation {
             format!(
@@ -938,7 +939,9 @@ impl FlexureStageFmu {
                 2.0 * fastest.damping_ratio / omega
             )
         } else {
-            "non-finite commands".to_owned()
+            "a gain that drives the platform or a creep state beyond 1 m (a stack's p, a creep \
+             gain, the amplifier gain); check them"
+                .to_owned()
         };
         format!(
             "{} = {} (non-finite, or beyond {} um / {} rad) with commands u1..u3 = {:?} V; \

@@ -424,7 +424,9 @@ impl Separator {
             let mut fields = Vec::new();
             let (mut start, mut quoted) = (0, false);
             for (at, character) in content.char_indices() {
-                if character == '"' {
+                // A quote opens only at a field's start (`Stroke 5"` is no
+                // quoted field) and closes at the next one.
+                if character == '"' && (quoted || content[start..at].trim_matches(' ').is_empty()) {
                     quoted = !quoted;
                 } else if character == c && !quoted {
                     fields.push(unquoted(&content[start..at]));
@@ -501,25 +503,27 @@ fn seconds_per(unit: &str) -> Option<f64> {
 /// `time_stamp` has none.
 fn time_unit_word(name: &str) -> Option<&str> {
     let name = name.trim_end();
-    let at = name.rfind(|c: char| c == '_' || c == ',' || c == '-' || c.is_whitespace())?;
-    let word = &name[at + 1..];
+    let separator = |c: char| c == '_' || c == ',' || c == '-' || c.is_whitespace();
+    let at = name.rfind(separator)?;
+    // The separator may be wider than a byte (a Latin-1 no-break space).
+    let word = name[at..].trim_start_matches(separator);
     (at > 0 && seconds_per(word).is_some()).then_some(word)
 }
 
-/// Whether a header name says its column is a time: a time unit in it
-/// (`Time [s]`, `t/ms`, `time_ms`), or a first word that names time (`t`,
-/// `time`, `Zeit`, `timestamp`).
+/// Whether a header name says its column is a time: a time unit in its
+/// brackets or after a slash (`Time [s]`, `t/ms`), or a first word that
+/// names time (`t`, `time`, `Zeit`, `timestamp`; a capital `T` is as often a
+/// temperature, and a trailing `_s` or `_min` as often something else).
 fn names_a_time(name: &str) -> bool {
     let first_word = name
         .split(|c: char| !c.is_alphanumeric())
         .find(|word| !word.is_empty())
-        .unwrap_or("")
-        .to_lowercase();
+        .unwrap_or("");
     unit_in_name(name).and_then(seconds_per).is_some()
-        || time_unit_word(name).is_some()
+        || first_word == "t"
         || matches!(
-            first_word.as_str(),
-            "t" | "time" | "zeit" | "timestamp" | "temps"
+            first_word.to_lowercase().as_str(),
+            "time" | "zeit" | "timestamp" | "temps"
         )
 }
 
@@ -629,10 +633,8 @@ pub fn read_record_with_columns(
     // byte for byte: every byte is a Latin-1 character.
     let (text, latin1) = match utf16 {
         Some((rest, unit)) => {
-            let units: Vec<u16> = rest
-                .chunks(2)
-                .map(|c| unit([c[0], *c.get(1).unwrap_or(&0)]))
-                .collect();
+            // An odd last byte is no character: it is left out.
+            let units: Vec<u16> = rest.chunks_exact(2).map(|c| unit([c[0], c[1]])).collect();
             (String::from_utf16_lossy(&units), false)
         }
         None => match String::from_utf8(bytes) {
@@ -693,9 +695,16 @@ pub fn parse_record_with_columns(
         if raw.trim_start().starts_with('%') {
             return String::new();
         }
-        raw.split('#')
-            .next()
-            .unwrap_or("")
+        // A `#` inside double quotes (`"Sensor #2"`) is part of a name.
+        let mut quoted = false;
+        let end = raw
+            .char_indices()
+            .find(|&(_, c)| {
+                quoted ^= c == '"';
+                c == '#' && !quoted
+            })
+            .map_or(raw.len(), |(at, _)| at);
+        raw[..end]
             .trim_end_matches(['\r', ' '])
             .trim_start_matches(' ')
             .to_owned()
@@ -938,7 +947,11 @@ pub fn parse_record_with_columns(
     let columns_used = ColumnsUsed {
         input: input_used,
         output: output_used,
-        time: columns.time.map(used),
+        // Times are scaled by their time unit, never as a length or voltage.
+        time: columns.time.map(|index| UsedColumn {
+            converted: None,
+            ..used(index)
+        }),
         separator,
         decimal_comma,
         header_line: header.as_ref().map(|(line, _)| *line),
@@ -1947,10 +1960,22 @@ mod tests {
                 parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults()).unwrap();
             assert_eq!((used.input.index, used.output.index), (1, 2), "{name}");
         }
-        let text = time_u_y_rows("tension;Voltage [V];Displacement [um]", 0.005, ";");
-        let (_, used) =
-            parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults()).unwrap();
-        assert_eq!((used.input.index, used.output.index), (0, 1));
+        // Not times: a temperature, a quantity with a unit-like suffix.
+        for header in [
+            "tension;Voltage [V];Displacement [um]",
+            "T [°C];u;y",
+            "u_s;y_min;y",
+        ] {
+            let text = time_u_y_rows(header, 0.005, ";");
+            let (_, used) =
+                parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults()).unwrap();
+            assert_eq!((used.input.index, used.output.index), (0, 1), "{header}");
+        }
+        // A no-break space (a Latin-1 export's 0xA0) before a unit word.
+        let text = time_u_y_rows("Zeit\u{a0}ms;Spannung\u{a0}(V);Weg\u{a0}(µm)", 5.0, ";");
+        let (record, _) =
+            parse_record_with_columns(&text, Path::new("d.csv"), &timed_defaults()).unwrap();
+        assert!((record.sample_period - 0.005).abs() < 1e-12);
     }
 
     fn by_rate_defaults() -> ReadOptions {
@@ -1999,6 +2024,10 @@ mod tests {
                 "quoted name",
                 plain.replacen("time,u,y", "\"time, s\",u,y", 1),
             ),
+            (
+                "quoted hash",
+                plain.replacen("time,u,y", "time,\"u #2\",y # a comment", 1),
+            ),
         ];
         for (what, text) in variants {
             let time = if what == "quoted name" {
@@ -2006,12 +2035,12 @@ mod tests {
             } else {
                 "time"
             };
-            let record = parse_record(
-                &text,
-                Path::new("d.csv"),
-                &options(Column::Name(time.into())),
-            )
-            .unwrap_or_else(|e| panic!("{what}: {e}"));
+            let mut read = options(Column::Name(time.into()));
+            if what == "quoted hash" {
+                read.input = Some(Column::Name("u #2".into()));
+            }
+            let record = parse_record(&text, Path::new("d.csv"), &read)
+                .unwrap_or_else(|e| panic!("{what}: {e}"));
             assert_eq!(record, expected, "{what}");
         }
         let dir = tempfile::tempdir().unwrap();

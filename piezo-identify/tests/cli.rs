@@ -982,4 +982,19 @@ fn a_validation_file_at_another_rate_is_refused() {
             "{model}: refused before the fit"
         );
     }
+    let same_rate = dir.path().join("same.csv");
+    std::fs::copy(&fitted, &same_rate).unwrap();
+    let taken = run(&[
+        "inverse-pi",
+        fit,
+        "--time",
+        "time",
+        "--validate",
+        same_rate.to_str().unwrap(),
+        "--starts",
+        "2",
+        "--max-iterations",
+        "40",
+    ]);
+    assert!(taken.status.success(), "{}", stderr(&taken));
 }

@@ -160,7 +160,8 @@ impl BoucWenParams {
     }
 
     /// Refuses a model whose hysteretic state runs away between `low` and
-    /// `high` [V] (`range` says what they are, for the message): from the
+    /// `high` [V], each held within ±1 kV (`range` says what they are, for
+    /// the message): from the
     /// virgin state, up to `high`, down to `low` and up again, in substeps of
     /// 0.1 V (the rest cycle's). Each parameter inside its own range can still
     /// make eq. (3) run away (beta + gamma < 0 steepens the loading branch as
@@ -177,6 +178,11 @@ impl BoucWenParams {
         const SUBSTEP: f64 = 0.1;
         // |h| beyond 1 m of displacement is no actuator's state.
         const BOUND: f64 = 1e6;
+        // No piezo amplifier drives a stack past 1 kV, and an absurd range is
+        // not integrated for seconds at every build; a run beyond it is still
+        // watched step by step.
+        const LIMIT: f64 = 1000.0;
+        let (low, high) = (low.max(-LIMIT), high.min(LIMIT));
         let mut model = AsymmetricBoucWen::new(*self);
         for end in [high, low, high] {
             model.advance_to(end, SUBSTEP);

@@ -243,13 +243,9 @@ const HYSTERESIS_NAMES: [&str; 7] = [
     "coupling.y_from_pzt3",
 ];
 
-/// Largest |voltage| the range check reaches [V]: no piezo amplifier drives
-/// a stack past 1 kV, and an absurd range is not integrated for seconds at
-/// every build; a run beyond it is still watched step by step.
-const RANGE_CHECK_LIMIT: f64 = 1000.0;
-
 /// Refuses a Bouc-Wen model whose hysteretic state runs away somewhere in
-/// the amplifier's output range (within ±1 kV; [`BoucWenParams::runaway`]).
+/// the amplifier's output range (within ±1 kV;
+/// [`BoucWenParams::check_bounded`]).
 fn diverging_model(
     params: &BoucWenParams,
     name: &str,
@@ -257,8 +253,8 @@ fn diverging_model(
 ) -> Result<(), ParamError> {
     params.check_bounded(
         name,
-        amplifier.v_min.max(-RANGE_CHECK_LIMIT),
-        amplifier.v_max.min(RANGE_CHECK_LIMIT),
+        amplifier.v_min,
+        amplifier.v_max,
         "the amplifier's output range",
     )
 }

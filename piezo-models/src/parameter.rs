@@ -6,7 +6,8 @@
 //! A bound is open or closed as the model needs it (a damping ratio of
 //! exactly 0 or 1 breaks the closed-form mode response; 0 < ζ < 1). A
 //! consumer that can only state inclusive bounds (FMI's min/max) states the
-//! bound's value and leaves the open end to the model's validation.
+//! nearest double inside an open end ([`Range::min_value`]), a value the
+//! model takes.
 
 use std::fmt;
 

@@ -190,27 +190,36 @@ impl ControllerParams {
                 allowed: "> command_min (finite)".to_owned(),
             });
         }
-        for (name, model) in [
-            ("bouc_wen.x", &self.bouc_wen.x),
-            ("bouc_wen.y", &self.bouc_wen.y),
-            ("bouc_wen.x_from_y", &self.bouc_wen.x_from_y),
-            ("bouc_wen.y_from_x", &self.bouc_wen.y_from_x),
+        let feedforward = self.hysteresis_model == HysteresisModel::BoucWen;
+        let model_based = self.decoupling_model == DecouplingModel::ModelBased;
+        for (name, model, selected) in [
+            ("bouc_wen.x", &self.bouc_wen.x, feedforward),
+            ("bouc_wen.y", &self.bouc_wen.y, feedforward),
+            ("bouc_wen.x_from_y", &self.bouc_wen.x_from_y, model_based),
+            ("bouc_wen.y_from_x", &self.bouc_wen.y_from_x, model_based),
         ] {
             model.validate(name)?;
-            model.check_bounded(
-                name,
-                self.command_min,
-                self.command_max,
-                "the command range",
-            )?;
+            // Only a selected model runs (the selectors are fixed while
+            // running): an unused one is not held to what running needs.
+            if selected {
+                model.check_bounded(
+                    name,
+                    self.command_min,
+                    self.command_max,
+                    "the command range",
+                )?;
+            }
         }
         // Eq. (6) inverts y = p·u + q·h: the x and y models must rise with
-        // their command where they start (h = 0: slope p + q·A), or the
-        // inverse has no command to give for a rising demand.
+        // their command where they start from virgin (h = 0: slope p + q·A),
+        // or the inverse has no command to give for a rising demand.
         for (name, model) in [
             ("bouc_wen.x", &self.bouc_wen.x),
             ("bouc_wen.y", &self.bouc_wen.y),
-        ] {
+        ]
+        .into_iter()
+        .filter(|_| feedforward)
+        {
             let slope = model.p + model.q * model.a;
             if slope.is_nan() || slope <= 0.0 {
                 return Err(ParamError {
