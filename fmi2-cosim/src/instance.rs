@@ -1179,26 +1179,29 @@ fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
     state != FmiState::Fatal && !other.own_states().contains(state)
 }
 
-/// A declared minimum as the lower end of an interval: `(0` for the double
-/// next above 0 (an open end, declared as the nearest value inside it, since
-/// FMI's bounds are inclusive), `[1e-4` for a closed one.
-fn lower_end(min: f64) -> String {
-    let outside = min.next_down();
-    if format_real(outside).len() < format_real(min).len() {
-        format!("({}", format_real(outside))
+/// A declared bound as an interval writes it, and whether that end is open:
+/// the round value `outside` next to it (the double beyond the bound) when
+/// the bound is the nearest double inside an open end (5e-324 for `> 0`,
+/// since FMI's bounds are inclusive), else the bound itself.
+fn interval_end(bound: f64, outside: f64) -> (bool, String) {
+    let (bound_text, outside_text) = (format_real(bound), format_real(outside));
+    if outside_text.len() < bound_text.len() {
+        (true, outside_text)
     } else {
-        format!("[{}", format_real(min))
+        (false, bound_text)
     }
 }
 
-/// A declared maximum as the upper end of an interval (see [`lower_end`]).
+/// A declared minimum as the lower end of an interval: `(0` or `[1e-4`.
+fn lower_end(min: f64) -> String {
+    let (open, text) = interval_end(min, min.next_down());
+    format!("{}{text}", if open { '(' } else { '[' })
+}
+
+/// A declared maximum as the upper end of an interval: `1)` or `10]`.
 fn upper_end(max: f64) -> String {
-    let outside = max.next_up();
-    if format_real(outside).len() < format_real(max).len() {
-        format!("{})", format_real(outside))
-    } else {
-        format!("{}]", format_real(max))
-    }
+    let (open, text) = interval_end(max, max.next_up());
+    format!("{text}{}", if open { ')' } else { ']' })
 }
 
 /// Why the parameter `var` of `model` is outside its declared range, if it

@@ -118,9 +118,8 @@ fn line_of_port<'a>(
         })
     };
     let lines: Vec<&str> = text.lines().collect();
-    let quoted = format!("\"{port}\"");
-    if let Some(at) = lines.iter().position(|line| line.contains(&quoted)) {
-        return Some(at + 1);
+    if let Some(line) = piezo_cosim::scenario::line_of_quoted(text, port) {
+        return Some(line);
     }
     let own_table = [format!("[fmu.{instance}"), format!("[fmu.\"{instance}\"")];
     let mut inside = false;

@@ -442,10 +442,7 @@ impl Invalid {
     /// key's line inside its table (TOML).
     fn line(&self, text: &str, json: bool) -> Option<usize> {
         match &self.written {
-            Written::Port(port) => {
-                let quoted = format!("\"{port}\"");
-                text.lines().position(|line| line.contains(&quoted))
-            }
+            Written::Port(port) => return line_of_quoted(text, port),
             Written::Key { .. } if json => None,
             Written::Key { table, key } => {
                 let mut current = "";
@@ -465,6 +462,16 @@ impl Invalid {
         }
         .map(|at| at + 1)
     }
+}
+
+/// The 1-based line of `text` (TOML or JSON) that first writes `port` in
+/// double quotes, as a signal's key, a connection's end or a recorded
+/// variable are written.
+pub fn line_of_quoted(text: &str, port: &str) -> Option<usize> {
+    let quoted = format!("\"{port}\"");
+    text.lines()
+        .position(|line| line.contains(&quoted))
+        .map(|at| at + 1)
 }
 
 /// 1-based line and column of a byte offset.
