@@ -34,8 +34,8 @@
 //! names the units it read, and where the time unit came from.
 //!
 //! Exports made in a locale whose decimal mark is a comma (spreadsheets and
-//! LabVIEW in much of Europe) separate their fields by semicolons or tabs and
-//! write `-123,059`: in a file so separated, a field that is not a number as
+//! LabVIEW in much of Europe) separate their fields by semicolons, tabs or
+//! spaces and write `-123,059`: in a file so separated, a field that is not a number as
 //! written but is one with its single comma read as the decimal point (and
 //! no point of its own) is read that way, and the summary says so
 //! ([`ColumnsUsed::decimal_comma`]). One file has one decimal mark: a field
@@ -43,6 +43,13 @@
 //! reverse) is refused, since `4,089` beside `0.005` is a thousands
 //! separator, not a decimal. A comma-separated file has no decimal commas:
 //! its commas are separators.
+//!
+//! A time column may hold dates and times instead of numbers
+//! ([`clock_time`]: ISO 8601 and its common spellings, or a time of day);
+//! its times are then seconds from the first row's. A LabVIEW Measurement
+//! file (`.lvm`) is read through its headers ([`Labview`]): its separator
+//! and decimal mark, its `X_Value` column as the time in seconds, and its
+//! `Delta_X` against a `--rate` given; one segment per file.
 //! Errors name the file, the 1-based line and the problem (`file:line:
 //! problem`).
 
@@ -196,6 +203,24 @@ pub enum Problem {
         unit: String,
         name_unit: String,
     },
+    #[error(
+        "field {field} (\"{text}\") is a date and time{}; give it as the time column (--time {field}), or give --rate and a header that names it a time (\"Date\", \"Time\")",
+        match role { Some(role) => format!(" in the {role} column"), None => String::new() }
+    )]
+    DateTime {
+        field: usize,
+        text: String,
+        role: Option<&'static str>,
+    },
+    #[error(
+        "field {field}, the time column, is \"{text}\", but it holds {} from line {first_line}: one time column is all dates and times or all numbers",
+        if text.contains(':') { "numbers" } else { "dates and times" }
+    )]
+    MixedTimes {
+        field: usize,
+        text: String,
+        first_line: usize,
+    },
     #[error("field {field} is {value}, not a finite number")]
     NotFinite { field: usize, value: f64 },
     #[error("field {field} is empty, and it is the {role} column")]
@@ -249,6 +274,27 @@ pub enum Problem {
     SlowInSeconds { step: Short },
     #[error("only {found} data rows, at least {minimum} are needed")]
     TooFewRows { found: usize, minimum: usize },
+    #[error(
+        "the LabVIEW measurement file's header does not end: no second ***End_of_Header*** (the file header's, then the segment's)"
+    )]
+    LabviewHeaderUnended,
+    #[error(
+        "the LabVIEW header states the separator \"{separator}\"; this tool reads Tab and Comma"
+    )]
+    LabviewSeparator { separator: String },
+    #[error(
+        "a second LabVIEW segment starts here; this tool reads one continuous record: save each segment to its own file (or write the measurement without segment headers)"
+    )]
+    LabviewSegment,
+    #[error(
+        "--rate {rate} Hz is a step of {given} s, but the LabVIEW header's Delta_X is {stated} s (give --rate {stated_rate}, or --time X_Value)"
+    )]
+    LabviewRate {
+        rate: Short,
+        given: Short,
+        stated: Short,
+        stated_rate: Short,
+    },
 }
 
 /// A record that could not be read.
@@ -326,10 +372,7 @@ impl Separator {
         .filter(present)
         .find(|separator| {
             let fields = separator.split(first);
-            let numbers = fields
-                .iter()
-                .filter(|f| separator.number(f).is_some())
-                .count();
+            let numbers = fields.iter().filter(|f| separator.value_like(f)).count();
             let empty = fields.iter().filter(|f| f.is_empty()).count();
             if numbers > 0 {
                 return numbers + empty == fields.len();
@@ -339,7 +382,7 @@ impl Separator {
                 below.len() == fields.len()
                     && below
                         .iter()
-                        .all(|f| f.is_empty() || separator.number(f).is_some())
+                        .all(|f| f.is_empty() || separator.value_like(f))
                     && below.iter().any(|f| !f.is_empty())
             };
             let units_below = |line: &String| {
@@ -394,9 +437,8 @@ impl Separator {
         if let Ok(value) = text.parse::<f64>() {
             return Some((value, false));
         }
-        let decimal_comma_possible = matches!(self, Separator::Tab | Separator::Semicolon)
-            && text.matches(',').count() == 1
-            && !text.contains('.');
+        let decimal_comma_possible =
+            self != Separator::Comma && text.matches(',').count() == 1 && !text.contains('.');
         if !decimal_comma_possible {
             return None;
         }
@@ -404,6 +446,12 @@ impl Separator {
             .parse::<f64>()
             .ok()
             .map(|value| (value, true))
+    }
+
+    /// Whether a field is a value of a data row: a number, or a date and time
+    /// ([`clock_time`]).
+    fn value_like(self, text: &str) -> bool {
+        self.number(text).is_some() || clock_time(text).is_some()
     }
 
     /// The fields of a line. A field in double quotes (RFC 4180: R's
@@ -442,6 +490,139 @@ impl Separator {
             Separator::Semicolon => by(';'),
             Separator::Whitespace => content.split_whitespace().collect(),
         }
+    }
+}
+
+/// A date and time, or a time of day, as data loggers and spreadsheets
+/// write a time column: ISO 8601 (`2026-11-25T10:00:00.005`, with a space
+/// for the `T`, with a zone `Z` or `+01:00`), with slashes
+/// (`2026/11/25 10:00:00.005`, LabVIEW), day first with dots
+/// (`25.11.2026 10:00:00,005`, German locales), or a time of day alone
+/// (`10:00:00.005`). A decimal comma may mark the seconds' fraction. A zone
+/// is applied (the result is UTC); a time of day is taken on one day, so a
+/// record across midnight is refused as a time that does not increase.
+/// None when `text` is none of these (every number is none: it has no `:`).
+fn clock_time(text: &str) -> Option<chrono::NaiveDateTime> {
+    use chrono::{DateTime, NaiveDate, NaiveDateTime, NaiveTime};
+    if !text.contains(':') {
+        return None;
+    }
+    let text = text.trim();
+    let owned;
+    let text = match text.rfind(',') {
+        // The seconds' fraction written with a decimal comma.
+        Some(at) if text[at + 1..].chars().all(|c| c.is_ascii_digit()) => {
+            owned = format!("{}.{}", &text[..at], &text[at + 1..]);
+            owned.as_str()
+        }
+        _ => text,
+    };
+    if let Ok(zoned) = DateTime::parse_from_rfc3339(&text.replacen(' ', "T", 1)) {
+        return Some(zoned.naive_utc());
+    }
+    const DATE_TIMES: [&str; 4] = [
+        "%Y-%m-%dT%H:%M:%S%.f",
+        "%Y-%m-%d %H:%M:%S%.f",
+        "%Y/%m/%d %H:%M:%S%.f",
+        "%d.%m.%Y %H:%M:%S%.f",
+    ];
+    DATE_TIMES
+        .iter()
+        .find_map(|format| NaiveDateTime::parse_from_str(text, format).ok())
+        .or_else(|| {
+            let time = NaiveTime::parse_from_str(text, "%H:%M:%S%.f").ok()?;
+            Some(NaiveDate::default().and_time(time))
+        })
+}
+
+/// What the header of a LabVIEW Measurement file (`.lvm`, written by
+/// LabVIEW's "Write To Measurement File") says about its data. Such a file
+/// opens with `LabVIEW Measurement`, a file header of `key<TAB>value` rows
+/// (`Separator`, `Decimal_Separator`, `X_Columns`, ...) closed by
+/// `***End_of_Header***`, then one segment header per segment (`Channels`,
+/// `Samples`, `X_Dimension`, `Delta_X`, ...) closed the same way, then a row
+/// of column names (`X_Value`, the channels' names, `Comment`) and the
+/// samples. A header row's keys would otherwise be read as a bad data row.
+#[derive(Clone, Debug, PartialEq)]
+struct Labview {
+    /// Lines 1..data_from hold the file and segment headers (1-based).
+    data_from: usize,
+    separator: Separator,
+    /// The `X_Value` columns hold time in seconds (`X_Dimension Time`).
+    x_is_time: bool,
+    /// The first channel's sample step and the line that states it.
+    delta_x: Option<(usize, f64)>,
+}
+
+/// The name LabVIEW gives its x (time) columns.
+const LABVIEW_X_COLUMN: &str = "X_Value";
+
+impl Labview {
+    /// The layout of `text` if it is a LabVIEW Measurement file; an error
+    /// (1-based line, problem) when its header is one this tool cannot read.
+    fn of(text: &str) -> Result<Option<Labview>, (usize, Problem)> {
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty());
+        match lines.next() {
+            Some((_, first)) if first.trim_start().starts_with("LabVIEW Measurement") => {}
+            _ => return Ok(None),
+        }
+        let (mut separator, mut x_is_time, mut delta_x) = (Separator::Tab, false, None);
+        let mut ends = 0;
+        for (index, raw) in lines {
+            let line = index + 1;
+            let raw = raw.trim_end_matches('\r');
+            // A decimal comma is possible only in a tab-separated header.
+            let by = if raw.contains('\t') { '\t' } else { ',' };
+            let mut fields = raw.split(by);
+            let key = fields.next().unwrap_or("").trim();
+            let value = fields.next().unwrap_or("").trim();
+            match key {
+                "***End_of_Header***" => {
+                    ends += 1;
+                    if ends == 2 {
+                        return Ok(Some(Labview {
+                            data_from: line + 1,
+                            separator,
+                            x_is_time,
+                            delta_x,
+                        }));
+                    }
+                }
+                "Separator" => {
+                    separator = match value {
+                        "Tab" => Separator::Tab,
+                        "Comma" => Separator::Comma,
+                        other => {
+                            return Err((
+                                line,
+                                Problem::LabviewSeparator {
+                                    separator: other.to_owned(),
+                                },
+                            ));
+                        }
+                    }
+                }
+                "X_Dimension" => x_is_time = value == "Time",
+                "Delta_X" if delta_x.is_none() => {
+                    // The value may be written with the file's decimal comma.
+                    delta_x = Separator::Tab.number(value).map(|(step, _)| (line, step));
+                }
+                _ => {}
+            }
+        }
+        Err((text.lines().count().max(1), Problem::LabviewHeaderUnended))
+    }
+
+    /// Whether a line of the data part opens another segment's header.
+    fn opens_a_segment(content: &str) -> bool {
+        let first = content.split(['\t', ',']).next().unwrap_or("").trim();
+        matches!(
+            first,
+            "Channels" | "***End_of_Header***" | "LabVIEW Measurement"
+        )
     }
 }
 
@@ -523,7 +704,7 @@ fn names_a_time(name: &str) -> bool {
         || first_word == "t"
         || matches!(
             first_word.to_lowercase().as_str(),
-            "time" | "zeit" | "timestamp" | "temps"
+            "time" | "zeit" | "timestamp" | "temps" | "date" | "datetime" | "datum" | "zeitstempel"
         )
 }
 
@@ -607,6 +788,8 @@ pub struct ColumnsUsed {
     pub time_unit: Option<TimeUnit>,
     /// The file was not UTF-8 and was read as Latin-1 (Windows exports).
     pub latin1: bool,
+    /// A LabVIEW Measurement file: the last line of its headers.
+    pub labview_header: Option<usize>,
 }
 
 /// Reads a record from a file.
@@ -679,6 +862,31 @@ pub fn parse_record_with_columns(
     } else {
         text
     };
+    let labview = Labview::of(text).map_err(|(line, problem)| malformed(line, problem))?;
+    if let (
+        Some(Labview {
+            delta_x: Some((line, stated)),
+            ..
+        }),
+        Sampling::Rate(rate),
+    ) = (&labview, &options.sampling)
+        && (1.0 / rate - stated).abs() > UNIFORM_SAMPLING_TOLERANCE * stated
+    {
+        return Err(malformed(
+            *line,
+            Problem::LabviewRate {
+                rate: Short(*rate),
+                given: Short(1.0 / rate),
+                stated: Short(*stated),
+                stated_rate: Short(1.0 / stated),
+            },
+        ));
+    }
+    let in_labview_header = |line: usize| {
+        labview
+            .as_ref()
+            .is_some_and(|layout| line < layout.data_from)
+    };
     let mut separator: Option<Separator> = None;
     let mut header: Option<(usize, Vec<String>)> = None;
     let mut resolved: Option<ResolvedColumns> = None;
@@ -709,19 +917,25 @@ pub fn parse_record_with_columns(
             .trim_start_matches(' ')
             .to_owned()
     };
-    // Excel's `sep=;` first line states the separator.
-    let stated = text
-        .lines()
-        .map(content_of)
-        .enumerate()
-        .find(|(_, content)| !content.trim().is_empty())
-        .and_then(|(index, content)| Separator::stated(&content).map(|s| (index + 1, s)));
+    // Excel's `sep=;` first line states the separator, and so does a
+    // LabVIEW header (line 0: no line of the data part to skip).
+    let stated = match &labview {
+        Some(layout) => Some((0, layout.separator)),
+        None => text
+            .lines()
+            .map(content_of)
+            .enumerate()
+            .find(|(_, content)| !content.trim().is_empty())
+            .and_then(|(index, content)| Separator::stated(&content).map(|s| (index + 1, s))),
+    };
     let mut first_lines = text
         .lines()
         .map(content_of)
         .enumerate()
         .filter(|(index, content)| {
-            !content.trim().is_empty() && stated.is_none_or(|(line, _)| line != index + 1)
+            !content.trim().is_empty()
+                && stated.is_none_or(|(line, _)| line != index + 1)
+                && !in_labview_header(index + 1)
         })
         .map(|(_, content)| content);
     let first = first_lines.next();
@@ -732,14 +946,27 @@ pub fn parse_record_with_columns(
     // The first field of each decimal mark, to refuse a file that has both.
     let mut first_decimal_point: Option<usize> = None;
     let mut first_decimal_comma: Option<usize> = None;
+    // The first date and time of a time column that holds them: its
+    // times are seconds from this one.
+    let mut clock_origin: Option<chrono::NaiveDateTime> = None;
+    // Whether the time column holds dates and times, from its first row.
+    let mut time_is_clock: Option<bool> = None;
+    // LabVIEW's X_Value columns are times in seconds.
+    let x_is_time = labview.as_ref().is_some_and(|layout| layout.x_is_time);
 
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         last_line = line;
         let content = content_of(raw);
         let content = content.as_str();
-        if content.trim().is_empty() || stated.is_some_and(|(at, _)| at == line) {
+        if content.trim().is_empty()
+            || stated.is_some_and(|(at, _)| at == line)
+            || in_labview_header(line)
+        {
             continue;
+        }
+        if labview.is_some() && header.is_some() && Labview::opens_a_segment(content) {
+            return Err(malformed(line, Problem::LabviewSegment));
         }
         let first_content_row = separator.is_none();
         let separator = *separator.get_or_insert_with(|| match stated {
@@ -748,10 +975,7 @@ pub fn parse_record_with_columns(
         });
         let fields = separator.split(content);
         if first_content_row {
-            let numeric = fields
-                .iter()
-                .filter(|f| separator.number(f).is_some())
-                .count();
+            let numeric = fields.iter().filter(|f| separator.value_like(f)).count();
             if numeric == 0 {
                 header = Some((line, fields.iter().map(|f| (*f).to_owned()).collect()));
                 continue;
@@ -776,6 +1000,15 @@ pub fn parse_record_with_columns(
         let columns = match &resolved {
             Some(columns) => *columns,
             None => {
+                // LabVIEW names a last `Comment` column that its rows leave
+                // out when they have no comment.
+                if labview.is_some()
+                    && let Some((_, names)) = &mut header
+                    && names.len() == fields.len() + 1
+                    && names.last().is_some_and(|name| name == "Comment")
+                {
+                    names.pop();
+                }
                 if let Some((header_line, names)) = &header
                     && names.len() != fields.len()
                 {
@@ -789,11 +1022,11 @@ pub fn parse_record_with_columns(
                         },
                     ));
                 }
-                let columns = resolve_columns(options, header.as_ref())
+                let columns = resolve_columns(options, header.as_ref(), x_is_time)
                     .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
                 if let Some(time) = columns.time {
                     time_unit = Some(
-                        time_unit_of(time, header.as_ref(), units.as_ref())
+                        time_unit_of(time, header.as_ref(), units.as_ref(), x_is_time)
                             .map_err(|(at, problem)| malformed(at, problem))?,
                     );
                 }
@@ -812,6 +1045,8 @@ pub fn parse_record_with_columns(
             ));
         }
         let mut values = vec![f64::NAN; fields.len()];
+        // This row's time, when the time column holds dates and times.
+        let mut clock_seconds = None;
         for (field, text) in fields.iter().enumerate() {
             let role = columns.role(field);
             if text.is_empty() {
@@ -823,6 +1058,35 @@ pub fn parse_record_with_columns(
                     }
                     None => continue,
                 }
+            }
+            if let Some(clock) = clock_time(text) {
+                if Some(field) == columns.time {
+                    let origin = *clock_origin.get_or_insert(clock);
+                    let since = (clock - origin).num_nanoseconds().ok_or_else(|| {
+                        malformed(
+                            line,
+                            Problem::NotANumber {
+                                field,
+                                text: (*text).to_owned(),
+                            },
+                        )
+                    })?;
+                    clock_seconds = Some(since as f64 * 1e-9);
+                    continue;
+                }
+                // Dates in a column nobody reads, named as a time, are kept
+                // out of the way; anywhere else they are a misread column.
+                if role.is_none() && columns.names_time(field) {
+                    continue;
+                }
+                return Err(malformed(
+                    line,
+                    Problem::DateTime {
+                        field,
+                        text: (*text).to_owned(),
+                        role,
+                    },
+                ));
             }
             let (value, comma) = separator.number(text).ok_or_else(|| {
                 malformed(
@@ -859,7 +1123,21 @@ pub fn parse_record_with_columns(
         input.push(values[columns.input]);
         output.push(values[columns.output]);
         if let Some(time) = columns.time {
-            let t = values[time] * time_unit.as_ref().map_or(1.0, |u| u.seconds_per_unit);
+            // One time column is all dates and times, or all numbers.
+            let row_is_clock = clock_seconds.is_some();
+            if *time_is_clock.get_or_insert(row_is_clock) != row_is_clock {
+                return Err(malformed(
+                    line,
+                    Problem::MixedTimes {
+                        field: time,
+                        text: fields[time].to_owned(),
+                        first_line: times.first().map_or(line, |&(at, _)| at),
+                    },
+                ));
+            }
+            let t = clock_seconds.unwrap_or_else(|| {
+                values[time] * time_unit.as_ref().map_or(1.0, |u| u.seconds_per_unit)
+            });
             if let Some(&(_, previous)) = times.last()
                 && t <= previous
             {
@@ -872,6 +1150,13 @@ pub fn parse_record_with_columns(
         }
     }
 
+    if clock_origin.is_some() {
+        time_unit = Some(TimeUnit {
+            seconds_per_unit: 1.0,
+            unit: "s".to_owned(),
+            source: "dates and times, from the first row's".to_owned(),
+        });
+    }
     let Some(separator) = separator else {
         return Err(DataError::Empty {
             path: path.to_owned(),
@@ -880,7 +1165,7 @@ pub fn parse_record_with_columns(
     // Columns named in the options must exist even in a file without data.
     let columns = match resolved {
         Some(columns) => columns,
-        None => resolve_columns(options, header.as_ref())
+        None => resolve_columns(options, header.as_ref(), x_is_time)
             .map_err(|(line, problem)| malformed(line.unwrap_or(last_line), problem))?,
     };
     if input.len() < MINIMUM_ROWS {
@@ -958,6 +1243,7 @@ pub fn parse_record_with_columns(
         units_line: units.as_ref().map(|(line, _)| *line),
         time_unit,
         latin1: false,
+        labview_header: labview.map(|layout| layout.data_from - 1),
     };
     Ok((
         Record {
@@ -976,7 +1262,17 @@ fn time_unit_of(
     time: usize,
     header: Option<&(usize, Vec<String>)>,
     units: Option<&(usize, Vec<String>)>,
+    x_is_time: bool,
 ) -> Result<TimeUnit, (usize, Problem)> {
+    if x_is_time
+        && header.is_some_and(|(_, names)| names.get(time).is_some_and(|n| n == LABVIEW_X_COLUMN))
+    {
+        return Ok(TimeUnit {
+            seconds_per_unit: 1.0,
+            unit: "s".to_owned(),
+            source: "LabVIEW header: X_Dimension Time".to_owned(),
+        });
+    }
     let named = header.and_then(|(line, names)| {
         let name = names.get(time)?;
         let unit = unit_in_name(name).or_else(|| time_unit_word(name))?;
@@ -1047,9 +1343,15 @@ struct ResolvedColumns {
     output: usize,
     time: Option<usize>,
     roles: Roles,
+    /// Columns (of the first 64) whose header names a time.
+    named_times: u64,
 }
 
 impl ResolvedColumns {
+    fn names_time(&self, column: usize) -> bool {
+        column < 64 && self.named_times & (1 << column) != 0
+    }
+
     fn largest(&self) -> usize {
         self.input.max(self.output).max(self.time.unwrap_or(0))
     }
@@ -1073,6 +1375,7 @@ impl ResolvedColumns {
 fn resolve_columns(
     options: &ReadOptions,
     header: Option<&(usize, Vec<String>)>,
+    x_is_time: bool,
 ) -> Result<ResolvedColumns, (Option<usize>, Problem)> {
     let resolve = |column: &Column| -> Result<usize, (Option<usize>, Problem)> {
         match column {
@@ -1119,7 +1422,11 @@ fn resolve_columns(
     // A column whose header names a time (`Time [s]`) is no default input or
     // output either: with --rate given, it would be fitted as a voltage.
     let names_time = |i: usize| {
-        header.is_some_and(|(_, names)| names.get(i).is_some_and(|name| names_a_time(name)))
+        header.is_some_and(|(_, names)| {
+            names
+                .get(i)
+                .is_some_and(|name| names_a_time(name) || (x_is_time && name == LABVIEW_X_COLUMN))
+        })
     };
     let default = |role: &'static str, taken: &[Option<usize>]| {
         let free = (0..)
@@ -1162,6 +1469,9 @@ fn resolve_columns(
         output,
         time,
         roles: options.roles,
+        named_times: (0..64)
+            .filter(|&i| names_time(i))
+            .fold(0, |bits, i| bits | 1 << i),
     })
 }
 
@@ -1361,7 +1671,7 @@ mod tests {
     /// the same numbers as the same record written with decimal points, and
     /// says it read decimal commas.
     #[test]
-    fn reads_decimal_commas_in_semicolon_and_tab_separated_files() {
+    fn reads_decimal_commas_in_semicolon_tab_and_space_separated_files() {
         let samples: Vec<(f64, f64, f64)> = (0..40)
             .map(|n| {
                 (
@@ -1395,6 +1705,8 @@ mod tests {
             (";", ""),
             ("\t", "Zeit [s]\tSpannung [V]\tWeg [um]\n"),
             ("\t", ""),
+            (" ", "Zeit Spannung Weg\n"),
+            (" ", ""),
         ] {
             let (record, used) = read(&written(separator, header, true));
             assert_eq!(record, reference, "{separator:?} {header:?}");
@@ -1402,10 +1714,10 @@ mod tests {
             assert_eq!(used.header_line.is_some(), !header.is_empty());
             assert_eq!(
                 used.separator,
-                if separator == ";" {
-                    Separator::Semicolon
-                } else {
-                    Separator::Tab
+                match separator {
+                    ";" => Separator::Semicolon,
+                    "\t" => Separator::Tab,
+                    _ => Separator::Whitespace,
                 }
             );
         }
@@ -2119,6 +2431,166 @@ mod tests {
         assert_eq!(
             used.output.to_string(),
             "column 2 \"Displacement [m]\" (in m, read as um: x1.00000e6)"
+        );
+    }
+
+    /// A LabVIEW Measurement file as "Write To Measurement File" writes it:
+    /// a file header, a segment header, `X_Value ... Comment` names.
+    fn labview_file(decimal: &str, rows: usize) -> String {
+        let mut text = format!(
+            "LabVIEW Measurement\t\nWriter_Version\t2\nReader_Version\t2\nSeparator\tTab\n\
+             Decimal_Separator\t{decimal}\nMulti_Headings\tNo\nX_Columns\tOne\n\
+             Time_Pref\tRelative\nOperator\tlab\nDate\t2026/11/25\nTime\t10:00:00.1234\n\
+             ***End_of_Header***\t\n\t\nChannels\t2\t\nSamples\t{rows}\t{rows}\t\n\
+             Date\t2026/11/25\t2026/11/25\t\nY_Unit_Label\tVolts\tum\t\n\
+             X_Dimension\tTime\tTime\t\nX0\t0{decimal}0\t0{decimal}0\t\n\
+             Delta_X\t0{decimal}005\t0{decimal}005\t\n***End_of_Header***\t\n\
+             X_Value\tVoltage\tDisplacement\tComment\n"
+        );
+        for n in 0..rows {
+            let row = format!(
+                "{:.6}\t{:.6}\t{:.6}\n",
+                n as f64 * 0.005,
+                0.1 * n as f64,
+                0.3 * n as f64
+            );
+            text.push_str(&row.replace('.', decimal));
+        }
+        text
+    }
+
+    fn rate_defaults(rate: f64) -> ReadOptions {
+        ReadOptions {
+            sampling: Sampling::Rate(rate),
+            ..timed_defaults()
+        }
+    }
+
+    /// The headers are skipped, X_Value is the time (and no default input),
+    /// the `Comment` name its rows leave out is dropped, a decimal comma is
+    /// read, and the summary names the file's kind.
+    #[test]
+    fn reads_a_labview_measurement_file() {
+        for decimal in [".", ","] {
+            let text = labview_file(decimal, 40);
+            for options in [
+                ReadOptions {
+                    sampling: Sampling::TimeColumn(Column::Name("X_Value".into())),
+                    ..timed_defaults()
+                },
+                rate_defaults(200.0),
+            ] {
+                let (record, used) = parse_record_with_columns(&text, Path::new("r.lvm"), &options)
+                    .unwrap_or_else(|e| panic!("decimal {decimal}: {e}"));
+                assert_eq!(record.input.len(), 40);
+                assert!((record.input[39] - 3.9).abs() < 1e-12);
+                assert!((record.output[39] - 11.7).abs() < 1e-12);
+                assert!((record.sample_period - 0.005).abs() < 1e-12);
+                assert_eq!(used.input.name.as_deref(), Some("Voltage"));
+                assert_eq!(used.output.name.as_deref(), Some("Displacement"));
+                assert_eq!(used.labview_header, Some(21));
+                assert_eq!(used.header_line, Some(22));
+                assert_eq!(used.decimal_comma, decimal == ",");
+                if let Some(unit) = &used.time_unit {
+                    assert_eq!(unit.source, "LabVIEW header: X_Dimension Time");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn refuses_what_a_labview_file_cannot_be_read_as() {
+        let text = labview_file(".", 40);
+        assert_eq!(
+            message(&text, &rate_defaults(100.0)),
+            "data.txt:20: --rate 100 Hz is a step of 0.01 s, but the LabVIEW header's Delta_X is 0.005 s (give --rate 200, or --time X_Value)"
+        );
+        let second = text.clone() + &text.lines().skip(13).collect::<Vec<_>>().join("\n");
+        assert_eq!(
+            message(&second, &rate_defaults(200.0)),
+            "data.txt:63: a second LabVIEW segment starts here; this tool reads one continuous record: save each segment to its own file (or write the measurement without segment headers)"
+        );
+        let unended: String = text.lines().take(20).map(|l| format!("{l}\n")).collect();
+        assert_eq!(
+            message(&unended, &rate_defaults(200.0)),
+            "data.txt:20: the LabVIEW measurement file's header does not end: no second ***End_of_Header*** (the file header's, then the segment's)"
+        );
+        let spaced = text.replacen("Separator\tTab", "Separator\tSpace", 1);
+        assert_eq!(
+            message(&spaced, &rate_defaults(200.0)),
+            "data.txt:4: the LabVIEW header states the separator \"Space\"; this tool reads Tab and Comma"
+        );
+    }
+
+    /// Dates and times in the time column, with a zone, across midnight, a
+    /// time of day with a decimal comma: seconds from the first row's.
+    #[test]
+    fn reads_dates_and_times_in_the_time_column() {
+        type Stamp = fn(u32) -> String;
+        let stamps: [(&str, Stamp); 4] = [
+            ("Date,u,y", |ms| {
+                let (s, ms) = (50 + ms / 1000, ms % 1000);
+                match s {
+                    s if s < 60 => format!("2026-11-25 23:59:{s:02}.{ms:03}"),
+                    s => format!("2026-11-26 00:00:{:02}.{ms:03}", s - 60),
+                }
+            }),
+            ("time,u,y", |ms| {
+                format!("2026-11-25T10:00:{:02}.{:03}+01:00", ms / 1000, ms % 1000)
+            }),
+            ("Zeit;u;y", |ms| {
+                format!("10:00:{:02},{:03}", ms / 1000, ms % 1000)
+            }),
+            ("Datum;u;y", |ms| {
+                format!("25.11.2026 10:00:{:02},{:03}", ms / 1000, ms % 1000)
+            }),
+        ];
+        for (header, stamp) in stamps {
+            let separator = if header.contains(';') { ";" } else { "," };
+            let mut text = format!("{header}\n");
+            for n in 0..50u32 {
+                let u = format!("{}", 0.5 * n as f64);
+                let u = if separator == ";" {
+                    u.replace('.', ",")
+                } else {
+                    u
+                };
+                text.push_str(&format!("{}{separator}{u}{separator}{n}\n", stamp(5 * n)));
+            }
+            let (record, used) =
+                parse_record_with_columns(&text, Path::new("d.csv"), &timed_defaults())
+                    .unwrap_or_else(|e| panic!("{header}: {e}"));
+            assert!((record.sample_period - 0.005).abs() < 1e-12, "{header}");
+            assert_eq!(record.input[49], 24.5, "{header}");
+            assert_eq!(record.output[49], 49.0, "{header}");
+            assert_eq!(
+                used.time_unit.unwrap().source,
+                "dates and times, from the first row's",
+                "{header}"
+            );
+            // With --rate, a column of dates named as a time is no input.
+            let record = parse_record(&text, Path::new("d.csv"), &rate_defaults(200.0)).unwrap();
+            assert_eq!(record.input[49], 24.5, "{header}");
+        }
+    }
+
+    #[test]
+    fn refuses_dates_where_numbers_are_read_and_a_half_dated_time_column() {
+        let mut text = String::from("stamp,u,y\n");
+        for n in 0..40 {
+            text.push_str(&format!(
+                "2026-11-25 10:00:{:06.3},{n},{n}\n",
+                n as f64 * 0.005
+            ));
+        }
+        assert_eq!(
+            message(&text, &rate_defaults(200.0)),
+            "data.txt:2: field 0 (\"2026-11-25 10:00:00.000\") is a date and time in the input column; give it as the time column (--time 0), or give --rate and a header that names it a time (\"Date\", \"Time\")"
+        );
+        let mixed = text.replacen("2026-11-25 10:00:00.010", "0.01", 1);
+        assert_eq!(
+            message(&mixed, &timed_defaults()),
+            "data.txt:4: field 0, the time column, is \"0.01\", but it holds dates and times from line 2: one time column is all dates and times or all numbers"
         );
     }
 }

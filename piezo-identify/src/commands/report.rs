@@ -40,6 +40,9 @@ pub(crate) fn describe_columns(columns: &ColumnsUsed) -> String {
     if columns.latin1 {
         text.push_str(", read as Latin-1 (not UTF-8)");
     }
+    if let Some(last) = columns.labview_header {
+        text.push_str(&format!(", LabVIEW measurement headers on lines 1-{last}"));
+    }
     text
 }
 
