@@ -323,12 +323,16 @@ def write_ssp(members: list[Member], out: Path) -> Path:
 
 
 def _copy_variable(variable, name: str, start=None) -> ModelVariable:
+    # FMI 2.0.4 §2.2.7: an input carries no `initial` (fmpy reads the
+    # default "exact" into one); canHandleMultipleSetPerTimeInstant is a
+    # Model Exchange input's attribute, and the container is Co-Simulation.
     return ModelVariable(
         name=name,
         type=variable.type,
         causality=variable.causality,
         variability=variable.variability,
-        initial=variable.initial,
+        initial=None if variable.causality in ("input", "independent") else variable.initial,
+        canHandleMultipleSetPerTimeInstant=False,  # False: fmpy writes no attribute
         description=variable.description,
         unit=variable.unit,
         start=start,
@@ -346,10 +350,13 @@ def container_configuration(members: list[Member]):
         m.instance: Component(name=m.instance, filename=m.fmu, modelDescription=m.description)
         for m in members
     }
-    time = ModelVariable(name="time", type="Real", causality="independent", variability="continuous")
+    time = ModelVariable(name="time", type="Real", causality="independent", variability="continuous",
+                         canHandleMultipleSetPerTimeInstant=False)
     variables = [time]
     mappings = {}
     outputs = []
+    # (instance, inner name) -> the container's variable, for dependencies.
+    exposed_as = {}
 
     def expose(member: Member, variable, name: str):
         start = member.parameters.get(variable.name)
@@ -361,8 +368,9 @@ def container_configuration(members: list[Member]):
         exposed = _copy_variable(variable, name, start)
         variables.append(exposed)
         mappings[exposed] = [(components[member.instance], variable)]
+        exposed_as[member.instance, variable.name] = exposed
         if variable.causality == "output":
-            outputs.append(exposed)
+            outputs.append((exposed, member, variable))
 
     controller = by_instance[CONTROLLER_INSTANCE]
     for name in REFERENCES:
@@ -432,8 +440,10 @@ def container_configuration(members: list[Member]):
         modelVariables=variables,
     )
     # Neither FMU has direct feedthrough, so neither has the container.
-    description.outputs = [Unknown(variable=v, dependencies=[]) for v in outputs]
-    description.initialUnknowns = [Unknown(variable=v, dependencies=[]) for v in outputs]
+    description.outputs = [Unknown(variable=v, dependencies=[]) for v, _, _ in outputs]
+    description.initialUnknowns = [
+        Unknown(variable=v, dependencies=initial_dependencies(member, variable, exposed_as))
+        for v, member, variable in outputs]
     return Configuration(
         parallelDoStep=False,
         modelDescription=description,
@@ -441,6 +451,19 @@ def container_configuration(members: list[Member]):
         connections=wires,
         variableMappings=mappings,
     )
+
+
+def initial_dependencies(member: Member, variable, exposed_as: dict):
+    """What an output of `member` initially depends on, as the container's
+    variables: the inner FMU's InitialUnknown dependencies, each mapped to
+    the container variable that exposes it. None (every known) when the inner
+    FMU lists none, or when one is not exposed (a wired input, whose value
+    comes from the other FMU)."""
+    inner = next((u for u in member.description.initialUnknowns if u.variable is variable), None)
+    if inner is None or inner.dependencies is None:
+        return None
+    mapped = [exposed_as.get((member.instance, d.name)) for d in inner.dependencies]
+    return None if any(m is None for m in mapped) else mapped
 
 
 def shared_platforms(names: list[str]) -> set[str]:

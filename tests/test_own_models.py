@@ -123,6 +123,41 @@ def test_the_inverse_pi_fit_runs_in_the_controller_as_fitted(own_set, tmp_path):
     assert np.ptp(expected) > 3.0  # the record's whole 0..3.6 V, not a corner of it
 
 
+def test_the_feedback_counts_from_the_fits_zero(own_set, tmp_path):
+    """The record's raw readings as s2 and s3 (the P-885 sensor reads about
+    -96 um at the model's zero) and the same displacement from the model's
+    zero as x_ref: with the README's sensor offsets the x PI law sees only
+    the record's noise about its smoothing; without them, the whole offset,
+    which the feedback would drive out against the feedforward."""
+    model, columns = fit_with_predictions("inverse-pi", tmp_path, "x_inverse_pi")
+    offset = model["displacement_offset_um"]
+    assert own_set["sensor_offset[2]"] == own_set["sensor_offset[3]"] == offset
+    raw = columns["displacement_um"]
+    x_ref = centred_moving_average(raw, model["smoothing_half_width_samples"]) - offset
+    dt = model["sample_period_s"]
+    t = np.arange(len(x_ref)) * dt
+    signals = np.zeros(len(t), dtype=[("time", float), ("x_ref", float), ("s2", float),
+                                      ("s3", float)])
+    signals["time"], signals["x_ref"], signals["s2"], signals["s3"] = t, x_ref, raw, raw
+
+    def e_x(start: dict) -> np.ndarray:
+        run = fmpy.simulate_fmu(str(CONTROLLER), start_values=start | FEEDFORWARD_ONLY,
+                                input=signals, step_size=dt, output_interval=dt,
+                                stop_time=t[-1], output=["e_x"])
+        return run["e_x"][1:]  # a step's outputs are those of its start's inputs
+
+    with_offsets = e_x(own_set)
+    rms = np.sqrt(np.mean(with_offsets ** 2))
+    print(f"e_x with the fit's zero as sensor offsets: RMS {rms:.3f} um "
+          f"(the fit's offset {offset:.3f} um)")
+    # What is left is the record's noise about its moving average (0.067 um
+    # RMS away from the ends, where the window shrinks): a tenth of a
+    # micrometre, against the offset's hundred.
+    assert rms < 0.1
+    without = e_x(own_set | {f"sensor_offset[{k}]": 0.0 for k in (1, 2, 3)})
+    assert np.abs(np.median(without) + offset) < 0.1, np.median(without)
+
+
 def test_the_bouc_wen_fit_inverts_to_the_voltage_it_was_fitted_for(own_set, tmp_path):
     model, columns = fit_with_predictions("bouc-wen", tmp_path, "x_bouc_wen")
     assert model["params"] == json.loads((OWN / "x_bouc_wen.json").read_text())["params"]

@@ -2,8 +2,10 @@
 //! Rust. `abi` turns C pointers into the slices these methods take; the model
 //! only sees validated calls in legal states.
 
+use std::cell::{Ref, RefCell};
 use std::ffi::CString;
 use std::fmt;
+use std::ops::Deref;
 use std::path::PathBuf;
 
 use crate::fmu_state::SnapshotData;
@@ -90,6 +92,30 @@ pub struct Instance<M: CoSimModel> {
     /// refills the buffer, or the instance is freed (FMI 2.0.4 §2.1.7 asks
     /// for them to last until the next call of any FMI function on it).
     pub(crate) strings: Vec<CString>,
+    /// In Initialization Mode, the model as `fmi2ExitInitializationMode`
+    /// would build it from the values set so far: what the getters read there,
+    /// since an InitialUnknown is a function of the knowns set (the FMI 2.0
+    /// schema's `InitialUnknowns`), not of the start values. Built by the
+    /// first getter that needs it, dropped by every change of a value, time
+    /// or state.
+    pub(crate) preview: RefCell<Option<M>>,
+}
+
+/// The model a getter reads: the instance's own, or in Initialization Mode
+/// its preview ([`Instance::readable`]).
+pub(crate) enum Readable<'a, M> {
+    Own(&'a M),
+    Preview(Ref<'a, M>),
+}
+
+impl<M> Deref for Readable<'_, M> {
+    type Target = M;
+    fn deref(&self) -> &M {
+        match self {
+            Readable::Own(model) => model,
+            Readable::Preview(model) => model,
+        }
+    }
 }
 
 /// What a setter does with one value after validation.
@@ -332,7 +358,52 @@ impl<M: CoSimModel> Instance<M> {
             guid,
             fmu_states: Vec::new(),
             strings: Vec::new(),
+            preview: RefCell::new(None),
         }
+    }
+
+    /// The model the getters read ([`Instance::preview`] in Initialization
+    /// Mode, built when missing; else the instance's own). Values that no
+    /// initialization would accept cannot be computed: that is the
+    /// `fmi2Error` `fmi2ExitInitializationMode` would return, with its reason.
+    pub(crate) fn readable(&self, function: FmiFunction) -> Result<Readable<'_, M>, Status> {
+        if self.state != FmiState::InitializationMode {
+            return Ok(Readable::Own(&self.model));
+        }
+        if self.preview.borrow().is_none() {
+            let cannot = |reason: &dyn fmt::Display| {
+                self.error(
+                    function,
+                    format_args!(
+                        "the initial values cannot be computed from the values set so far: \
+                         {reason}"
+                    ),
+                )
+            };
+            let mut candidate = self.model.clone();
+            if let Some(message) = M::variables()
+                .iter()
+                .find_map(|var| parameter_out_of_range(var, &candidate))
+            {
+                return Err(cannot(&message));
+            }
+            let mut ctx = Context {
+                env: &self.env,
+                function,
+            };
+            if let Err(e) = candidate.exit_initialization_mode(&mut ctx, self.start_time) {
+                return Err(cannot(&e));
+            }
+            *self.preview.borrow_mut() = Some(candidate);
+        }
+        Ok(Readable::Preview(Ref::map(self.preview.borrow(), |p| {
+            p.as_ref().expect("built above")
+        })))
+    }
+
+    /// Drops the preview: a value, the time or the state changed.
+    pub(crate) fn forget_preview(&mut self) {
+        *self.preview.get_mut() = None;
     }
 
     pub fn state(&self) -> FmiState {
@@ -457,10 +528,12 @@ impl<M: CoSimModel> Instance<M> {
         self.start_time = start_time;
         self.stop_time = stop_time.unwrap_or(f64::INFINITY);
         self.time = start_time;
+        self.forget_preview();
         Status::Ok
     }
 
     pub(crate) fn enter_initialization_mode(&mut self) -> Status {
+        self.forget_preview();
         self.state = FmiState::InitializationMode;
         self.event(
             FmiFunction::EnterInitializationMode,
@@ -473,6 +546,7 @@ impl<M: CoSimModel> Instance<M> {
     /// validate the rest and build its initial state.
     pub(crate) fn exit_initialization_mode(&mut self) -> Status {
         let function = FmiFunction::ExitInitializationMode;
+        self.forget_preview();
         let mut violations = 0;
         for var in M::variables() {
             if let Some(message) = parameter_out_of_range(var, &self.model) {
@@ -519,6 +593,7 @@ impl<M: CoSimModel> Instance<M> {
     /// Back to the state after `fmi2Instantiate`, start values included; the
     /// importer's logging choices are kept.
     pub(crate) fn reset(&mut self) -> Status {
+        self.forget_preview();
         self.model = M::new();
         self.state = FmiState::Instantiated;
         self.time = 0.0;
@@ -558,13 +633,20 @@ impl<M: CoSimModel> Instance<M> {
         vrs: &[u32],
         mut store: impl FnMut(usize, T),
     ) -> Status {
+        if vrs.is_empty() {
+            return Status::Ok;
+        }
+        let model = match self.readable(function) {
+            Ok(model) => model,
+            Err(status) => return status,
+        };
         for (i, vr) in vrs.iter().enumerate() {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,
                 Err(status) => return status,
             };
             let value = match (T::getter(&var.value), &var.value) {
-                (Some(get), _) => get(&self.model),
+                (Some(get), _) => get(&model),
                 (None, Value::Time(_)) => match T::time(self.time) {
                     Some(time) => time,
                     None => return self.wrong_type(function, *vr, var, T::TYPE_NAME),
@@ -597,6 +679,14 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn get_strings(&mut self, function: FmiFunction, vrs: &[u32]) -> Status {
         let mut strings = std::mem::take(&mut self.strings);
         strings.clear();
+        if vrs.is_empty() {
+            self.strings = strings;
+            return Status::Ok;
+        }
+        let model = match self.readable(function) {
+            Ok(model) => model,
+            Err(status) => return status,
+        };
         for vr in vrs {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,
@@ -605,7 +695,7 @@ impl<M: CoSimModel> Instance<M> {
             let Value::String(s) = &var.value else {
                 return self.wrong_type(function, *vr, var, "String");
             };
-            match CString::new((s.get)(&self.model)) {
+            match CString::new((s.get)(&model)) {
                 Ok(text) => strings.push(text),
                 Err(e) => {
                     return self.error(
@@ -620,6 +710,7 @@ impl<M: CoSimModel> Instance<M> {
                 }
             }
         }
+        drop(model);
         self.strings = strings;
         Status::Ok
     }
@@ -765,12 +856,14 @@ impl<M: CoSimModel> Instance<M> {
         vrs: &[u32],
         value_at: impl Fn(usize) -> T,
     ) -> Status {
+        // Between steps no preview exists: the fast path leaves it alone.
         if self.inputs_between_steps::<T>(vrs, &value_at) {
             for (i, vr) in vrs.iter().enumerate() {
                 value_at(i).write(&M::variables()[*vr as usize].value, &mut self.model);
             }
             return Status::Ok;
         }
+        self.forget_preview();
         let mut status = Status::Ok;
         for (i, vr) in vrs.iter().enumerate() {
             let value = value_at(i);
@@ -1138,6 +1231,7 @@ impl<M: CoSimModel> Instance<M> {
                 ),
             );
         }
+        self.forget_preview();
         self.model = data.model.clone();
         self.time = data.time;
         self.start_time = data.start_time;
@@ -1181,8 +1275,8 @@ fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
 
 /// A declared bound as an interval writes it, and whether that end is open:
 /// the round value `outside` next to it (the double beyond the bound) when
-/// the bound is the nearest double inside an open end (5e-324 for `> 0`,
-/// since FMI's bounds are inclusive), else the bound itself.
+/// the bound is the nearest double inside an open end, since FMI's bounds are
+/// inclusive, else the bound itself.
 fn interval_end(bound: f64, outside: f64) -> (bool, String) {
     let (bound_text, outside_text) = (format_real(bound), format_real(outside));
     if outside_text.len() < bound_text.len() {
@@ -1192,15 +1286,26 @@ fn interval_end(bound: f64, outside: f64) -> (bool, String) {
     }
 }
 
+/// The double beyond a declared bound, the way `next` steps: 0 beyond the
+/// smallest normal double, which an open end at 0 declares (the subnormals
+/// between them are out of range to C's `strtod`).
+fn beyond(bound: f64, next: fn(f64) -> f64) -> f64 {
+    if bound.abs() == f64::MIN_POSITIVE {
+        0.0
+    } else {
+        next(bound)
+    }
+}
+
 /// A declared minimum as the lower end of an interval: `(0` or `[1e-4`.
 fn lower_end(min: f64) -> String {
-    let (open, text) = interval_end(min, min.next_down());
+    let (open, text) = interval_end(min, beyond(min, f64::next_down));
     format!("{}{text}", if open { '(' } else { '[' })
 }
 
 /// A declared maximum as the upper end of an interval: `1)` or `10]`.
 fn upper_end(max: f64) -> String {
-    let (open, text) = interval_end(max, max.next_up());
+    let (open, text) = interval_end(max, beyond(max, f64::next_up));
     format!("{text}{}", if open { ')' } else { ']' })
 }
 

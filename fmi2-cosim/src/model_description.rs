@@ -592,6 +592,7 @@ mod tests {
             1e-20,
             123456.789,
             f64::MAX,
+            f64::MIN_POSITIVE,
             5e-324,
         ] {
             let text = format_real(x);

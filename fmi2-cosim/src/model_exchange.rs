@@ -196,6 +196,7 @@ impl<M: ModelExchange> Instance<M> {
                 ),
             );
         }
+        self.forget_preview();
         self.model.set_continuous_states(states);
         Status::Ok
     }
@@ -207,7 +208,10 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        self.model.continuous_states(states);
+        match self.readable(function) {
+            Ok(model) => model.continuous_states(states),
+            Err(status) => return status,
+        }
         Status::Ok
     }
 
@@ -218,7 +222,10 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        self.model.derivatives(self.time, derivatives);
+        match self.readable(function) {
+            Ok(model) => model.derivatives(self.time, derivatives),
+            Err(status) => return status,
+        }
         if let Some(k) = derivatives.iter().position(|d| !d.is_finite()) {
             return self.error(
                 function,
@@ -239,7 +246,10 @@ impl<M: ModelExchange> Instance<M> {
         if let Err(status) = self.check_length(function, "ni", indicators.len(), expected) {
             return status;
         }
-        self.model.event_indicators(self.time, indicators);
+        match self.readable(function) {
+            Ok(model) => model.event_indicators(self.time, indicators),
+            Err(status) => return status,
+        }
         Status::Ok
     }
 
@@ -250,7 +260,10 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        self.model.nominals(nominals);
+        match self.readable(function) {
+            Ok(model) => model.nominals(nominals),
+            Err(status) => return status,
+        }
         // FMI 2.0.4 §3.2.2: nominals are positive; 1.0 is the standard's
         // default when a model cannot say.
         for nominal in nominals.iter_mut() {

@@ -337,19 +337,28 @@ const PORTS: &[Variable<PiezoControllerFmu>] = &[
         "Command of the PZT1 amplifier channel (y), within command_min..command_max (wire to FlexureStage.u1)",
         "V",
         u[0]
-    ),
+    )
+    // Before the first step the command rests at 0 V clamped into the
+    // command range (PiezoController's rest output).
+    .initially_depends_on(&["command_min", "command_max"]),
     output!(
         "u2",
         "Command of the PZT2 amplifier channel (x pair), within command_min..command_max (wire to FlexureStage.u2)",
         "V",
         u[1]
-    ),
+    )
+    // Before the first step the command rests at 0 V clamped into the
+    // command range (PiezoController's rest output).
+    .initially_depends_on(&["command_min", "command_max"]),
     output!(
         "u3",
         "Command of the PZT3 amplifier channel (x pair), within command_min..command_max (wire to FlexureStage.u3)",
         "V",
         u[2]
-    ),
+    )
+    // Before the first step the command rests at 0 V clamped into the
+    // command range (PiezoController's rest output).
+    .initially_depends_on(&["command_min", "command_max"]),
     output!(
         "u1_ff",
         "Feedforward part of u1: the inverse hysteresis model of y (Guo et al. eq. 3 or ABW-XY eq. 6)",
@@ -386,11 +395,21 @@ const PORTS: &[Variable<PiezoControllerFmu>] = &[
         "V",
         feedback[2]
     ),
-    output!("e_x", "Tracking error x_ref − (s2+s3)/2", "um", e_x),
-    output!("e_y", "Tracking error y_ref − s1", "um", e_y),
+    output!(
+        "e_x",
+        "Tracking error x_ref − (s2+s3)/2, each sensor less its sensor_offset",
+        "um",
+        e_x
+    ),
+    output!(
+        "e_y",
+        "Tracking error y_ref − s1, s1 less sensor_offset[1]",
+        "um",
+        e_y
+    ),
     Variable::<PiezoControllerFmu>::real_output(
         "e_theta",
-        "Tracking error theta_ref − (s2−s3)/L",
+        "Tracking error theta_ref − (s2−s3)/L, each sensor less its sensor_offset",
         "rad",
         |m| m.output().e_theta,
     )
@@ -551,6 +570,31 @@ const RESTS: &[Variable<PiezoControllerFmu>] = &[
     ),
 ];
 
+/// Each sensor's reading at the references' zero (appended, see [`BLOCKS`]).
+const SENSOR_OFFSETS: &[Variable<PiezoControllerFmu>] = &[
+    tunable_parameter!(
+        "sensor_offset[1]",
+        "Reading of s1 where y counts from (the y model's zero: its fit's displacement_offset_um or sensor_offset_um on raw readings; 0 for a sensor zeroed there), subtracted from s1 before the PI laws",
+        "um",
+        ControllerParams::SENSOR_OFFSET_UM,
+        sensor_offsets[0]
+    ),
+    tunable_parameter!(
+        "sensor_offset[2]",
+        "Reading of s2 where x counts from (the x model's zero; 0 for a sensor zeroed there), subtracted from s2 before the PI laws",
+        "um",
+        ControllerParams::SENSOR_OFFSET_UM,
+        sensor_offsets[1]
+    ),
+    tunable_parameter!(
+        "sensor_offset[3]",
+        "Reading of s3 where x counts from (the x model's zero; 0 for a sensor zeroed there), subtracted from s3 before the PI laws",
+        "um",
+        ControllerParams::SENSOR_OFFSET_UM,
+        sensor_offsets[2]
+    ),
+];
+
 /// The blocks of the table, in value-reference order.
 ///
 /// APPEND ONLY. A variable's value reference is its position in this table,
@@ -574,6 +618,7 @@ const BLOCKS: &[&[Variable<PiezoControllerFmu>]] = &[
     BOUC_WEN_X_FROM_Y,
     BOUC_WEN_Y_FROM_X,
     RESTS,
+    SENSOR_OFFSETS,
 ];
 
 /// Every variable, in value-reference order.

@@ -202,7 +202,8 @@ macro_rules! bouc_wen_blocks {
 /// max, that the model's validation agrees with the table: a value at the
 /// bound is accepted (FMI's min and max are inclusive), a value just beyond
 /// it is refused by name (its `model_path`), and an open end (declared as
-/// the double next to a round value: 5e-324 for `> 0`) has the round value
+/// the double next to a round value, or the smallest normal double for `> 0`)
+/// has the round value
 /// refused and its strict bound stated in the description (`> 0`, `0 <`,
 /// `< 1`). `fresh` gives a model with valid parameters, `validate` runs the
 /// model's validation on a model's parameters. A parameter whose name ends
@@ -260,7 +261,10 @@ pub fn check_declared_ranges<M>(
                  validation does not refuse it by name",
                 variable.name
             );
-            let outside = if outward < 0.0 {
+            // The smallest normal double declares an open end at 0.
+            let outside = if bound.abs() == f64::MIN_POSITIVE {
+                0.0
+            } else if outward < 0.0 {
                 bound.next_down()
             } else {
                 bound.next_up()

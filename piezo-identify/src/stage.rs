@@ -550,6 +550,9 @@ pub fn identify_stage(
         bouc_wen,
         command_min,
         command_max,
+        // The procedure's models count from the plant's rest, where its
+        // sensors read 0 (step 4 above).
+        sensor_offsets: [0.0; 3],
     };
     let spacing_um = spacing_mm * 1e3;
     let mut all_rounds = Vec::new();

@@ -72,12 +72,16 @@ impl Range {
     }
 
     /// The smallest allowed value, as an inclusive minimum (FMI's `min`): a
-    /// closed bound's value, or the double next above an open one's (0 for
-    /// `> 0` is declared as 5e-324, which is allowed; 0 is not).
+    /// closed bound's value, or the nearest double above an open one's that
+    /// every reader parses (`> 0` is declared as 2.2250738585072014e-308,
+    /// the smallest normal double, which is allowed; 0 is not). The double
+    /// next to 0 is subnormal, and C's `strtod` reports a subnormal as out of
+    /// range (ERANGE, on which C++'s `std::stod` throws).
     pub const fn min_value(&self) -> Option<f64> {
         match self.min {
             Bound::Unbounded => None,
             Bound::Closed(v) => Some(v),
+            Bound::Open(0.0) => Some(f64::MIN_POSITIVE),
             Bound::Open(v) => Some(v.next_up()),
         }
     }
@@ -88,6 +92,7 @@ impl Range {
         match self.max {
             Bound::Unbounded => None,
             Bound::Closed(v) => Some(v),
+            Bound::Open(0.0) => Some(-f64::MIN_POSITIVE),
             Bound::Open(v) => Some(v.next_down()),
         }
     }
@@ -218,7 +223,7 @@ mod tests {
         // FMI's min and max are inclusive: the nearest values inside.
         assert_eq!(
             (damping.min_value(), damping.max_value()),
-            (Some(5e-324), Some(1.0 - f64::EPSILON / 2.0))
+            (Some(f64::MIN_POSITIVE), Some(1.0 - f64::EPSILON / 2.0))
         );
         assert!(damping.contains(damping.min_value().unwrap()));
         assert!(damping.contains(damping.max_value().unwrap()));

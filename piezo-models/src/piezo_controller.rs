@@ -137,6 +137,14 @@ pub struct ControllerParams {
     /// the E-505 (−20..120 V at the stacks; MODEL.md §4).
     pub command_min: f64,
     pub command_max: f64,
+    /// Each sensor's reading (s1, s2, s3) at the displacement the references
+    /// and the inverse models count from [µm], subtracted from the sensors
+    /// before the PI laws: the feedback then shares the feedforward's zero.
+    /// 0 for sensors that read 0 there (the presets' plant); a model fitted
+    /// on raw readings counts from its own zero (`piezo-identify`'s
+    /// `displacement_offset_um`, `sensor_offset_um`), which goes here.
+    #[serde(default)]
+    pub sensor_offsets: [f64; 3],
 }
 
 impl ControllerParams {
@@ -163,11 +171,15 @@ impl ControllerParams {
             bouc_wen: ControllerParams::stage().bouc_wen,
             command_min: -2.0,
             command_max: 12.0,
+            sensor_offsets: [0.0; 3],
         }
     }
 
     /// L [mm].
     pub const SENSOR_SPACING_MM: Range = Range::POSITIVE;
+
+    /// A sensor's offset [µm] (`sensor_offsets`).
+    pub const SENSOR_OFFSET_UM: Range = Range::FINITE;
 
     /// Checks every value against its declared range (the ranges the FMU's
     /// variable table states), then the command range; the error names the
@@ -181,6 +193,9 @@ impl ControllerParams {
             PiGains::GAIN.check(&format!("{name}.ki"), gains.ki)?;
         }
         Self::SENSOR_SPACING_MM.check("sensor_spacing_mm", self.sensor_spacing_mm)?;
+        for (k, offset) in self.sensor_offsets.iter().enumerate() {
+            Self::SENSOR_OFFSET_UM.check(&format!("sensor_offsets[{k}]"), *offset)?;
+        }
         if !(self.command_min.is_finite() && self.command_max.is_finite())
             || self.command_max <= self.command_min
         {
@@ -660,9 +675,11 @@ impl PiezoController {
             }
         }
 
-        let e_x = x_ref - 0.5 * (sensors[1] + sensors[2]);
-        let e_y = y_ref - sensors[0];
-        let e_theta = theta_ref - (sensors[1] - sensors[2]) / (2.0 * half_spacing_um);
+        // Displacements from the references' zero.
+        let [s1, s2, s3] = [0, 1, 2].map(|k| sensors[k] - p.sensor_offsets[k]);
+        let e_x = x_ref - 0.5 * (s2 + s3);
+        let e_y = y_ref - s1;
+        let e_theta = theta_ref - (s2 - s3) / (2.0 * half_spacing_um);
         let axes = [
             (p.feedback_y, p.translation_gains, e_y, Y_DIRECTIONS),
             (p.feedback_x, p.translation_gains, e_x, X_DIRECTIONS),

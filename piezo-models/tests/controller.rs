@@ -335,3 +335,38 @@ fn the_commands_before_the_first_sample_are_inside_the_range() {
         );
     }
 }
+
+/// Sensors that read `offsets` where the references count from (a stage
+/// whose models were fitted on raw readings) give the PI laws no error once
+/// the offsets are given, and the offsets as errors when they are not: the
+/// feedback would pull the stage to the sensors' 0 against the feedforward.
+#[test]
+fn sensor_offsets_give_the_feedback_the_references_zero() {
+    let offsets = [23.4, -96.2, -95.1];
+    let half_l_um = 0.5 * params().sensor_spacing_mm * 1e3;
+    let (x_ref, y_ref, theta_ref) = (3.0, 5.0, 2e-5);
+    let sensors = [
+        offsets[0] + y_ref,
+        offsets[1] + x_ref + theta_ref * half_l_um,
+        offsets[2] + x_ref - theta_ref * half_l_um,
+    ];
+    let mut with = feedback_only(params());
+    with.sensor_offsets = offsets;
+    let mut controller = PiezoController::new(with).unwrap();
+    for _ in 0..100 {
+        let out = controller.step(x_ref, y_ref, theta_ref, sensors, DT);
+        assert!(out.e_x.abs() < 1e-12 && out.e_y.abs() < 1e-12, "{out:?}");
+        assert!(out.e_theta.abs() < 1e-15, "{out:?}");
+        assert!(out.feedback.iter().all(|u| u.abs() < 1e-9), "{out:?}");
+    }
+    let mut without = PiezoController::new(feedback_only(params())).unwrap();
+    let out = without.step(x_ref, y_ref, theta_ref, sensors, DT);
+    assert!((out.e_y + offsets[0]).abs() < 1e-12, "{out:?}");
+    assert!(
+        (out.e_x + 0.5 * (offsets[1] + offsets[2])).abs() < 1e-12,
+        "{out:?}"
+    );
+    let mut bad = params();
+    bad.sensor_offsets[2] = f64::NAN;
+    assert!(PiezoController::new(bad).is_err());
+}

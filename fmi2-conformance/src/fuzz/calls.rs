@@ -106,9 +106,14 @@ impl Fuzzer<'_> {
         }
     }
 
-    pub(super) fn exit_initialization_mode(&mut self, slot: usize) {
-        let c = self.live(slot).c;
-        let is_legal = self.legal_now(slot, Function::ExitInitializationMode);
+    /// What building the model from `slot`'s values may answer: what
+    /// fmi2ExitInitializationMode returns, and a getter in Initialization
+    /// Mode too (it reads the model that exit would build, FMI 2.0's
+    /// InitialUnknowns), when the call itself is legal and valid; and why.
+    pub(super) fn initialization_outcome(
+        &self,
+        slot: usize,
+    ) -> (&'static [sys::fmi2Status], String) {
         // A parameter outside its declared range must be refused; other
         // changed parameters are for the model to judge.
         let mut out_of_range = None;
@@ -132,14 +137,23 @@ impl Fuzzer<'_> {
                 ));
             }
         }
-        let allowed: &[sys::fmi2Status] =
-            if !is_legal || (out_of_range.is_some() && !self.live(slot).model.tainted) {
+        let allowed: &'static [sys::fmi2Status] =
+            if out_of_range.is_some() && !self.live(slot).model.tainted {
                 &[ERROR]
             } else if changed {
                 &[OK, ERROR]
             } else {
                 &[OK]
             };
+        let why = out_of_range.unwrap_or_else(|| format!("parameters changed: {changed}"));
+        (allowed, why)
+    }
+
+    pub(super) fn exit_initialization_mode(&mut self, slot: usize) {
+        let c = self.live(slot).c;
+        let is_legal = self.legal_now(slot, Function::ExitInitializationMode);
+        let (outcome, why) = self.initialization_outcome(slot);
+        let allowed: &[sys::fmi2Status] = if is_legal { outcome } else { &[ERROR] };
         self.begin("fmi2ExitInitializationMode", Some(slot));
         // SAFETY: `c` is the live instance in `slot`; each array argument is NULL or holds at
         // least the length passed with it, and each FMU-state argument is NULL, a live state of
@@ -151,11 +165,7 @@ impl Fuzzer<'_> {
             status,
             allowed,
             !is_legal,
-            || {
-                out_of_range
-                    .clone()
-                    .unwrap_or_else(|| format!("parameters changed: {changed}"))
-            },
+            || why.clone(),
         );
         if status == OK {
             let live = self.live_mut(slot);
@@ -290,8 +300,16 @@ impl Fuzzer<'_> {
         let reads_derivative = resolved
             .as_ref()
             .is_ok_and(|indices| indices.iter().any(|i| self.fmu.is_derivative(*i)));
+        let in_initialization = self.live(slot).state == State::InitializationMode;
         let allowed: &[sys::fmi2Status] = if !is_legal || !valid {
             &[ERROR]
+        } else if in_initialization && n > 0 {
+            // The values read are those of the model built from the values
+            // set (and a derivative of it may overflow as below).
+            match self.initialization_outcome(slot).0 {
+                [OK] if reads_derivative && !self.pristine_model_exchange(slot) => &[OK, ERROR],
+                outcome => outcome,
+            }
         } else if reads_derivative && !self.pristine_model_exchange(slot) {
             &[OK, ERROR]
         } else {

@@ -307,14 +307,21 @@ impl Fuzzer<'_> {
         // model's domain, which the model reports as an error.
         let may_fail = getter == VectorGetter::Derivatives
             && (!self.pristine_model_exchange(slot) || live.failed);
+        let in_initialization = self.live(slot).state == State::InitializationMode;
         let allowed: &[sys::fmi2Status] = if !is_legal || !valid {
             &[ERROR]
+        } else if in_initialization {
+            // Read from the model built from the values set.
+            match self.initialization_outcome(slot).0 {
+                [OK] if may_fail => &[OK, ERROR],
+                outcome => outcome,
+            }
         } else if may_fail {
             &[OK, ERROR]
         } else {
             &[OK]
         };
-        let tainted = live.tainted;
+        let tainted = self.live(slot).model.tainted;
         self.check(slot, function.name(), status, allowed, !is_legal, || {
             format!("{shape:?} of {expected}")
         });
