@@ -177,6 +177,36 @@ pub struct BoucWenModelFit {
     /// Signed extremes of the error (model − measurement) there [output
     /// units]: seed 001 §5.2 reports its fits this way.
     pub error_range: (f64, f64),
+    /// The scaled shape (β̃, γ̃, n, δ̃, [`SHAPE_PARAMETERS`]) the model was
+    /// made from: where it lies in the search box.
+    pub shape: Vec<f64>,
+}
+
+impl BoucWenModelFit {
+    /// The shape parameters that sit on a wall of `bounds` (within 0.1 % of
+    /// the box's width) where the wall is only the search's: the best model
+    /// may lie beyond it. n = 1 and β̃ = 0 are limits of the model itself
+    /// (the smallest exponent; a loop that dissipates), so a fit on them is
+    /// no sign of a short box.
+    pub fn on_search_walls(&self, bounds: &Bounds) -> Vec<(&'static str, f64)> {
+        SHAPE_PARAMETERS
+            .iter()
+            .enumerate()
+            .filter_map(|(i, &name)| {
+                let (low, high, value) = (bounds.lower[i], bounds.upper[i], self.shape[i]);
+                let near = 1e-3 * (high - low);
+                let model_limit =
+                    (name == "n" && low <= MIN_EXPONENT) || (name == "beta" && low <= 0.0);
+                if high - value <= near {
+                    Some((name, high))
+                } else if value - low <= near && !model_limit {
+                    Some((name, low))
+                } else {
+                    None
+                }
+            })
+            .collect()
+    }
 }
 
 /// GA-PSO's fit and its refinement.
@@ -605,6 +635,7 @@ fn model_fit(record: &ScaledRecord, shape: &[f64], scales: Scales) -> Option<Bou
         rms: root_mean_square(&residuals) * scales.output,
         max_error: max_error * scales.output,
         error_range: (low * scales.output, high * scales.output),
+        shape: shape.to_vec(),
     })
 }
 

@@ -297,6 +297,48 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
         "{rms} vs {refined_rms}"
     );
 
+    // n = 1 is the model's own limit, not the search's: no note.
+    assert!(!printed.contains("search box's wall"), "{printed}");
+    // A box that shuts the loop's n = 1 out: the fit stops on its wall, and
+    // says so.
+    let output = run(&[
+        "bouc-wen",
+        data,
+        "--time",
+        "time",
+        "--generations",
+        "10",
+        "--no-offset",
+        "--bounds",
+        "n=2:3",
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let printed = stdout(&output);
+    assert!(
+        printed.contains("note: the fit stopped on the search box's wall (")
+            && printed.contains(" n = 2, "),
+        "{printed}"
+    );
+    // A sensor counting the other way: refused, with the fix, by both fits.
+    let falling = dir.path().join("falling.csv");
+    let mut text = String::from("time,volts,microns\n");
+    for (n, (u, y)) in u.iter().zip(&y).enumerate() {
+        text.push_str(&format!("{},{u},{}\n", n as f64 * 0.005, -y));
+    }
+    std::fs::write(&falling, text).unwrap();
+    let falling = falling.to_str().unwrap();
+    for command in ["bouc-wen", "inverse-pi"] {
+        let output = run(&[command, falling, "--time", "time"]);
+        assert!(!output.status.success(), "{command}");
+        let message = stderr(&output);
+        assert!(
+            message.starts_with(&format!(
+                "{falling}: the displacement falls as the command rises (correlation -0.99"
+            )) && message.contains("multiply the column by -1"),
+            "{command}: {message}"
+        );
+    }
+
     let output = run(&["bouc-wen", data, "--time", "time", "--bounds", "n=3:1"]);
     // (refused before any fit)
     assert!(!output.status.success());

@@ -272,6 +272,16 @@ impl ProtocolArgs {
         default_warm_up: Option<f64>,
     ) -> Result<Plan, String> {
         let record = &loaded.record;
+        let correlation = pearson(&record.input, &record.output);
+        if correlation < -FALLING_CORRELATION {
+            return Err(format!(
+                "{}: the displacement falls as the command rises (correlation {correlation:.3}): \
+                 the models, and PiezoController's feedback, take a displacement that rises with \
+                 the command; a sensor counting the other way is read negated (multiply the \
+                 column by -1) and fitted again",
+                loaded.name
+            ));
+        }
         Plan::new(
             &record.input,
             record.sample_period,
@@ -386,4 +396,28 @@ pub(crate) struct ValidationZero {
     pub(crate) mode: &'static str,
     pub(crate) alignment: Option<ZeroAlignment>,
     pub(crate) not_aligned_because: Option<String>,
+}
+
+/// A record whose displacement correlates with its command below minus this
+/// is a falling one: a piezo's displacement rises with its voltage (r near
+/// +1; hysteresis and creep take a few per cent off), so only a sensor
+/// counting the other way, or swapped columns of a coupling, fall.
+const FALLING_CORRELATION: f64 = 0.5;
+
+/// Pearson's correlation of `a` and `b` (0 when either is constant).
+fn pearson(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    let (mean_a, mean_b) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        let (dx, dy) = (x - mean_a, y - mean_b);
+        ab += dx * dy;
+        aa += dx * dx;
+        bb += dy * dy;
+    }
+    if aa > 0.0 && bb > 0.0 {
+        ab / (aa * bb).sqrt()
+    } else {
+        0.0
+    }
 }

@@ -411,4 +411,16 @@ pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSet
         "model: p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}; sensor offset {:.6} um",
         p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta, best.offset
     );
+    let walls = best.on_search_walls(&settings.bounds);
+    if !walls.is_empty() {
+        println!(
+            "note: the fit stopped on the search box's wall ({}, in the scaled shape --bounds \
+             takes): a better model may lie beyond it; try --wide-bounds, or --bounds past it",
+            walls
+                .iter()
+                .map(|(name, wall)| format!("{name} = {wall}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
 }
