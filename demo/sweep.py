@@ -23,8 +23,10 @@ metrics, the wall time.
   master`): start them from a checkout with PYTHONPATH set to it.
 - A run is a pure function of its scenario (spec, sample seed), whichever
   task runs it: its key is a hash of the scenario with the FMUs' contents. A
-  task rescheduled after a worker dies gives the same rows, and the table
-  keeps each key once. A run
+  task rescheduled after a worker dies gives the same rows (a task whose
+  worker died with the only copy of the FMUs is sent again, the FMUs
+  scattered anew), and the table keeps each key once; two grid points that
+  make one scenario are refused. A run
   that exceeds the spec's `timeout` is a row with status "timeout" and runs
   again at the next invocation (a loaded machine, not the run, may be why).
 - Rows are journalled to DIR/<study>.journal.jsonl as they arrive; an
@@ -83,6 +85,14 @@ PROGRESS_SECONDS = 10.0
 #: after the first, and a tenth of the scheduler's traffic); `runs_per_task =
 #: 1` in a spec gives each run its own process (FMUs that keep global state).
 RUNS_PER_TASK = 10
+# Times a task that could not run (its worker died, and with it the FMUs
+# scattered there when no other worker held them) is sent again, with the
+# FMUs scattered anew, before its runs are left for the next invocation.
+TASK_RETRIES = 2
+# The table's own columns (execute_runs, expand): a variable by one of these
+# names would overwrite them, and the rows would lose its values or their keys.
+RESERVED_COLUMNS = {"run", "key", "status", "error", "steps", "simulated_s", "warnings",
+                    "wall_s", "task_s", "worker", "seed", "sample"}
 
 
 class SpecError(ValueError):
@@ -230,11 +240,27 @@ def load_spec(path: str | Path) -> Spec:
                                   dict(case.get("patch", {}))))
             values = cases
         elif not isinstance(values, list) or not values:
-            raise fail(name, f"variable {name!r}: values must be a list or a table of cases")
+            raise fail(name, f"variable {name!r}: values must be a non-empty list, or a table "
+                             f"of cases")
+        else:
+            for value in values:
+                if isinstance(value, bool) or not isinstance(value, (int, float, str)) or (
+                        isinstance(value, float) and not math.isfinite(value)):
+                    # Its `name = "..."` line, not an expression naming it.
+                    quoted = next((q for q in (f'"{name}"', f"'{name}'") if q in text), name)
+                    raise fail(quoted, f"variable {name!r}: value {value!r} is not a finite "
+                                       f"number or a name")
         variables.append(Variable(name, values))
     names = [v.name for v in variables]
-    if len(set(names)) != len(names):
-        raise fail(None, "two variables have the same name")
+    for name in names:
+        # Its `name = "..."` line, not an earlier key of that name.
+        quoted = next((q for q in (f'"{name}"', f"'{name}'") if q in text), name)
+        if names.count(name) > 1:
+            raise fail(quoted, f"two variables are named {name!r}")
+        if name in RESERVED_COLUMNS or str(name).startswith("factor."):
+            raise fail(quoted, f"variable {name!r}: the table has a column of that name "
+                             f"({', '.join(sorted(RESERVED_COLUMNS))} and factor.* are its "
+                             f"own); choose another name")
     exclude = data.get("exclude", [])
     for rule in exclude:
         for key in rule:
@@ -425,12 +451,12 @@ def _plant_parameters(fmu_path: Path) -> dict:
 
 def _range_text(low, high) -> str:
     """A declared range as an interval. FMI's min and max are inclusive, so an
-    open end (> 0) is declared as the double next to it (5e-324): written back
-    as the open end, (0, inf]."""
+    open end is declared as the double next to it (> 0 as the smallest normal
+    double, sys.float_info.min): written back as the open end, (0, inf]."""
     def end(bound, toward: float, closed: str, opened: str, missing: str) -> str:
         if bound is None:
             return missing
-        outside = math.nextafter(bound, toward)
+        outside = 0.0 if abs(bound) == sys.float_info.min else math.nextafter(bound, toward)
         if len(f"{outside:g}") < len(f"{bound:g}") or (outside == 0 and bound != 0):
             return opened.format(f"{outside:g}")
         return closed.format(f"{bound:g}")
@@ -546,6 +572,19 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
             values["seed"] = seed
             key = hashlib.sha256(canonical(scenario).encode()).hexdigest()[:32]
             runs.append(Run(len(runs), key, scenario, values))
+    # Two grid points that make one scenario would be one row, which says
+    # only one of their values: a variable the template never uses, or a
+    # value given twice.
+    first_of: dict[str, Run] = {}
+    for run in runs:
+        twin = first_of.setdefault(run.key, run)
+        if twin is not run:
+            differ = [name for name in run.values if run.values[name] != twin.values.get(name)]
+            names = ", ".join(f"{n} = {twin.values[n]!r} and {run.values[n]!r}" for n in differ)
+            raise _fail(spec.path, spec.text, differ[0] if differ else None,
+                        f"two points of the grid make the same run ({names or 'the same values'}): "
+                        f"a variable the template does not use (as `= name`), or a value given "
+                        f"twice")
     return runs, {digest: path for path, digest in fmus.items()}
 
 
@@ -604,12 +643,13 @@ def _unpacked(digest: str, data: bytes) -> Path:
 
 
 def flatten_metrics(metrics: dict | None) -> dict:
-    """Ranges [min, max] become two columns <name>_min, <name>_max."""
+    """Ranges [min, max] become two columns <name>_min, <name>_max
+    (`y_error_range_min`): without the `_range` they would overwrite the
+    master's own `y_error_max`, the largest |e_y|."""
     row = {}
     for name, value in (metrics or {}).items():
         if isinstance(value, list):
-            base = name[:-len("_range")] if name.endswith("_range") else name
-            row[f"{base}_min"], row[f"{base}_max"] = float(value[0]), float(value[1])
+            row[f"{name}_min"], row[f"{name}_max"] = float(value[0]), float(value[1])
         else:
             row[name] = value
     return row
@@ -790,16 +830,21 @@ def _progress_lines(done: int, total: int, failed: int, started: float, study: s
 
 
 def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: str = "auto",
-              on_row=None) -> dict:
+              on_row=None, checked: bool = False) -> dict:
     """Runs every run of `spec` not yet in DIR/<study>.parquet on `client`'s
     cluster. `on_row(row, done)` is called after each row (tests use it to
-    kill a worker mid-sweep). Returns a summary."""
+    kill a worker mid-sweep); `checked` says `check_scenarios` passed on all
+    of its runs already. Returns a summary."""
     from distributed import as_completed
 
     out.mkdir(parents=True, exist_ok=True)
     runs, fmus = expand(spec)
     keys = {run.key: run.index for run in runs}
     if restart:
+        # The spec is checked before anything is deleted: a typo keeps the table.
+        if not checked:
+            check_scenarios(runs, fmus, spec)
+            checked = True
         table_path(out, spec.study).unlink(missing_ok=True)
         journal_path(out, spec.study).unlink(missing_ok=True)
     existing = read_rows(out, spec.study)
@@ -816,10 +861,14 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     if not todo:
         summary["rows"] = consolidate(out, spec, keys)
         return summary
-    check_scenarios(todo, fmus, spec)
+    if not checked:
+        check_scenarios(todo, fmus, spec)
 
-    data = {digest: client.scatter(path.read_bytes(), broadcast=True, hash=True)
-            for digest, path in fmus.items()}
+    def scatter() -> dict:
+        return {digest: client.scatter(path.read_bytes(), broadcast=True, hash=True)
+                for digest, path in fmus.items()}
+
+    data = scatter()
     workers = len(client.scheduler_info().get("workers", {}))
     tasks = batches(todo, workers, spec.runs_per_task)
     futures = [client.submit(execute_runs, task, data, spec.timeout,
@@ -827,7 +876,8 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                                  "".join(run.key for run in task).encode()).hexdigest()[:32],
                              pure=True)
                for task in tasks]
-    size_of = {future.key: len(task) for future, task in zip(futures, tasks)}
+    task_of = {future.key: task for future, task in zip(futures, tasks)}
+    tries = {future.key: 0 for future in futures}
     mode = progress
     if mode == "auto":
         mode = "bar" if sys.stdout.isatty() else "lines"
@@ -839,19 +889,31 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     journal = Journal(out, spec.study)
     started = last_line = time.monotonic()
     done = 0
+    pending = as_completed(futures)
     try:
-        for future in as_completed(futures):
+        for future in pending:
             try:
                 rows = future.result()
             except Exception as e:  # noqa: BLE001 - the task did not run (see below)
                 # Not failed runs (those are rows) but a task that could not
                 # run: a worker without the package or the master, a task
-                # whose workers died again and again. Its runs stay out of
-                # the table, so the next invocation runs them again.
+                # whose workers died again and again. It is sent again (a
+                # worker that died took the FMUs scattered to it); then its
+                # runs stay out of the table, and the next invocation runs
+                # them again.
+                task = task_of[future.key]
+                if tries[future.key] < TASK_RETRIES:
+                    data = scatter()
+                    again = client.submit(execute_runs, task, data, spec.timeout,
+                                          key=f"{future.key}-again", pure=False)
+                    task_of[again.key], tries[again.key] = task, tries[future.key] + 1
+                    pending.add(again)
+                    futures.append(again)
+                    continue
                 if summary["lost"] == 0:
                     print(f"a run could not be executed: {type(e).__name__}: {e}"
                           + lost_task_hint(e), file=sys.stderr, flush=True)
-                summary["lost"] += size_of[future.key]
+                summary["lost"] += len(task)
                 continue
             for row in rows:
                 journal.add(row)
@@ -906,16 +968,26 @@ def main(argv=None) -> int:
     try:
         specs = [load_spec(path) for path in args.specs]
         master.binary()
+        studies = [spec.study for spec in specs]
+        for spec in specs:
+            if studies.count(spec.study) > 1:
+                raise SpecError(f"{spec.path}: study {spec.study!r} is the study of another "
+                                f"spec given; each study has its own table")
+            # Every spec's runs are checked before any runs: a typo in the
+            # last spec fails now, not after the first ones have run.
+            runs, fmus = expand(spec)
+            check_scenarios(runs, fmus, spec)
     except (SpecError, FileNotFoundError) as e:
         print(e, file=sys.stderr)
         return 2
-    timed_out = 0
+    timed_out = failed = 0
     with make_client(args.scheduler, args.workers) as client:
         print(f"dask: {len(client.scheduler_info()['workers'])} workers "
               f"({args.scheduler or 'LocalCluster'})", flush=True)
         for spec in specs:
             try:
-                summary = run_sweep(spec, args.out, client, args.restart, args.progress)
+                summary = run_sweep(spec, args.out, client, args.restart, args.progress,
+                                    checked=True)
             except SpecError as e:
                 print(e, file=sys.stderr)
                 return 2
@@ -927,6 +999,7 @@ def main(argv=None) -> int:
             if summary["interrupted"]:
                 print("interrupted: run the same command again to continue", file=sys.stderr)
                 return 130
+            failed += summary["failed"]
             if summary["timeouts"]:
                 timed_out += summary["timeouts"]
                 print(f"{summary['timeouts']} runs gave no result within {spec.timeout} s: run "
@@ -940,9 +1013,11 @@ def main(argv=None) -> int:
 
         report = write_report(args.out)
         print(f"report: {report}")
-    # The report shows what is in the tables; a table with timed-out runs is
-    # not complete, and the exit status says so.
-    return 1 if timed_out else 0
+    # The report shows what is in the tables; a table with timed-out or
+    # failed runs is not complete, and the exit status says so.
+    if failed:
+        print(f"{failed} runs failed: their rows say why (status, error)", file=sys.stderr)
+    return 1 if timed_out or failed else 0
 
 
 if __name__ == "__main__":

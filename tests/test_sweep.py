@@ -15,6 +15,7 @@ import contextlib
 import copy
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -125,7 +126,7 @@ def test_a_local_cluster_sweep_makes_one_row_per_run(spec_path, reference_table)
     first = rows[0]
     for column in ("frequency", "decoupling", "amplitude", "sample", "seed",
                    "factor.pzt[1].A", "factor.pzt[1].beta", "factor.amplifier.gain",
-                   "tracking_rms", "tracking_max", "coupling_x2_span", "coupling_x3_min",
+                   "tracking_rms", "tracking_max", "coupling_x2_span", "coupling_x3_range_min",
                    "wall_s", "task_s", "worker"):
         assert column in first, column
     factors = [r["factor.pzt[1].A"] for r in rows]
@@ -140,7 +141,7 @@ def test_a_local_cluster_sweep_makes_one_row_per_run(spec_path, reference_table)
         entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
     direct = master.run(scenario)["metrics"]
     assert rows[5]["tracking_rms"] == direct["tracking_rms"]
-    assert rows[5]["coupling_x2_min"] == direct["coupling_x2_range"][0]
+    assert rows[5]["coupling_x2_range_min"] == direct["coupling_x2_range"][0]
 
 
 def test_the_same_spec_gives_the_same_table_on_two_workers(spec_path, reference_table,
@@ -331,6 +332,37 @@ def test_killing_a_worker_mid_sweep_loses_and_duplicates_no_run(spec_path, refer
     assert results(rows) == results(reference_table)
 
 
+def test_a_lone_worker_killed_mid_sweep_loses_no_run(spec_path, reference_table, tmp_path,
+                                                    monkeypatch):
+    """With one worker, the FMUs scattered to it die with it: the tasks left
+    were lost ("already forgotten") until the sweep learnt to scatter them
+    again and resend the tasks to the worker the nanny restarts."""
+    from distributed import Client
+
+    monkeypatch.setattr(sweep, "batches",
+                        lambda runs, workers, size: [runs[i:i + 2] for i in range(0, len(runs), 2)])
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    (tmp_path / "cluster").mkdir()
+    killed = {}
+    with cluster(tmp_path / "cluster", 1, env, env, REPO_ROOT) as address, \
+            Client(address, timeout="30s") as client:
+        client.wait_for_workers(1, timeout=60)
+        pids = client.run(os.getpid)
+
+        def kill_it(row, done):
+            if not killed:
+                os.kill(next(iter(pids.values())), signal.SIGKILL)
+                killed.update(after=done)
+
+        summary = sweep.run_sweep(sweep.load_spec(spec_path), tmp_path / "out", client,
+                                  progress="none", on_row=kill_it)
+    assert killed and killed["after"] < RUNS, killed
+    assert summary["lost"] == 0 and summary["executed"] == RUNS, summary
+    rows = rows_of(tmp_path / "out")
+    assert [r["run"] for r in rows] == list(range(RUNS))
+    assert results(rows) == results(reference_table)
+
+
 def test_a_run_that_timed_out_is_run_again(spec_path, reference_table, tmp_path):
     """A run over the spec's timeout is a row saying so (a loaded machine,
     not the run, may be why); the next invocation runs it again, and its
@@ -400,6 +432,60 @@ def test_spec_errors_name_the_file_and_line(tmp_path):
     with pytest.raises(sweep.SpecError,
                        match=rf"^{bad}:{line}: report_options: unknown key 'tracking_limt'"):
         sweep.load_spec(bad)
+
+
+def test_a_variable_named_as_a_table_column_is_refused(tmp_path):
+    """A variable `key` replaced every row's key (the table kept 0 rows of
+    16), `run` the run index, `seed` the seed."""
+    bad = tmp_path / "bad.toml"
+    for name in ("key", "run", "seed", "status", "factor.x"):
+        text = SPEC.replace('name = "amplitude"', f'name = "{name}"')
+        bad.write_text(text)
+        line = text.splitlines().index(f'name = "{name}"') + 1
+        with pytest.raises(sweep.SpecError,
+                           match=rf"^{bad}:{line}: variable '{re.escape(name)}': the table "
+                                 rf"has a column of that name"):
+            sweep.load_spec(bad)
+
+
+def test_restart_keeps_the_table_when_the_spec_does_not_run(spec_path, reference_table,
+                                                            tmp_path):
+    """`--restart` with a misspelt parameter deleted the table, then refused."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = tmp_path / "small.parquet"
+    pq.write_table(pa.Table.from_pylist(reference_table), table)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SPEC.replace('"noise.enabled" = true', '"noise.enabld" = true'))
+    with pytest.raises(sweep.SpecError, match="does not run"):
+        sweep.run_sweep(sweep.load_spec(bad), tmp_path, client=None, restart=True)
+    assert pq.read_table(table).num_rows == len(reference_table)
+
+
+def test_grid_values_that_make_no_run_of_their_own_are_refused(tmp_path):
+    """An unused variable collapsed 16 runs into 4 rows, each claiming one of
+    its values; a NaN value failed every run with the master's JSON error."""
+    bad = tmp_path / "bad.toml"
+    text = SPEC + '[[variable]]\nname = "unused"\nvalues = [1.0, 2.0]\n'
+    bad.write_text(text)
+    with pytest.raises(sweep.SpecError, match=r"two points of the grid make the same run "
+                                              r"\(unused = 1.0 and 2.0\)"):
+        sweep.expand(sweep.load_spec(bad))
+    text = SPEC.replace("values = [2.0]", "values = [2.0, nan]")
+    bad.write_text(text)
+    line = text.splitlines().index('name = "amplitude"') + 1
+    with pytest.raises(sweep.SpecError, match=rf"^{bad}:{line}: variable 'amplitude': value nan "
+                                              rf"is not a finite number or a name"):
+        sweep.load_spec(bad)
+
+
+def test_a_range_metric_keeps_the_masters_largest_error():
+    """`y_error_range` as `y_error_min`/`y_error_max` overwrote the master's
+    `y_error_max` (the largest |e_y|) with the range's upper end."""
+    row = sweep.flatten_metrics({"y_error_max": 0.03022, "y_error_range": [-0.03022, 0.02444]})
+    assert row == {"y_error_max": 0.03022, "y_error_range_min": -0.03022,
+                   "y_error_range_max": 0.02444}
 
 
 def test_runs_go_to_tasks_in_order_and_keep_every_worker_busy(tmp_path):
