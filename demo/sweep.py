@@ -89,6 +89,14 @@ RUNS_PER_TASK = 10
 # scattered there when no other worker held them) is sent again, with the
 # FMUs scattered anew, before its runs are left for the next invocation.
 TASK_RETRIES = 2
+# The reports a spec may name (demo/sweep_report.py), and the variables each
+# reads from every row: its tables are grouped by them, and the decoupling
+# variable's cases are named "off" and "on".
+REPORT_VARIABLES = {
+    "none": set(),
+    "envelope": {"stage", "method", "axis", "held", "amplitude", "frequency", "decoupling"},
+    "robustness": {"axis", "decoupling"},
+}
 # The table's own columns (execute_runs, expand): a variable by one of these
 # names would overwrite them, and the rows would lose its values or their keys.
 RESERVED_COLUMNS = {"run", "key", "status", "error", "steps", "simulated_s", "warnings",
@@ -303,12 +311,29 @@ def load_spec(path: str | Path) -> Spec:
     for key, value in report_options.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
             raise fail(key, f"report_options.{key} {value!r}: a positive number")
+    report = data.get("report", "none")
+    if report not in REPORT_VARIABLES:
+        raise fail("report", f"report {report!r}: one of {', '.join(sorted(REPORT_VARIABLES))}")
+    missing = REPORT_VARIABLES[report] - set(names)
+    if missing:
+        raise fail("report", f"report {report!r} reads the variables "
+                             f"{', '.join(sorted(REPORT_VARIABLES[report]))}; the spec has no "
+                             f"{', '.join(sorted(missing))} (report = \"none\" for a table alone)")
+    if report != "none":
+        decoupling = next(v for v in variables if v.name == "decoupling")
+        cases = {getattr(value, "name", value) for value in decoupling.values}
+        if cases != {"off", "on"}:
+            raise fail("decoupling", f"report {report!r} compares the decoupling variable's "
+                                     f"cases \"off\" and \"on\"; the spec has "
+                                     f"{sorted(map(str, cases))}")
+    if report == "robustness" and "monte_carlo" not in data:
+        raise fail("report", "report 'robustness' summarizes a [monte_carlo]; the spec has none")
     timeout = data.get("timeout")
     runs_per_task = data.get("runs_per_task", RUNS_PER_TASK)
     if not isinstance(runs_per_task, int) or isinstance(runs_per_task, bool) or runs_per_task < 1:
         raise fail("runs_per_task", f"runs_per_task {runs_per_task!r}: a whole number, at least 1")
     return Spec(path=path, text=text, study=study, title=data.get("title", study),
-                report=data.get("report", "none"), seed=int(data.get("seed", 0)),
+                report=report, seed=int(data.get("seed", 0)),
                 timeout=float(timeout) if timeout is not None else None,
                 template=data["template"], variables=variables, exclude=exclude,
                 monte_carlo=mc, report_options=report_options,
@@ -824,9 +849,10 @@ def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> None:
 def _progress_lines(done: int, total: int, failed: int, started: float, study: str) -> None:
     elapsed = time.monotonic() - started
     rate = done / elapsed if elapsed > 0 else 0.0
-    eta = (total - done) / rate if rate > 0 else float("nan")
+    to_go = (f"about {(total - done) / rate:.0f} s to go" if rate > 0
+             else "no run done yet to time the rest by")
     print(f"sweep {study}: {done}/{total} runs ({100 * done / max(total, 1):.0f} %), "
-          f"{failed} failed, {elapsed:.0f} s elapsed, about {eta:.0f} s to go", flush=True)
+          f"{failed} failed, {elapsed:.0f} s elapsed, {to_go}", flush=True)
 
 
 def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: str = "auto",
@@ -889,6 +915,7 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     journal = Journal(out, spec.study)
     started = last_line = time.monotonic()
     done = 0
+    printed_at = None  # the `done` of the last progress line
     pending = as_completed(futures)
     try:
         for future in pending:
@@ -926,6 +953,7 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
             if mode == "lines" and time.monotonic() - last_line >= PROGRESS_SECONDS:
                 last_line = time.monotonic()
                 _progress_lines(done, len(todo), summary["failed"], started, spec.study)
+                printed_at = done
     except KeyboardInterrupt:
         summary["interrupted"] = True
         client.cancel(futures)
@@ -933,7 +961,7 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
         journal.close()
         summary["rows"] = consolidate(out, spec, keys)
         summary["wall_s"] = time.monotonic() - started
-    if mode == "lines" and not summary["interrupted"]:
+    if mode == "lines" and not summary["interrupted"] and printed_at != done:
         _progress_lines(done, len(todo), summary["failed"], started, spec.study)
     return summary
 

@@ -480,6 +480,21 @@ def test_grid_values_that_make_no_run_of_their_own_are_refused(tmp_path):
         sweep.load_spec(bad)
 
 
+def test_a_report_the_spec_cannot_feed_is_refused(tmp_path):
+    """`report = "envelop"` was taken silently, and "robustness" on a spec
+    without its variables crashed after every run, and every later report
+    into the same folder."""
+    bad = tmp_path / "bad.toml"
+    for report, problem in (
+            ("envelop", "report 'envelop': one of envelope, none, robustness"),
+            ("robustness", "report 'robustness' reads the variables axis, decoupling; the "
+                           "spec has no axis")):
+        text = f'report = "{report}"\n' + SPEC
+        bad.write_text(text)
+        with pytest.raises(sweep.SpecError, match=rf"^{bad}:1: {re.escape(problem)}"):
+            sweep.load_spec(bad)
+
+
 def test_a_range_metric_keeps_the_masters_largest_error():
     """`y_error_range` as `y_error_min`/`y_error_max` overwrote the master's
     `y_error_max` (the largest |e_y|) with the range's upper end."""

@@ -366,7 +366,14 @@ pub fn run_with(
         let mut typed = Vec::new();
         for (name, value) in spec.parameter_values()? {
             let port = format!("{}.{name}", l.name);
-            let info = l.variable(&name, &port)?;
+            // A value from a parameter set is named with its file.
+            let given_in = || match spec.parameter_origin(&name) {
+                Some(set) => format!(" (given in {})", set.display()),
+                None => String::new(),
+            };
+            let info = l
+                .variable(&name, &port)
+                .map_err(|e| RunError::Scenario(format!("{e}{}", given_in())))?;
             let value = match (info.kind, value) {
                 ("Real", ParameterValue::Number(v)) => Typed::Real(v),
                 ("Integer", ParameterValue::Number(v))
@@ -376,8 +383,19 @@ pub fn run_with(
                 }
                 ("Boolean", ParameterValue::Boolean(v)) => Typed::Boolean(v),
                 (kind, value) => {
+                    let wanted = match kind {
+                        "Integer" => "a whole number",
+                        "Boolean" => "true or false",
+                        _ => "a number",
+                    };
                     return Err(RunError::Scenario(format!(
-                        "{port} is a {kind} variable; the scenario gives {value:?}"
+                        "{port} is {} {kind} variable, which takes {wanted}; {value} was given{}",
+                        if kind.starts_with(['A', 'E', 'I', 'O', 'U']) {
+                            "an"
+                        } else {
+                            "a"
+                        },
+                        given_in()
                     )));
                 }
             };

@@ -529,6 +529,29 @@ impl FmuSpec {
         values.extend(self.parameters.iter().map(|(k, v)| (k.clone(), *v)));
         Ok(values)
     }
+
+    /// Where the value of parameter `name` comes from, for messages: the
+    /// parameter set that gives it (the last one, as it wins), or None for
+    /// the scenario's own `parameters`.
+    pub fn parameter_origin(&self, name: &str) -> Option<&Path> {
+        if self.parameters.contains_key(name) {
+            return None;
+        }
+        self.parameter_sets
+            .iter()
+            .rev()
+            .find(|set| read_parameter_set(set).is_ok_and(|v| v.iter().any(|(n, _)| n == name)))
+            .map(PathBuf::as_path)
+    }
+}
+
+impl std::fmt::Display for ParameterValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ParameterValue::Boolean(b) => write!(f, "{b}"),
+            ParameterValue::Number(v) => write!(f, "{v}"),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -255,7 +255,30 @@ fn a_scenario_that_does_not_fit_is_refused_by_name() {
         );
     let error = run(&scenario, RunOptions::default()).unwrap_err();
     assert!(
-        error.to_string().contains("hysteresis_model is a Integer"),
+        error.to_string().contains(
+            "controller.hysteresis_model is an Integer variable, which takes a whole number; \
+             1.5 was given"
+        ),
+        "{error}"
+    );
+    // A value from a parameter set names the set.
+    let set = std::env::temp_dir().join(format!("cosim-set-{}.json", std::process::id()));
+    std::fs::write(&set, r#"{"x.cc": 1.0}"#).unwrap();
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario
+        .fmu
+        .get_mut("controller")
+        .unwrap()
+        .parameter_sets
+        .push(set.clone());
+    let error = run(&scenario, RunOptions::default()).unwrap_err();
+    std::fs::remove_file(&set).ok();
+    assert!(
+        error.to_string().contains(&format!(
+            "controller.x.cc: {} has no variable \"x.cc\" (given in {})",
+            fmus.controller.display(),
+            set.display()
+        )),
         "{error}"
     );
 }
