@@ -99,6 +99,9 @@ pub const UNIFORM_SAMPLING_TOLERANCE: f64 = 0.01;
 pub enum Column {
     Index(usize),
     Name(String),
+    /// The one column whose header name says it is a time (`Time [s]`,
+    /// `t_ms`, LabVIEW's `X_Value`): the sampling when none is given.
+    NamedTime,
 }
 
 impl Column {
@@ -117,6 +120,7 @@ impl fmt::Display for Column {
         match self {
             Column::Index(i) => write!(f, "{i}"),
             Column::Name(name) => write!(f, "\"{name}\""),
+            Column::NamedTime => write!(f, "the column named as a time"),
         }
     }
 }
@@ -272,6 +276,16 @@ pub enum Problem {
         "the time column steps by {step} per row and names no unit, so it would be read in seconds: slower than one sample a second, too slow for a hysteresis record; name its unit in the header (\"time [ms]\", \"time_ms\") or give --rate"
     )]
     SlowInSeconds { step: Short },
+    #[error(
+        "give the sampling: --rate HZ or --time COLUMN ({})",
+        match names {
+            Some(names) => format!("no column of the header, {names}, is named as a time"),
+            None => "the file has no header to find a time column by".to_owned(),
+        }
+    )]
+    NoSampling { names: Option<String> },
+    #[error("give the sampling: --time COLUMN or --rate HZ (the header names {names} as times)")]
+    TwoTimeColumns { names: String },
     #[error("only {found} data rows, at least {minimum} are needed")]
     TooFewRows { found: usize, minimum: usize },
     #[error(
@@ -1377,9 +1391,43 @@ fn resolve_columns(
     header: Option<&(usize, Vec<String>)>,
     x_is_time: bool,
 ) -> Result<ResolvedColumns, (Option<usize>, Problem)> {
+    let time_named = |name: &String| names_a_time(name) || (x_is_time && name == LABVIEW_X_COLUMN);
     let resolve = |column: &Column| -> Result<usize, (Option<usize>, Problem)> {
         match column {
             Column::Index(i) => Ok(*i),
+            Column::NamedTime => {
+                let quoted = |names: &[String]| {
+                    names
+                        .iter()
+                        .map(|n| format!("\"{n}\""))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                let Some((line, names)) = header else {
+                    return Err((None, Problem::NoSampling { names: None }));
+                };
+                let times: Vec<usize> = (0..names.len())
+                    .filter(|&i| time_named(&names[i]))
+                    .collect();
+                match times.as_slice() {
+                    [one] => Ok(*one),
+                    [] => Err((
+                        Some(*line),
+                        Problem::NoSampling {
+                            names: Some(quoted(names)),
+                        },
+                    )),
+                    _ => {
+                        let named: Vec<String> = times.iter().map(|&i| names[i].clone()).collect();
+                        Err((
+                            Some(*line),
+                            Problem::TwoTimeColumns {
+                                names: quoted(&named),
+                            },
+                        ))
+                    }
+                }
+            }
             Column::Name(name) => match header {
                 None => Err((None, Problem::NoHeader { name: name.clone() })),
                 Some((line, names)) => {
@@ -1421,13 +1469,8 @@ fn resolve_columns(
     let width = header.map(|(_, names)| names.len());
     // A column whose header names a time (`Time [s]`) is no default input or
     // output either: with --rate given, it would be fitted as a voltage.
-    let names_time = |i: usize| {
-        header.is_some_and(|(_, names)| {
-            names
-                .get(i)
-                .is_some_and(|name| names_a_time(name) || (x_is_time && name == LABVIEW_X_COLUMN))
-        })
-    };
+    let names_time =
+        |i: usize| header.is_some_and(|(_, names)| names.get(i).is_some_and(time_named));
     let default = |role: &'static str, taken: &[Option<usize>]| {
         let free = (0..)
             .find(|i| !taken.contains(&Some(*i)) && !names_time(*i))

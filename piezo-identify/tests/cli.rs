@@ -99,7 +99,10 @@ fn malformed_file_exits_non_zero_with_file_line_problem() {
     assert!(!output.status.success());
     assert_eq!(
         stderr(&output),
-        "give the sampling: --rate HZ or --time COLUMN\n"
+        format!(
+            "{path}:1: give the sampling: --rate HZ or --time COLUMN (the file has no header \
+             to find a time column by)\n"
+        )
     );
 }
 
@@ -879,6 +882,34 @@ fn columns_left_to_the_defaults_are_not_the_time_column() {
     let named = quick_split_fit(&path, "time", "volts", "microns");
     assert!(!rms_lines(&named).is_empty(), "{named}");
     assert_eq!(rms_lines(&summary), rms_lines(&named));
+    // With no sampling given, the column the header names as a time is it.
+    let found = run(&[&["inverse-pi", file][..], &quick[..]].concat());
+    assert!(found.status.success(), "{}", stderr(&found));
+    assert_eq!(rms_lines(&stdout(&found)), rms_lines(&named));
+    assert!(stdout(&found).contains("time column 0 \"time\""));
+    let two = dir.path().join("two_times.csv");
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "time,volts,microns",
+        "time,volts,microns,t_ms",
+        1,
+    );
+    let text: String = text
+        .lines()
+        .map(|l| match l.starts_with(|c: char| c.is_ascii_digit()) {
+            true => format!("{l},0\n"),
+            false => format!("{l}\n"),
+        })
+        .collect();
+    std::fs::write(&two, text).unwrap();
+    let two = two.to_str().unwrap();
+    let refused = run(&["inverse-pi", two]);
+    assert_eq!(
+        stderr(&refused).trim_end(),
+        format!(
+            "{two}:2: give the sampling: --time COLUMN or --rate HZ (the header names \"time\", \
+             \"t_ms\" as times)"
+        )
+    );
     let twice = run(&["inverse-pi", file, "--time", "time", "--input", "0"]);
     assert!(!twice.status.success());
     assert_eq!(

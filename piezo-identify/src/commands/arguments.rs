@@ -112,7 +112,8 @@ pub(crate) struct ColumnArgs {
     /// Sample rate [Hz] (or give --time).
     #[arg(long, conflicts_with = "time")]
     pub(crate) rate: Option<f64>,
-    /// Time column [s]: 0-based index or header name (or give --rate).
+    /// Time column [s]: 0-based index or header name (or give --rate; with
+    /// neither, the one column whose header name says it is a time).
     #[arg(long)]
     pub(crate) time: Option<String>,
 }
@@ -122,7 +123,11 @@ impl ColumnArgs {
         let sampling = match (&self.time, self.rate) {
             (Some(time), None) => Sampling::TimeColumn(Column::parse(time)),
             (None, Some(rate)) => Sampling::Rate(rate),
-            _ => return Err("give the sampling: --rate HZ or --time COLUMN".to_owned()),
+            // The file's own time column, if its header names one.
+            (None, None) => Sampling::TimeColumn(Column::NamedTime),
+            (Some(_), Some(_)) => {
+                return Err("give the sampling once: --rate HZ or --time COLUMN".to_owned());
+            }
         };
         Ok(ReadOptions {
             input: self.input.as_deref().map(Column::parse),
