@@ -192,6 +192,17 @@ pub enum DrivenAxis {
     Theta,
 }
 
+impl DrivenAxis {
+    /// The axis as messages name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            DrivenAxis::Y => "y",
+            DrivenAxis::X => "x",
+            DrivenAxis::Theta => "theta_z",
+        }
+    }
+}
+
 /// How hard and where the single-axis runs drive a stage. The defaults are
 /// seed 000's as printed (§5, §3.2); another stage scales them to its
 /// strokes (seed 001's XY200S, 144 µm, runs the same procedure at 11.3x the
@@ -449,6 +460,50 @@ pub enum StageError {
     },
     #[error("{0}: the plant has no parameter L (sensor spacing) to read")]
     NoSpacing(String),
+    #[error(
+        "the single-axis {axis} run does not track: its error is {rms_um:.3} um RMS on a demand \
+         spanning {span_um:.3} um, so the couplings it shows are the loop's, not the stage's; \
+         seed 000's PI gains times --gain-scale {gain_scale} are unstable or saturate on this \
+         plant (try a smaller --gain-scale)"
+    )]
+    DoesNotTrack {
+        axis: &'static str,
+        rms_um: f64,
+        span_um: f64,
+        gain_scale: f64,
+    },
+}
+
+/// Largest tracking RMS of a single-axis run's driven axis, as a share of its
+/// demand's span, for the run's couplings to be the stage's: a loop that
+/// tracks errs by a few per cent of the span, one that oscillates or sits on
+/// a command limit by its whole span or more.
+const MAX_TRACKING_SHARE: f64 = 0.5;
+
+/// The driven axis's tracking error over the fitted window of `run`, RMS
+/// [µm at the actuators, for θ], and its demand's span there.
+fn driven_tracking(
+    axis: DrivenAxis,
+    run: &crate::plant::ClosedLoopRun,
+    spacing_um: f64,
+) -> (f64, f64) {
+    let shared = conditions();
+    let from = shared.start_time() + shared.run_time() - shared.fitted_time() - 1e-9;
+    let half = spacing_um / 2.0;
+    let (mut sum, mut count, mut low, mut high) = (0.0, 0usize, f64::INFINITY, f64::NEG_INFINITY);
+    for k in (0..run.t.len()).filter(|&k| run.t[k] >= from) {
+        let (r, s) = (run.references[k], run.sensors[k]);
+        let (demand, reached) = match axis {
+            DrivenAxis::Y => (r[1], s[0]),
+            DrivenAxis::X => (r[0], 0.5 * (s[1] + s[2])),
+            DrivenAxis::Theta => (r[2] * half, 0.5 * (s[1] - s[2])),
+        };
+        sum += (demand - reached).powi(2);
+        count += 1;
+        low = low.min(demand);
+        high = high.max(demand);
+    }
+    ((sum / count.max(1) as f64).sqrt(), high - low)
 }
 
 /// Runs steps 1-3 on `plant`; `progress(message)` is told what runs.
@@ -592,6 +647,17 @@ pub fn identify_stage(
                 SAMPLE_PERIOD,
                 PREVIEW,
             )?;
+            let (rms_um, span_um) = driven_tracking(axis, &run, spacing_um);
+            // A NaN error (a run that diverged) does not track either.
+            let tracks = rms_um <= MAX_TRACKING_SHARE * span_um;
+            if !tracks {
+                return Err(StageError::DoesNotTrack {
+                    axis: axis.name(),
+                    rms_um,
+                    span_um,
+                    gain_scale: conditions.gain_scale,
+                });
+            }
             for (index, f, e) in coupling_pairs(axis, &run, spacing_um) {
                 let total = f
                     .iter()
@@ -647,6 +713,42 @@ pub fn identify_stage(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A run that follows its sine within 1 % tracks; one whose x pair
+    /// swings far past its demand (an unstable loop, as the PI gains of
+    /// seed 000 on a stiffer, lighter stage make it) does not.
+    #[test]
+    fn driven_tracking_tells_a_loop_that_follows_from_one_that_swings() {
+        let stage = StageConditions::default();
+        let end = conditions().start_time() + conditions().run_time();
+        let t: Vec<f64> = (0..=(end / 1e-3) as usize)
+            .map(|k| k as f64 * 1e-3)
+            .collect();
+        let references: Vec<[f64; 3]> = t
+            .iter()
+            .map(|&t| single_axis_reference(DrivenAxis::X, &stage, t))
+            .collect();
+        let run = |gain: f64, swing: f64| crate::plant::ClosedLoopRun {
+            t: t.clone(),
+            references: references.clone(),
+            sensors: t
+                .iter()
+                .zip(&references)
+                .map(|(t, r)| {
+                    let x = gain * r[0] + swing * (2.0 * std::f64::consts::PI * 600.0 * t).sin();
+                    [0.0, x, x]
+                })
+                .collect(),
+        };
+        let (rms, span) = driven_tracking(DrivenAxis::X, &run(0.99, 0.0), 76_580.0);
+        assert!((span - stage.translation_span_um).abs() < 1e-6, "{span}");
+        assert!(
+            rms < 0.01 * span && rms <= MAX_TRACKING_SHARE * span,
+            "{rms}"
+        );
+        let (rms, span) = driven_tracking(DrivenAxis::X, &run(1.0, 150.0), 76_580.0);
+        assert!(rms > MAX_TRACKING_SHARE * span, "{rms} of {span}");
+    }
 
     #[test]
     fn conditions_file_parses_into_the_printed_protocol() {
