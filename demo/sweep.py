@@ -550,6 +550,15 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                 raise _fail(spec.path, spec.text, group.pattern.pattern,
                             f"monte_carlo.vary {group.pattern.pattern!r} matches no Real "
                             f"parameter of {plant_path.name}")
+            # A parameter in two groups would take the last group's range
+            # without a word.
+            for earlier in range(g):
+                both = sorted(set(vary_names[earlier]) & set(vary_names[g]))
+                if both:
+                    raise _fail(spec.path, spec.text, group.pattern.pattern,
+                                f"monte_carlo.vary {group.pattern.pattern!r} matches "
+                                f"{', '.join(both)}, which "
+                                f"{mc.vary[earlier].pattern.pattern!r} matches too")
     samples = range(mc.samples) if mc else [None]
 
     runs = []
@@ -586,8 +595,9 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                             raise _fail(set_path, set_path.read_text(), f'"{name}"', problem)
                         raise _fail(spec.path, spec.text, name, problem)
                     parameters[name] = perturbed(nominal, factor, low, high)
-                    # The factor applied, after the range (the swept value).
-                    applied[name] = parameters[name] / nominal if nominal else factor
+                    # The factor applied, after the range (the swept value); a
+                    # nominal 0 stays 0, unperturbed.
+                    applied[name] = parameters[name] / nominal if nominal else 1.0
                 if mc.seed_parameter:
                     parameters[mc.seed_parameter] = seed
                 values["sample"] = sample

@@ -495,6 +495,17 @@ def test_a_report_the_spec_cannot_feed_is_refused(tmp_path):
             sweep.load_spec(bad)
 
 
+def test_a_parameter_in_two_monte_carlo_groups_is_refused(tmp_path):
+    """Overlapping groups gave the parameter the last group's range silently
+    (+-1 % instead of the +-50 % meant)."""
+    bad = tmp_path / "bad.toml"
+    text = SPEC.replace("match = '^amplifier\\.gain$'", "match = '^pzt\\[1\\]\\.A$'")
+    assert text != SPEC
+    bad.write_text(text)
+    with pytest.raises(sweep.SpecError, match=r"matches pzt\[1\]\.A, which .* matches too"):
+        sweep.expand(sweep.load_spec(bad))
+
+
 def test_a_range_metric_keeps_the_masters_largest_error():
     """`y_error_range` as `y_error_min`/`y_error_max` overwrote the master's
     `y_error_max` (the largest |e_y|) with the range's upper end."""
