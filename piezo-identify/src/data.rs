@@ -465,7 +465,7 @@ impl Separator {
     /// Whether a field is a value of a data row: a number, or a date and time
     /// ([`clock_time`]).
     fn value_like(self, text: &str) -> bool {
-        self.number(text).is_some() || clock_time(text).is_some()
+        self.number(text).is_some() || clock_time(text).is_some() || calendar_date(text)
     }
 
     /// The fields of a line. A field in double quotes (RFC 4180: R's
@@ -547,6 +547,14 @@ fn clock_time(text: &str) -> Option<chrono::NaiveDateTime> {
             let time = NaiveTime::parse_from_str(text, "%H:%M:%S%.f").ok()?;
             Some(NaiveDate::default().and_time(time))
         })
+}
+
+/// Whether `text` is a calendar date alone (`2026-11-25`, `2026/11/25`,
+/// `25.11.2026`): a logger's date column beside its time-of-day column.
+fn calendar_date(text: &str) -> bool {
+    ["%Y-%m-%d", "%Y/%m/%d", "%d.%m.%Y"]
+        .iter()
+        .any(|format| chrono::NaiveDate::parse_from_str(text.trim(), format).is_ok())
 }
 
 /// What the header of a LabVIEW Measurement file (`.lvm`, written by
@@ -963,6 +971,8 @@ pub fn parse_record_with_columns(
     // The first date and time of a time column that holds them: its
     // times are seconds from this one.
     let mut clock_origin: Option<chrono::NaiveDateTime> = None;
+    // A LabVIEW file's `Comment` column: text, never read.
+    let mut comment_column: Option<usize> = None;
     // Whether the time column holds dates and times, from its first row.
     let mut time_is_clock: Option<bool> = None;
     // LabVIEW's X_Value columns are times in seconds.
@@ -992,6 +1002,10 @@ pub fn parse_record_with_columns(
             let numeric = fields.iter().filter(|f| separator.value_like(f)).count();
             if numeric == 0 {
                 header = Some((line, fields.iter().map(|f| (*f).to_owned()).collect()));
+                // LabVIEW's last column holds free-text comments.
+                if labview.is_some() && fields.last() == Some(&"Comment") {
+                    comment_column = Some(fields.len() - 1);
+                }
                 continue;
             }
             // Mostly names with a number among them: a header with a typo, not
@@ -1016,15 +1030,9 @@ pub fn parse_record_with_columns(
             None => {
                 // LabVIEW names a last `Comment` column that its rows leave
                 // out when they have no comment.
-                if labview.is_some()
-                    && let Some((_, names)) = &mut header
-                    && names.len() == fields.len() + 1
-                    && names.last().is_some_and(|name| name == "Comment")
-                {
-                    names.pop();
-                }
                 if let Some((header_line, names)) = &header
                     && names.len() != fields.len()
+                    && !(comment_column.is_some() && names.len() == fields.len() + 1)
                 {
                     return Err(malformed(
                         line,
@@ -1062,6 +1070,9 @@ pub fn parse_record_with_columns(
         // This row's time, when the time column holds dates and times.
         let mut clock_seconds = None;
         for (field, text) in fields.iter().enumerate() {
+            if Some(field) == comment_column {
+                continue;
+            }
             let role = columns.role(field);
             if text.is_empty() {
                 // An empty field in a column nobody reads (an unnamed index
@@ -1101,6 +1112,11 @@ pub fn parse_record_with_columns(
                         role,
                     },
                 ));
+            }
+            // A date alone (a logger's date column beside its time of day),
+            // in a column named as a time that nothing reads.
+            if role.is_none() && columns.names_time(field) && calendar_date(text) {
+                continue;
             }
             let (value, comma) = separator.number(text).ok_or_else(|| {
                 malformed(
@@ -1409,8 +1425,12 @@ fn resolve_columns(
                 let times: Vec<usize> = (0..names.len())
                     .filter(|&i| time_named(&names[i]))
                     .collect();
+                // LabVIEW's X_Columns Multi gives every channel its own
+                // X_Value, all the same times: the first stands for them.
+                let all_x = times.iter().all(|&i| names[i] == LABVIEW_X_COLUMN);
                 match times.as_slice() {
                     [one] => Ok(*one),
+                    [first, ..] if x_is_time && all_x => Ok(*first),
                     [] => Err((
                         Some(*line),
                         Problem::NoSampling {
@@ -1433,7 +1453,8 @@ fn resolve_columns(
                 Some((line, names)) => {
                     let mut matches = names.iter().enumerate().filter(|(_, n)| *n == name);
                     let found = matches.next().map(|(i, _)| i);
-                    if matches.next().is_some() {
+                    let labview_x = x_is_time && name == LABVIEW_X_COLUMN;
+                    if matches.next().is_some() && !labview_x {
                         return Err((Some(*line), Problem::DuplicateColumn { name: name.clone() }));
                     }
                     found.ok_or_else(|| {
@@ -2534,9 +2555,11 @@ mod tests {
                 assert_eq!(used.labview_header, Some(21));
                 assert_eq!(used.header_line, Some(22));
                 assert_eq!(used.decimal_comma, decimal == ",");
-                if let Some(unit) = &used.time_unit {
-                    assert_eq!(unit.source, "LabVIEW header: X_Dimension Time");
-                }
+                let timed = matches!(options.sampling, Sampling::TimeColumn(_));
+                assert_eq!(
+                    used.time_unit.as_ref().map(|unit| unit.source.as_str()),
+                    timed.then_some("LabVIEW header: X_Dimension Time")
+                );
             }
         }
     }
@@ -2634,6 +2657,87 @@ mod tests {
         assert_eq!(
             message(&mixed, &timed_defaults()),
             "data.txt:4: field 0, the time column, is \"0.01\", but it holds dates and times from line 2: one time column is all dates and times or all numbers"
+        );
+    }
+
+    /// A `Comment` column with text in some rows, rows with and without it,
+    /// and X_Columns Multi (an X_Value before every channel): read by name
+    /// and by the named-time default alike.
+    #[test]
+    fn reads_labview_comments_and_one_x_column_per_channel() {
+        let plain = labview_file(".", 40);
+        let mut text = String::new();
+        for (n, line) in plain.lines().enumerate() {
+            let row = match n {
+                21 => "X_Value\tVoltage\tX_Value\tDisplacement\tComment".to_owned(),
+                n if n > 21 => {
+                    let f: Vec<&str> = line.split('\t').collect();
+                    let comment = if n == 30 {
+                        "\tstep here, µ"
+                    } else if n % 2 == 0 {
+                        "\t"
+                    } else {
+                        ""
+                    };
+                    format!("{}\t{}\t{}\t{}{comment}", f[0], f[1], f[0], f[2])
+                }
+                _ => line.to_owned(),
+            };
+            text.push_str(&row);
+            text.push('\n');
+        }
+        for sampling in [
+            Sampling::TimeColumn(Column::Name("X_Value".into())),
+            Sampling::TimeColumn(Column::NamedTime),
+        ] {
+            let options = ReadOptions {
+                sampling,
+                ..timed_defaults()
+            };
+            let (record, used) = parse_record_with_columns(&text, Path::new("m.lvm"), &options)
+                .unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(record.input.len(), 40);
+            assert!((record.output[39] - 11.7).abs() < 1e-12);
+            assert!((record.sample_period - 0.005).abs() < 1e-12);
+            assert_eq!(used.time.unwrap().index, 0);
+            assert_eq!(used.output.name.as_deref(), Some("Displacement"));
+            assert_eq!(
+                used.time_unit.unwrap().source,
+                "LabVIEW header: X_Dimension Time"
+            );
+        }
+    }
+
+    /// A logger's date and time of day in two columns: the time column is
+    /// the time of day, the date column is passed over.
+    #[test]
+    fn a_date_column_beside_a_time_of_day_is_passed_over() {
+        let mut text = String::from("Date\tTime\tu\ty\n");
+        for n in 0..40 {
+            text.push_str(&format!(
+                "2026-11-25\t10:00:{:06.3}\t{}\t{}\n",
+                n as f64 * 0.005,
+                0.5 * n as f64,
+                n
+            ));
+        }
+        let options = ReadOptions {
+            sampling: Sampling::TimeColumn(Column::Name("Time".into())),
+            ..timed_defaults()
+        };
+        let (record, used) =
+            parse_record_with_columns(&text, Path::new("d.txt"), &options).unwrap();
+        assert!((record.sample_period - 0.005).abs() < 1e-12);
+        assert_eq!((used.input.index, used.output.index), (2, 3));
+        assert_eq!(record.input[39], 19.5);
+        // With no sampling given, two columns named as times are a question.
+        let options = ReadOptions {
+            sampling: Sampling::TimeColumn(Column::NamedTime),
+            ..timed_defaults()
+        };
+        assert_eq!(
+            message(&text, &options),
+            "data.txt:1: give the sampling: --time COLUMN or --rate HZ (the header names \"Date\", \"Time\" as times)"
         );
     }
 }

@@ -249,6 +249,26 @@ impl ProtocolArgs {
         }
     }
 
+    /// Refuses a record whose displacement falls as the command rises, for
+    /// a model the feedforward inverts (`inverse-pi`, `bouc-wen --monotone`):
+    /// PiezoController's feedback takes a displacement that rises with its
+    /// command. A coupled displacement may fall (the stage preset's H_XY
+    /// has p < 0), and is fitted without this check.
+    pub(crate) fn refuse_falling(loaded: &Loaded) -> Result<(), String> {
+        let correlation = pearson(&loaded.record.input, &loaded.record.output);
+        if correlation < -FALLING_CORRELATION {
+            return Err(format!(
+                "{}: the displacement falls as the command rises (correlation {correlation:.3}): \
+                 the inverse model, and PiezoController's feedback, take a displacement that \
+                 rises with the command; a sensor counting the other way is read negated \
+                 (multiply the column by -1) and fitted again (a coupled displacement, which \
+                 may fall, is fitted by bouc-wen without --monotone)",
+                loaded.name
+            ));
+        }
+        Ok(())
+    }
+
     /// The first scored sample (the record's length when nothing is split).
     pub(crate) fn fit_end(&self, record: &Record) -> Result<usize, String> {
         let n = record.input.len();
@@ -277,16 +297,6 @@ impl ProtocolArgs {
         default_warm_up: Option<f64>,
     ) -> Result<Plan, String> {
         let record = &loaded.record;
-        let correlation = pearson(&record.input, &record.output);
-        if correlation < -FALLING_CORRELATION {
-            return Err(format!(
-                "{}: the displacement falls as the command rises (correlation {correlation:.3}): \
-                 the models, and PiezoController's feedback, take a displacement that rises with \
-                 the command; a sensor counting the other way is read negated (multiply the \
-                 column by -1) and fitted again",
-                loaded.name
-            ));
-        }
         Plan::new(
             &record.input,
             record.sample_period,
@@ -405,8 +415,8 @@ pub(crate) struct ValidationZero {
 
 /// A record whose displacement correlates with its command below minus this
 /// is a falling one: a piezo's displacement rises with its voltage (r near
-/// +1; hysteresis and creep take a few per cent off), so only a sensor
-/// counting the other way, or swapped columns of a coupling, fall.
+/// +1; hysteresis and creep take a few per cent off), so a driven axis that
+/// falls is a sensor counting the other way.
 const FALLING_CORRELATION: f64 = 0.5;
 
 /// Pearson's correlation of `a` and `b` (0 when either is constant).

@@ -229,6 +229,9 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
         Some(path) => Some(load_validation(path, &args.columns, &loaded)?),
         None => None,
     };
+    if args.monotone {
+        ProtocolArgs::refuse_falling(&loaded)?;
+    }
     let plan = args.protocol.plan(&loaded, default_warm_up)?;
     let validation_scored = match &validation {
         Some(v) => Some(args.protocol.validation_scored(&plan, v)?),

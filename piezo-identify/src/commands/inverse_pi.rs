@@ -68,6 +68,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
         Some(path) => Some(load_validation(path, &args.columns, &loaded)?),
         None => None,
     };
+    ProtocolArgs::refuse_falling(&loaded)?;
     let plan = args.protocol.plan(&loaded, None)?;
     let validation_scored = match &validation {
         Some(v) => Some(args.protocol.validation_scored(&plan, v)?),
