@@ -362,43 +362,55 @@ impl<M: CoSimModel> Instance<M> {
         }
     }
 
-    /// The model the getters read ([`Instance::preview`] in Initialization
-    /// Mode, built when missing; else the instance's own). Values that no
-    /// initialization would accept cannot be computed: that is the
-    /// `fmi2Error` `fmi2ExitInitializationMode` would return, with its reason.
-    pub(crate) fn readable(&self, function: FmiFunction) -> Result<Readable<'_, M>, Status> {
-        if self.state != FmiState::InitializationMode {
-            return Ok(Readable::Own(&self.model));
+    /// The model the getters read, and the status of that reading: in
+    /// Initialization Mode, when `computed` (a value the model calculates is
+    /// read), [`Instance::preview`], built when missing; else the instance's
+    /// own. Values set so far that no initialization takes (the importer may
+    /// be half way through setting them) cannot be computed: the getter
+    /// then reads the instance's own model, whose calculated values are the
+    /// start values', with `fmi2Warning` and the reason;
+    /// `fmi2ExitInitializationMode` refuses them if they stay.
+    pub(crate) fn readable(
+        &self,
+        function: FmiFunction,
+        computed: bool,
+    ) -> (Readable<'_, M>, Status) {
+        if self.state != FmiState::InitializationMode || !computed {
+            return (Readable::Own(&self.model), Status::Ok);
         }
         if self.preview.borrow().is_none() {
-            let cannot = |reason: &dyn fmt::Display| {
-                self.error(
-                    function,
-                    format_args!(
-                        "the initial values cannot be computed from the values set so far: \
-                         {reason}"
-                    ),
-                )
-            };
             let mut candidate = self.model.clone();
-            if let Some(message) = M::variables()
+            let refused = match M::variables()
                 .iter()
                 .find_map(|var| parameter_out_of_range(var, &candidate))
             {
-                return Err(cannot(&message));
-            }
-            let mut ctx = Context {
-                env: &self.env,
-                function,
+                Some(message) => Some(message),
+                None => {
+                    let mut ctx = Context {
+                        env: &self.env,
+                        function,
+                    };
+                    candidate
+                        .exit_initialization_mode(&mut ctx, self.start_time)
+                        .err()
+                        .map(|e| e.to_string())
+                }
             };
-            if let Err(e) = candidate.exit_initialization_mode(&mut ctx, self.start_time) {
-                return Err(cannot(&e));
+            if let Some(reason) = refused {
+                self.env.logger.warning(
+                    function.name(),
+                    format_args!(
+                        "the initial values cannot be computed from the values set so far \
+                         ({reason}): the calculated values read are the start values'; \
+                         fmi2ExitInitializationMode refuses these values if they stay"
+                    ),
+                );
+                return (Readable::Own(&self.model), Status::Warning);
             }
             *self.preview.borrow_mut() = Some(candidate);
         }
-        Ok(Readable::Preview(Ref::map(self.preview.borrow(), |p| {
-            p.as_ref().expect("built above")
-        })))
+        let preview = Ref::map(self.preview.borrow(), |p| p.as_ref().expect("built above"));
+        (Readable::Preview(preview), Status::Ok)
     }
 
     /// Drops the preview: a value, the time or the state changed.
@@ -633,13 +645,17 @@ impl<M: CoSimModel> Instance<M> {
         vrs: &[u32],
         mut store: impl FnMut(usize, T),
     ) -> Status {
-        if vrs.is_empty() {
-            return Status::Ok;
-        }
-        let model = match self.readable(function) {
-            Ok(model) => model,
-            Err(status) => return status,
-        };
+        // Parameters, inputs and time read as set; what the model calculates
+        // needs the model built from them.
+        let computed = vrs.iter().any(|vr| {
+            M::variables().get(*vr as usize).is_some_and(|var| {
+                !matches!(
+                    var.causality,
+                    Causality::Parameter | Causality::Input | Causality::Independent
+                ) && var.variability != Variability::Constant
+            })
+        });
+        let (model, status) = self.readable(function, computed);
         for (i, vr) in vrs.iter().enumerate() {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,
@@ -669,7 +685,7 @@ impl<M: CoSimModel> Instance<M> {
             }
             store(i, value);
         }
-        Status::Ok
+        status
     }
 
     /// Reads the String variables `vrs` into the instance's buffer of C
@@ -679,14 +695,8 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn get_strings(&mut self, function: FmiFunction, vrs: &[u32]) -> Status {
         let mut strings = std::mem::take(&mut self.strings);
         strings.clear();
-        if vrs.is_empty() {
-            self.strings = strings;
-            return Status::Ok;
-        }
-        let model = match self.readable(function) {
-            Ok(model) => model,
-            Err(status) => return status,
-        };
+        // No String is calculated: every one reads as set.
+        let (model, _) = self.readable(function, false);
         for vr in vrs {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,

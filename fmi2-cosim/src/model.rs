@@ -152,6 +152,10 @@ pub trait CoSimModel: Clone + Serialize + DeserializeOwned + 'static {
 
     /// Called by `fmi2ExitInitializationMode` after the declared ranges of all
     /// parameters were checked: validate the rest and build the initial state.
+    /// A getter in Initialization Mode that reads a calculated value calls it
+    /// too, on a copy of the model, to read the initial values the values set
+    /// so far give (FMI 2.0's InitialUnknowns); what it logs then is logged
+    /// under that getter's name.
     fn exit_initialization_mode(
         &mut self,
         ctx: &mut Context<'_>,

@@ -208,11 +208,9 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        match self.readable(function) {
-            Ok(model) => model.continuous_states(states),
-            Err(status) => return status,
-        }
-        Status::Ok
+        let (model, status) = self.readable(function, true);
+        model.continuous_states(states);
+        status
     }
 
     pub(crate) fn get_derivatives(&self, derivatives: &mut [f64]) -> Status {
@@ -222,10 +220,9 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        match self.readable(function) {
-            Ok(model) => model.derivatives(self.time, derivatives),
-            Err(status) => return status,
-        }
+        let (model, status) = self.readable(function, true);
+        model.derivatives(self.time, derivatives);
+        drop(model);
         if let Some(k) = derivatives.iter().position(|d| !d.is_finite()) {
             return self.error(
                 function,
@@ -237,7 +234,7 @@ impl<M: ModelExchange> Instance<M> {
                 ),
             );
         }
-        Status::Ok
+        status
     }
 
     pub(crate) fn get_event_indicators(&self, indicators: &mut [f64]) -> Status {
@@ -246,11 +243,9 @@ impl<M: ModelExchange> Instance<M> {
         if let Err(status) = self.check_length(function, "ni", indicators.len(), expected) {
             return status;
         }
-        match self.readable(function) {
-            Ok(model) => model.event_indicators(self.time, indicators),
-            Err(status) => return status,
-        }
-        Status::Ok
+        let (model, status) = self.readable(function, true);
+        model.event_indicators(self.time, indicators);
+        status
     }
 
     pub(crate) fn get_nominals(&self, nominals: &mut [f64]) -> Status {
@@ -260,10 +255,9 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        match self.readable(function) {
-            Ok(model) => model.nominals(nominals),
-            Err(status) => return status,
-        }
+        let (model, status) = self.readable(function, true);
+        model.nominals(nominals);
+        drop(model);
         // FMI 2.0.4 §3.2.2: nominals are positive; 1.0 is the standard's
         // default when a model cannot say.
         for nominal in nominals.iter_mut() {
@@ -271,6 +265,6 @@ impl<M: ModelExchange> Instance<M> {
                 *nominal = 1.0;
             }
         }
-        Status::Ok
+        status
     }
 }

@@ -149,6 +149,26 @@ impl Fuzzer<'_> {
         (allowed, why)
     }
 
+    /// What a getter in Initialization Mode that reads a calculated value
+    /// may return when the call is legal and valid: the values of the model
+    /// built from the values set (fmi2OK), or, when no initialization takes
+    /// them, the start values' with fmi2Warning; `may_fail` adds fmi2Error (a
+    /// derivative that overflows).
+    pub(super) fn initial_read_outcome(
+        &self,
+        slot: usize,
+        may_fail: bool,
+    ) -> &'static [sys::fmi2Status] {
+        match (self.initialization_outcome(slot).0, may_fail) {
+            ([OK], false) => &[OK],
+            ([OK], true) => &[OK, ERROR],
+            ([ERROR], false) => &[WARNING],
+            ([ERROR], true) => &[WARNING, ERROR],
+            (_, false) => &[OK, WARNING],
+            (_, true) => &[OK, WARNING, ERROR],
+        }
+    }
+
     pub(super) fn exit_initialization_mode(&mut self, slot: usize) {
         let c = self.live(slot).c;
         let is_legal = self.legal_now(slot, Function::ExitInitializationMode);
@@ -300,16 +320,26 @@ impl Fuzzer<'_> {
         let reads_derivative = resolved
             .as_ref()
             .is_ok_and(|indices| indices.iter().any(|i| self.fmu.is_derivative(*i)));
+        // What the model calculates (not a parameter, input, the time or a
+        // constant) is read, in Initialization Mode, from the model built
+        // from the values set.
+        let reads_calculated = resolved.as_ref().is_ok_and(|indices| {
+            indices.iter().any(|&i| {
+                let v = &self.fmu.variables[i];
+                !matches!(
+                    v.causality,
+                    Causality::Parameter | Causality::Input | Causality::Independent
+                ) && v.variability != Some(Variability::Constant)
+            })
+        });
         let in_initialization = self.live(slot).state == State::InitializationMode;
         let allowed: &[sys::fmi2Status] = if !is_legal || !valid {
             &[ERROR]
-        } else if in_initialization && n > 0 {
-            // The values read are those of the model built from the values
-            // set (and a derivative of it may overflow as below).
-            match self.initialization_outcome(slot).0 {
-                [OK] if reads_derivative && !self.pristine_model_exchange(slot) => &[OK, ERROR],
-                outcome => outcome,
-            }
+        } else if in_initialization && reads_calculated {
+            self.initial_read_outcome(
+                slot,
+                reads_derivative && !self.pristine_model_exchange(slot),
+            )
         } else if reads_derivative && !self.pristine_model_exchange(slot) {
             &[OK, ERROR]
         } else {

@@ -312,10 +312,7 @@ impl Fuzzer<'_> {
             &[ERROR]
         } else if in_initialization {
             // Read from the model built from the values set.
-            match self.initialization_outcome(slot).0 {
-                [OK] if may_fail => &[OK, ERROR],
-                outcome => outcome,
-            }
+            self.initial_read_outcome(slot, may_fail)
         } else if may_fail {
             &[OK, ERROR]
         } else {
