@@ -939,7 +939,11 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                 # runs stay out of the table, and the next invocation runs
                 # them again.
                 task = task_of[future.key]
-                if tries[future.key] < TASK_RETRIES:
+                # Only data lost with a worker is worth sending again; a
+                # task that fails by itself (a worker without the package, a
+                # task that kills its workers) fails again.
+                lost_data = type(e).__name__ in ("FutureCancelledError", "CancelledError")
+                if lost_data and tries[future.key] < TASK_RETRIES:
                     data = scatter()
                     again = client.submit(execute_runs, task, data, spec.timeout,
                                           key=f"{future.key}-again", pure=False)

@@ -384,9 +384,10 @@ pub fn run_with(
                 ("Boolean", ParameterValue::Boolean(v)) => Typed::Boolean(v),
                 (kind, value) => {
                     let wanted = match kind {
-                        "Integer" => "a whole number",
+                        "Real" => "a number",
+                        "Integer" | "Enumeration" => "a whole number",
                         "Boolean" => "true or false",
-                        _ => "a number",
+                        _ => "no value from a scenario",
                     };
                     return Err(RunError::Scenario(format!(
                         "{port} is {} {kind} variable, which takes {wanted}; {value} was given{}",
