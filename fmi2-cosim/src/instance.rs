@@ -645,17 +645,7 @@ impl<M: CoSimModel> Instance<M> {
         vrs: &[u32],
         mut store: impl FnMut(usize, T),
     ) -> Status {
-        // Parameters, inputs and time read as set; what the model calculates
-        // needs the model built from them.
-        let computed = vrs.iter().any(|vr| {
-            M::variables().get(*vr as usize).is_some_and(|var| {
-                !matches!(
-                    var.causality,
-                    Causality::Parameter | Causality::Input | Causality::Independent
-                ) && var.variability != Variability::Constant
-            })
-        });
-        let (model, status) = self.readable(function, computed);
+        let (model, status) = self.readable(function, reads_calculated::<M>(vrs));
         for (i, vr) in vrs.iter().enumerate() {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,
@@ -695,8 +685,7 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn get_strings(&mut self, function: FmiFunction, vrs: &[u32]) -> Status {
         let mut strings = std::mem::take(&mut self.strings);
         strings.clear();
-        // No String is calculated: every one reads as set.
-        let (model, _) = self.readable(function, false);
+        let (model, status) = self.readable(function, reads_calculated::<M>(vrs));
         for vr in vrs {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,
@@ -722,7 +711,7 @@ impl<M: CoSimModel> Instance<M> {
         }
         drop(model);
         self.strings = strings;
-        Status::Ok
+        status
     }
 
     /// Whether `var` (value reference `vr`) may receive `value` now. Errors
@@ -1281,6 +1270,19 @@ fn can_be_saved_in(interface: Interface, state: FmiState) -> bool {
         Interface::ModelExchange => Interface::CoSimulation,
     };
     state != FmiState::Fatal && !other.own_states().contains(state)
+}
+
+/// Whether `vrs` name a value the model calculates: not a parameter, an
+/// input, the time or a constant, which read as set (or declared).
+fn reads_calculated<M: CoSimModel>(vrs: &[u32]) -> bool {
+    vrs.iter().any(|vr| {
+        M::variables().get(*vr as usize).is_some_and(|var| {
+            !matches!(
+                var.causality,
+                Causality::Parameter | Causality::Input | Causality::Independent
+            ) && var.variability != Variability::Constant
+        })
+    })
 }
 
 /// A declared bound as an interval writes it, and whether that end is open:
