@@ -178,6 +178,12 @@ def _line_of(text: str, needle: str) -> int | None:
     return None
 
 
+def _quoted(text: str, name: str) -> str:
+    """The needle that finds a variable's `name = "..."` line, rather than an
+    expression or an earlier key that holds the same word."""
+    return next((q for q in (f'"{name}"', f"'{name}'") if q in text), name)
+
+
 def _fail(spec_path: Path, text: str, needle: str | None, problem: str) -> SpecError:
     line = _line_of(text, needle) if needle else None
     where = f"{spec_path}:{line}" if line else f"{spec_path}"
@@ -254,15 +260,12 @@ def load_spec(path: str | Path) -> Spec:
             for value in values:
                 if isinstance(value, bool) or not isinstance(value, (int, float, str)) or (
                         isinstance(value, float) and not math.isfinite(value)):
-                    # Its `name = "..."` line, not an expression naming it.
-                    quoted = next((q for q in (f'"{name}"', f"'{name}'") if q in text), name)
-                    raise fail(quoted, f"variable {name!r}: value {value!r} is not a finite "
+                    raise fail(_quoted(text, name), f"variable {name!r}: value {value!r} is not a finite "
                                        f"number or a name")
         variables.append(Variable(name, values))
     names = [v.name for v in variables]
     for name in names:
-        # Its `name = "..."` line, not an earlier key of that name.
-        quoted = next((q for q in (f'"{name}"', f"'{name}'") if q in text), name)
+        quoted = _quoted(text, name)
         if names.count(name) > 1:
             raise fail(quoted, f"two variables are named {name!r}")
         if name in RESERVED_COLUMNS or str(name).startswith("factor."):

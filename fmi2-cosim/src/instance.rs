@@ -363,7 +363,7 @@ impl<M: CoSimModel> Instance<M> {
     }
 
     /// The model the getters read, and the status of that reading: in
-    /// Initialization Mode, when `computed` (a value the model calculates is
+    /// Initialization Mode, when `computed()` (a value the model calculates is
     /// read), [`Instance::preview`], built when missing; else the instance's
     /// own. Values set so far that no initialization takes (the importer may
     /// be half way through setting them) cannot be computed: the getter
@@ -373,9 +373,11 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn readable(
         &self,
         function: FmiFunction,
-        computed: bool,
+        computed: impl FnOnce() -> bool,
     ) -> (Readable<'_, M>, Status) {
-        if self.state != FmiState::InitializationMode || !computed {
+        // Asked only in Initialization Mode: between steps a getter pays one
+        // compare.
+        if self.state != FmiState::InitializationMode || !computed() {
             return (Readable::Own(&self.model), Status::Ok);
         }
         if self.preview.borrow().is_none() {
@@ -645,7 +647,7 @@ impl<M: CoSimModel> Instance<M> {
         vrs: &[u32],
         mut store: impl FnMut(usize, T),
     ) -> Status {
-        let (model, status) = self.readable(function, reads_calculated::<M>(vrs));
+        let (model, status) = self.readable(function, || reads_calculated::<M>(vrs));
         for (i, vr) in vrs.iter().enumerate() {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,
@@ -685,7 +687,7 @@ impl<M: CoSimModel> Instance<M> {
     pub(crate) fn get_strings(&mut self, function: FmiFunction, vrs: &[u32]) -> Status {
         let mut strings = std::mem::take(&mut self.strings);
         strings.clear();
-        let (model, status) = self.readable(function, reads_calculated::<M>(vrs));
+        let (model, status) = self.readable(function, || reads_calculated::<M>(vrs));
         for vr in vrs {
             let var = match self.variable(function, *vr) {
                 Ok(var) => var,

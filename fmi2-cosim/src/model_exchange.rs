@@ -208,7 +208,7 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        let (model, status) = self.readable(function, true);
+        let (model, status) = self.readable(function, || true);
         model.continuous_states(states);
         status
     }
@@ -220,7 +220,7 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        let (model, status) = self.readable(function, true);
+        let (model, status) = self.readable(function, || true);
         model.derivatives(self.time, derivatives);
         drop(model);
         if let Some(k) = derivatives.iter().position(|d| !d.is_finite()) {
@@ -243,7 +243,7 @@ impl<M: ModelExchange> Instance<M> {
         if let Err(status) = self.check_length(function, "ni", indicators.len(), expected) {
             return status;
         }
-        let (model, status) = self.readable(function, true);
+        let (model, status) = self.readable(function, || true);
         model.event_indicators(self.time, indicators);
         status
     }
@@ -255,7 +255,7 @@ impl<M: ModelExchange> Instance<M> {
         {
             return status;
         }
-        let (model, status) = self.readable(function, true);
+        let (model, status) = self.readable(function, || true);
         model.nominals(nominals);
         drop(model);
         // FMI 2.0.4 §3.2.2: nominals are positive; 1.0 is the standard's
