@@ -492,6 +492,31 @@ def test_container_fmu_exposes_the_loop_and_both_parameter_sets(members):
     assert binaries == carried
 
 
+def test_container_names_form_a_tree():
+    """The container names its variables `<instance>.<name>` under the
+    structured convention, so the inner FMUs' trees become branches of one
+    tree: no variable may also be the group of another (as `decoupling`
+    was of `decoupling.dk[1]`), or importers that build the tree (Simulink's
+    parameter structs, Modelica wrappers) have no place for its value."""
+    description = fmpy.read_model_description(str(require(LOOP, "systems")))
+    assert description.variableNamingConvention == "structured"
+    names = {v.name for v in description.modelVariables}
+    clashes = []
+    for name in names:
+        # Every prefix that ends before a '.' or '[' outside an index is a group.
+        depth = 0
+        for at, character in enumerate(name):
+            if character == "[":
+                if depth == 0 and name[:at] in names:
+                    clashes.append(f"{name[:at]} / {name}")
+                depth += 1
+            elif character == "]":
+                depth -= 1
+            elif character == "." and depth == 0 and name[:at] in names:
+                clashes.append(f"{name[:at]} / {name}")
+    assert not clashes, clashes
+
+
 def test_container_default_experiment_holds_home_as_the_direct_loop(fmus, members):
     result = fmpy.simulate_fmu(str(require(LOOP, "systems")))
     experiment = fmpy.read_model_description(str(LOOP)).defaultExperiment

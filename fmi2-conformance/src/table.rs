@@ -175,6 +175,62 @@ pub fn ports_have_flat_names<M: CoSimModel>() {
     }
 }
 
+/// The groups a structured name belongs to, outermost first: `a.b[2].c`
+/// gives `a`, `a.b` (the array) and `a.b[2]`. Dots and brackets inside a
+/// quoted identifier (`'x.y'`) or an index do not split.
+fn enclosing_groups(name: &str) -> Vec<&str> {
+    let mut groups = Vec::new();
+    let (mut quoted, mut depth) = (false, 0usize);
+    for (at, character) in name.char_indices() {
+        match character {
+            '\'' => quoted = !quoted,
+            '[' if !quoted => {
+                if depth == 0 {
+                    groups.push(&name[..at]);
+                }
+                depth += 1;
+            }
+            ']' if !quoted => {
+                depth = depth.saturating_sub(1);
+                if depth == 0 && name[at + 1..].starts_with('.') {
+                    groups.push(&name[..=at]);
+                }
+            }
+            '.' if !quoted && depth == 0 && !name[..at].ends_with(']') => {
+                groups.push(&name[..at]);
+            }
+            _ => {}
+        }
+    }
+    groups
+}
+
+/// Under `variableNamingConvention="structured"` the names form a tree, and
+/// no variable is also a group of others (`d` beside `d.k[1]`, or `v`
+/// beside `v[1]`): importers that build the tree (Simulink's structured
+/// parameters, Modelica wrappers, tree views) have no place for a value on
+/// a branch. Derivatives, `der(...)`, are names of their own and skipped.
+pub fn structured_names_form_a_tree<M: CoSimModel>() {
+    let names: Vec<&str> = M::variables().iter().map(|v| v.name).collect();
+    let clashes = variables_on_branches(&names);
+    assert!(clashes.is_empty(), "{}", clashes.join("\n"));
+}
+
+/// Each name of `names` that is also a group of another, as a message.
+fn variables_on_branches(names: &[&str]) -> Vec<String> {
+    let all: std::collections::HashSet<&str> = names.iter().copied().collect();
+    names
+        .iter()
+        .filter(|name| !name.starts_with("der("))
+        .flat_map(|name| {
+            enclosing_groups(name)
+                .into_iter()
+                .filter(|group| all.contains(group))
+                .map(move |group| format!("`{group}` is a variable and the group of `{name}`"))
+        })
+        .collect()
+}
+
 /// Every parameter records where the model keeps it (a serde path, as in
 /// the JSON presets and the model's validation messages), and the path leads
 /// there: the value at that path of the serialized model equals the
@@ -276,9 +332,12 @@ pub fn ports_have_units<M: CoSimModel>(ports: &[(&str, &str)]) {
 /// (`record`, each FMU crate's `valueReferences.txt`: lines
 /// `<value reference> <name>`, `#` comments): every
 /// recorded name still has its recorded reference, and every variable of the
-/// table is recorded. Value references are append-only: a renamed, moved or
-/// removed variable fails here, and a new variable fails until its line is
-/// appended to the record (the message gives the lines).
+/// table is recorded. Value references are append-only: a moved or removed
+/// variable fails here, and a new variable fails until its line is appended
+/// to the record (the message gives the lines). A name may change only at
+/// its reference, and only when the record says so: `<value reference>
+/// <name> (was <old name>)`. Importers that key on references keep working;
+/// the note keeps the old name findable for those that key on names.
 pub fn value_references_are_append_only<M>(variables: &[Variable<M>], record: &str) {
     let mut recorded = 0;
     let mut changed = Vec::new();
@@ -289,10 +348,19 @@ pub fn value_references_are_append_only<M>(variables: &[Variable<M>], record: &s
         }
         let (vr, name) = line
             .split_once(' ')
-            .and_then(|(vr, name)| Some((vr.parse::<usize>().ok()?, name)))
+            .and_then(|(vr, rest)| {
+                let name = match rest.split_once(" (was ") {
+                    Some((name, old)) if old.ends_with(')') && !old.contains(' ') => name,
+                    Some(_) => return None,
+                    None => rest,
+                };
+                Some((vr.parse::<usize>().ok()?, name))
+            })
+            .filter(|(_, name)| !name.contains(' '))
             .unwrap_or_else(|| {
                 panic!(
-                    "record line {}: {line:?} is not `<value reference> <name>`",
+                    "record line {}: {line:?} is not `<value reference> <name>` \
+                     or `<value reference> <name> (was <old name>)`",
                     number + 1
                 )
             });
@@ -353,6 +421,10 @@ macro_rules! table_tests {
             $crate::table::ports_have_flat_names::<$model>();
         }
         #[test]
+        fn structured_names_form_a_tree() {
+            $crate::table::structured_names_form_a_tree::<$model>();
+        }
+        #[test]
         fn every_parameter_maps_to_its_preset_path() {
             $crate::table::every_parameter_has_a_model_path::<$model>();
         }
@@ -387,6 +459,46 @@ mod tests {
     #[should_panic(expected = "c (2) is no longer in the table")]
     fn a_rename_fails() {
         value_references_are_append_only(&[real("a"), real("b"), real("c2")], RECORD);
+    }
+
+    #[test]
+    fn groups_of_structured_names() {
+        assert_eq!(enclosing_groups("a"), Vec::<&str>::new());
+        assert_eq!(enclosing_groups("a.b[2].c"), ["a", "a.b", "a.b[2]"]);
+        assert_eq!(enclosing_groups("v[1,2]"), ["v"]);
+        assert_eq!(enclosing_groups("'x.y'.z"), ["'x.y'"]);
+        assert_eq!(enclosing_groups("m[i.j]"), ["m"]);
+    }
+
+    #[test]
+    fn a_variable_on_a_branch_is_found() {
+        assert!(variables_on_branches(&["d", "d_params.k[1]", "der(d)", "v[1]"]).is_empty());
+        assert_eq!(
+            variables_on_branches(&["d", "d.k[1]", "d.k[2]", "v", "v[1]"]),
+            [
+                "`d` is a variable and the group of `d.k[1]`",
+                "`d` is a variable and the group of `d.k[2]`",
+                "`v` is a variable and the group of `v[1]`",
+            ]
+        );
+    }
+
+    #[test]
+    fn a_rename_recorded_at_its_reference_passes() {
+        let record = "0 a\n1 b2 (was b)\n2 c\n";
+        value_references_are_append_only(&[real("a"), real("b2"), real("c")], record);
+    }
+
+    #[test]
+    #[should_panic(expected = "b (1) is no longer in the table")]
+    fn a_rename_without_its_note_fails() {
+        value_references_are_append_only(&[real("a"), real("b2"), real("c")], RECORD);
+    }
+
+    #[test]
+    #[should_panic(expected = "is not `<value reference> <name>`")]
+    fn a_malformed_rename_note_fails() {
+        value_references_are_append_only(&TABLE, "0 a\n1 b (was\n2 c\n");
     }
 
     #[test]
