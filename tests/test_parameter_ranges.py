@@ -200,6 +200,10 @@ PHYSICAL_RANGE_CASES = [
     ("PiezoController", {"rotation.ki": -70.0}, "rotation.ki", "-70", "[0, inf]"),
     ("FlexureStage", {"amplifier.gain": -10.0}, "amplifier.gain", "-10", "(0, inf]"),
     ("FlexureStage", {"amplifier.gain": 0.0}, "amplifier.gain", "= 0", "(0, inf]"),
+    # a subnormal value, inside (0, ...) but below the declared min (the
+    # smallest normal double): the message says why it is refused
+    ("FlexureStage", {"amplifier.gain": 1e-310}, "amplifier.gain", "= 1e-310",
+     "(0, inf] (a subnormal double: the range starts at the smallest normal double"),
     # a zero sensor spacing L (theta = (s2 - s3) / L)
     ("PiezoController", {"L": 0.0}, "L", "= 0", "(0, inf]"),
     ("FlexureStage", {"L": 0.0}, "L", "= 0", "(0, inf]"),

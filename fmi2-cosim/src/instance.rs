@@ -1335,12 +1335,31 @@ fn parameter_out_of_range<M>(var: &Variable<M>, model: &M) -> Option<String> {
             let value = (r.get)(model);
             let below = r.min.is_some_and(|min| value.is_nan() || value < min);
             let above = r.max.is_some_and(|max| value.is_nan() || value > max);
+            // An open end at 0 is declared as the smallest normal double, so
+            // a subnormal value is refused though it lies inside "(0, ...":
+            // say why, or the message contradicts itself.
+            let subnormal = value != 0.0
+                && value.abs() < f64::MIN_POSITIVE
+                && (below && r.min == Some(f64::MIN_POSITIVE)
+                    || above && r.max == Some(-f64::MIN_POSITIVE));
+            // Display writes every digit of a subnormal (300 and more).
+            let shown = if subnormal {
+                format!("{value:e}")
+            } else {
+                value.to_string()
+            };
             (below || above).then(|| {
                 format!(
-                    "parameter {} = {value} is outside its allowed range {}, {}",
+                    "parameter {} = {shown} is outside its allowed range {}, {}{}",
                     var.name,
                     r.min.map_or("[-inf".to_owned(), lower_end),
-                    r.max.map_or("inf]".to_owned(), upper_end)
+                    r.max.map_or("inf]".to_owned(), upper_end),
+                    if subnormal {
+                        " (a subnormal double: the range starts at the smallest normal \
+                         double, 2.2250738585072014e-308, as the declared min says)"
+                    } else {
+                        ""
+                    }
                 )
             })
         }
