@@ -39,6 +39,35 @@ pub fn parameter_values<M: CoSimModel>(model: &M) -> Vec<(&'static str, ScalarVa
         .collect()
 }
 
+/// Reads a model's own parameter struct from the JSON file at `path`. A
+/// malformed file is named with the line, column and key of the problem:
+/// `my.json:49:15: x_model.c: invalid type: string "oops", expected f64`.
+pub fn read_json<P: serde::de::DeserializeOwned>(path: &str) -> Result<P, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
+    let mut reader = serde_json::Deserializer::from_str(&text);
+    let params = serde_path_to_error::deserialize(&mut reader).map_err(|e| {
+        let key = e.path().to_string();
+        located(path, &key, &e.into_inner())
+    })?;
+    // Text after the object is an error too, as serde_json::from_str has it.
+    reader.end().map_err(|e| located(path, ".", &e))?;
+    Ok(params)
+}
+
+/// `path:line:column: key: problem` (no key for the document itself, ".",
+/// nor where the text ended before a key was read, "?").
+fn located(path: &str, key: &str, error: &serde_json::Error) -> String {
+    // serde_json ends its message with the place, which leads here instead.
+    let place = format!(" at line {} column {}", error.line(), error.column());
+    let message = error.to_string();
+    let message = message.strip_suffix(&place).unwrap_or(&message);
+    let key = match key {
+        "." | "?" => String::new(),
+        key => format!("{key}: "),
+    };
+    format!("{path}:{}:{}: {key}{message}", error.line(), error.column())
+}
+
 /// `main` of a model's parameter-set binary: `<binary> <preset> <out.json>`
 /// writes `{ "<FMI name>": value, ... }` for the model `build(preset)`
 /// returns (a preset name the model knows, or a path to its own JSON).
@@ -73,5 +102,73 @@ pub fn main<M: CoSimModel>(
             eprintln!("{program}: {e}");
             std::process::ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize, PartialEq)]
+    struct Params {
+        gain: f64,
+        stages: Vec<Stage>,
+    }
+
+    #[derive(Debug, serde::Deserialize, PartialEq)]
+    struct Stage {
+        on: bool,
+    }
+
+    /// Reads `text` from a file of its own (tests run in parallel).
+    fn read(text: &str) -> Result<Params, String> {
+        static FILES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let number = FILES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let file = std::env::temp_dir().join(format!(
+            "parameter-set-{}-{number}.json",
+            std::process::id()
+        ));
+        std::fs::write(&file, text).unwrap();
+        let path = file.to_str().unwrap().to_owned();
+        let read = read_json(&path).map_err(|e| e.replacen(&path, "p.json", 1));
+        std::fs::remove_file(&file).unwrap();
+        read
+    }
+
+    #[test]
+    fn a_well_formed_file_is_read() {
+        let params = read("{\"gain\": 2.5, \"stages\": [{\"on\": true}]}\n").unwrap();
+        assert_eq!(params.stages, [Stage { on: true }]);
+    }
+
+    #[test]
+    fn a_bad_value_is_named_by_its_place_and_key_once() {
+        let text = "{\n  \"gain\": 1,\n  \"stages\": [{\"on\": true}, {\"on\": \"yes\"}]\n}";
+        assert_eq!(
+            read(text).unwrap_err(),
+            "p.json:3:39: stages[1].on: invalid type: string \"yes\", expected a boolean"
+        );
+    }
+
+    #[test]
+    fn a_missing_key_text_after_the_object_and_a_cut_file_are_named() {
+        assert_eq!(
+            read("{\"stages\": []}").unwrap_err(),
+            "p.json:1:14: missing field `gain`"
+        );
+        assert_eq!(
+            read("{\"gain\": 1, \"stages\": []} x").unwrap_err(),
+            "p.json:1:27: trailing characters"
+        );
+        assert_eq!(
+            read("{\"gain\": 1,").unwrap_err(),
+            "p.json:1:11: EOF while parsing a value"
+        );
+    }
+
+    #[test]
+    fn a_missing_file_is_named() {
+        let error = read_json::<Params>("/no/such/parameters.json").unwrap_err();
+        assert!(error.starts_with("/no/such/parameters.json: "), "{error}");
     }
 }

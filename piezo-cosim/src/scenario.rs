@@ -218,8 +218,14 @@ impl Scenario {
     /// Parses scenario text; `origin` names it in errors (a file name, `-`).
     pub fn parse(text: &str, json: bool, origin: &str) -> Result<Scenario, ScenarioError> {
         let scenario: Scenario = if json {
-            serde_json::from_str(text)
-                .map_err(|e| ScenarioError(format!("{origin}:{}:{}: {e}", e.line(), e.column())))?
+            serde_json::from_str(text).map_err(|e| {
+                ScenarioError(format!(
+                    "{origin}:{}:{}: {}",
+                    e.line(),
+                    e.column(),
+                    json_problem(&e)
+                ))
+            })?
         } else {
             toml::from_str(text).map_err(|e| {
                 let (line, column) = e
@@ -251,12 +257,12 @@ impl Scenario {
         line: usize,
     ) -> Result<Scenario, ScenarioError> {
         let scenario: Scenario = serde_json::from_str(text).map_err(|e| {
-            // serde_json's message ends with the position within the text,
-            // which is always line 1 here: the file's line replaces it.
-            let message = e.to_string();
-            let position = format!(" at line {} column {}", e.line(), e.column());
-            let message = message.strip_suffix(&position).unwrap_or(&message);
-            ScenarioError(format!("{origin}:{line}:{}: {message}", e.column()))
+            // The text is one line of the file: the file's line is the place.
+            ScenarioError(format!(
+                "{origin}:{line}:{}: {}",
+                e.column(),
+                json_problem(&e)
+            ))
         })?;
         scenario
             .validate()
@@ -485,6 +491,17 @@ fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// serde_json's message without the place it ends with ("at line 3 column
+/// 7"), which the messages here lead with as `file:line:column`.
+fn json_problem(error: &serde_json::Error) -> String {
+    let message = error.to_string();
+    let place = format!(" at line {} column {}", error.line(), error.column());
+    match message.strip_suffix(&place) {
+        Some(problem) => problem.to_owned(),
+        None => message,
+    }
+}
+
 /// Reads a parameter set `{ "<FMI name>": value, ... }` (the format of
 /// dist/presets/*.json).
 pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, ScenarioError> {
@@ -493,10 +510,11 @@ pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, 
     let map: serde_json::Map<String, serde_json::Value> =
         serde_json::from_str(&text).map_err(|e| {
             ScenarioError(format!(
-                "{}:{}:{}: {e}",
+                "{}:{}:{}: {}",
                 path.display(),
                 e.line(),
-                e.column()
+                e.column(),
+                json_problem(&e)
             ))
         })?;
     map.into_iter()
@@ -596,6 +614,23 @@ path = "c.fmu"
             .unwrap_err()
             .0;
         assert_eq!(e, "runs.jsonl:8: no [fmu.<instance>] table");
+    }
+
+    #[test]
+    fn a_json_scenario_and_a_parameter_set_name_the_place_once() {
+        let e = Scenario::parse("{\n  \"duration\": \"long\"\n}", true, "run.json")
+            .unwrap_err()
+            .0;
+        assert!(
+            e.starts_with("run.json:2:20: invalid type: string \"long\""),
+            "{e}"
+        );
+        assert!(!e.contains("at line"), "{e}");
+        let file = std::env::temp_dir().join(format!("set-{}.json", std::process::id()));
+        std::fs::write(&file, "{\"x.c\": 1,\n\"L\" 2}").unwrap();
+        let e = read_parameter_set(&file).unwrap_err().0;
+        std::fs::remove_file(&file).unwrap();
+        assert_eq!(e, format!("{}:2:5: expected `:`", file.display()));
     }
 
     #[test]

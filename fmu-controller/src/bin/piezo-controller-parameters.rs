@@ -13,11 +13,7 @@ fn main() -> std::process::ExitCode {
             let params = match preset {
                 "stage" => ControllerParams::stage(),
                 "paper" => ControllerParams::paper(),
-                path => {
-                    let text = std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?;
-                    serde_json::from_str(&text)
-                        .map_err(|e| format!("{path}:{}:{}: {e}", e.line(), e.column()))?
-                }
+                path => fmi2_cosim::parameter_set::read_json(path)?,
             };
             PiezoControllerFmu::with_params(params).map_err(|e| format!("{preset}: {e}"))
         },
