@@ -161,10 +161,6 @@ pub(crate) struct SearchArgs {
     /// the rate a function of position and direction (k not identifiable).
     #[arg(long)]
     pub(crate) rate_independent: bool,
-    /// Half width [samples] of a centred moving average applied to the
-    /// displacement of every record before fitting and evaluation (0: none).
-    #[arg(long, default_value_t = 0)]
-    pub(crate) smooth: usize,
 }
 
 impl SearchArgs {

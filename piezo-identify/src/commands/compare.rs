@@ -28,6 +28,10 @@ pub(crate) struct CompareArgs {
     pub(crate) columns: ColumnArgs,
     #[command(flatten)]
     pub(crate) search: SearchArgs,
+    /// Half width [samples] of a centred moving average applied to the
+    /// displacement of the record before fitting and evaluation (0: none).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) smooth: usize,
     /// Displacement offset [µm] for a file, or "auto" (as for inverse-pi).
     /// The synthetic record starts de-energized at 0 and is not shifted.
     #[arg(long, default_value = "auto", allow_negative_numbers = true)]
@@ -58,17 +62,14 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), String> {
             .expect("clap requires a file without --synthetic");
         let record = read(path, &args.columns.read_options()?)?;
         let warm_up = (args.search.warm_up / record.sample_period).round() as usize;
-        let smoothed = centred_moving_average(&record.output, args.search.smooth);
+        let smoothed = centred_moving_average(&record.output, args.smooth);
         let offset = resolve_offset(&args.offset, &smoothed, warm_up)?;
         (record, path.display().to_string(), offset, 1)
     };
     let options = args
         .search
         .options(record.sample_period, default_decimation);
-    let y = shifted(
-        &centred_moving_average(&record.output, args.search.smooth),
-        offset,
-    );
+    let y = shifted(&centred_moving_average(&record.output, args.smooth), offset);
     let u = &record.input;
     println!("{}", describe(&record, &name));
     println!(

@@ -81,11 +81,6 @@ pub(crate) struct DecouplingArgs {
 pub(crate) const STAGE_DECIMATION: usize = 20;
 
 pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
-    if args.search.smooth != 0 {
-        return Err(
-            "--smooth: the stage's records are simulated and not smoothed; leave it out".to_owned(),
-        );
-    }
     let plant = open_plant(&args.plant, args.plant_parameters.as_deref())?;
     let options = args
         .search
