@@ -11,7 +11,9 @@ The expanded runs go to dask in tasks of up to `runs_per_task` runs (default
 10, fewer when the workers would otherwise run out of tasks), each task one
 master process (`piezo-cosim batch`) that returns one row per run; the rows
 land in DIR/<study>.parquet, one per run: every swept value, the seed, the
-metrics, the wall time.
+metrics, the wall time, each column's unit (where it has one) in its Arrow
+field's metadata (b"unit": the FMUs' units for variables, METRIC_UNITS for
+metrics).
 
 - Runs go to a LocalCluster of N worker processes (default: one per core), or
   to an existing cluster (`dask scheduler`, `dask worker`) with --scheduler.
@@ -31,7 +33,10 @@ metrics, the wall time.
   again at the next invocation (a loaded machine, not the run, may be why).
 - Rows are journalled to DIR/<study>.journal.jsonl as they arrive; an
   interrupted sweep (Ctrl-C, a lost client) is folded into the table, and the
-  same command skips every run already in it.
+  same command skips every run already in it. Ctrl-C ends the command with
+  one line, the runs kept and how to resume, and exit status 130.
+- A spec that does not fit is refused before any run, with its file, line and
+  problem (exit status 2).
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from __future__ import annotations
 import argparse
 import ast
 import atexit
+import contextlib
 import copy
 import hashlib
 import io
@@ -48,6 +54,7 @@ import math
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -101,6 +108,42 @@ REPORT_VARIABLES = {
 # names would overwrite them, and the rows would lose its values or their keys.
 RESERVED_COLUMNS = {"run", "key", "status", "error", "steps", "simulated_s", "warnings",
                     "wall_s", "task_s", "worker", "seed", "sample"}
+#: The units of the table's own columns that hold a quantity ("1": a count);
+#: the others (run, key, status, error, worker, seed, sample) name or number
+#: a run and have none.
+OWN_COLUMN_UNITS = {"steps": "1", "simulated_s": "s", "warnings": "1", "wall_s": "s",
+                    "task_s": "s"}
+#: A Monte Carlo factor (factor.<parameter>) is a ratio to the nominal value.
+FACTOR_UNIT = "1"
+#: The unit of a figure of the driven axis (tracking, the demand's span), by
+#: the scenario's metrics.driven: the FMUs' units of the references and the
+#: sensors, um for x and y, rad for theta_z.
+DRIVEN_AXIS_UNITS = {"x": "um", "y": "um", "theta": "rad"}
+#: Every metric the master writes (piezo-cosim/src/metrics.rs, whose test
+#: here keeps the two lists equal) and its unit there: errors and couplings
+#: in um, in rad for theta_z; "1" for a count or a share of the window. A
+#: metric named *_range is a [min, max] pair, two columns in the table
+#: (flatten_metrics).
+METRIC_UNITS = {
+    "samples": "1",
+    "tracking_max": DRIVEN_AXIS_UNITS, "tracking_rms": DRIVEN_AXIS_UNITS,
+    "demand_span": DRIVEN_AXIS_UNITS,
+    "coupling_x_span": "um", "coupling_x2_span": "um", "coupling_x2_range": "um",
+    "coupling_x3_span": "um", "coupling_x3_range": "um",
+    "coupling_y_span": "um", "coupling_y_range": "um",
+    "contour_2norm": "um", "contour_rms": "um", "contour_samples": "1",
+    "x_error_range": "um", "y_error_range": "um", "x_error_max": "um", "y_error_max": "um",
+    "theta_error_range": "rad", "theta_error_max": "rad",
+    "pose_coupling_x_span": "um", "pose_coupling_x2_span": "um",
+    "pose_coupling_x3_span": "um", "pose_coupling_y_span": "um",
+    "command_saturation": "1",
+}
+
+
+def metric_columns_of(metric: str) -> list[str]:
+    """The table's columns of a metric: its name, or <name>_min and
+    <name>_max for a range."""
+    return [f"{metric}_min", f"{metric}_max"] if metric.endswith("_range") else [metric]
 
 
 class SpecError(ValueError):
@@ -184,10 +227,116 @@ def _quoted(text: str, name: str) -> str:
     return next((q for q in (f'"{name}"', f"'{name}'") if q in text), name)
 
 
-def _fail(spec_path: Path, text: str, needle: str | None, problem: str) -> SpecError:
-    line = _line_of(text, needle) if needle else None
+def _fail(spec_path: Path, text: str, needle: str | int | None, problem: str) -> SpecError:
+    """The error of `problem` at the line of `needle` (a word to find, or a
+    line number already found)."""
+    if isinstance(needle, int) and not isinstance(needle, bool):
+        line = needle
+    else:
+        line = _line_of(text, needle) if needle else None
     where = f"{spec_path}:{line}" if line else f"{spec_path}"
     return SpecError(f"{where}: {problem}")
+
+
+_HEADER = re.compile(r"^\s*\[\[?([^\[\]]*)\]\]?\s*(#.*)?$")
+
+
+class _SpecLines:
+    """Where a key is written in a spec's TOML text, for messages: inside the
+    table it belongs to, so that `seed` is found at the top level and not in
+    a comment or in `"noise.seed"`, and `relative` in the Monte Carlo group
+    that gives it."""
+
+    def __init__(self, text: str):
+        self.text = text
+        self.lines = text.splitlines()
+
+    def header(self, number: int) -> str | None:
+        """The dotted name of the table a header line opens ([a.b] or
+        [[a.b]], quotes and spaces left out), None for any other line."""
+        found = _HEADER.match(self.lines[number - 1])
+        return re.sub(r"[\s\"']", "", found.group(1)) if found else None
+
+    def table(self, name: str, index: int = 0,
+              within: tuple[int, int] | None = None) -> tuple[int, int] | None:
+        """First and last line of the `index`-th table `name` (a [name] or a
+        [[name]] header, with its subtables), searched `within` a span of
+        lines; None when it is not written as a header there."""
+        first, last = within or (1, len(self.lines))
+        starts = [n for n in range(first, last + 1) if self.header(n) == name]
+        if index >= len(starts):
+            return None
+        start = starts[index]
+        for n in range(start + 1, last + 1):
+            header = self.header(n)
+            if header is not None and not header.startswith(name + "."):
+                return start, n - 1
+        return start, last
+
+    def table_or_key(self, name: str) -> tuple[int, int] | None:
+        """The lines of table `name` of the top level: its header's, or the
+        line of its key when it is written inline (`name = { ... }`)."""
+        span = self.table(name)
+        if span is not None:
+            return span
+        line = self.key(name)
+        return (line, line) if line else None
+
+    def top(self) -> tuple[int, int]:
+        """The top-level keys' lines: those before the first header."""
+        first_header = next((n for n in range(1, len(self.lines) + 1)
+                             if self.header(n) is not None), len(self.lines) + 1)
+        return 1, first_header - 1
+
+    def key(self, key: str, span: tuple[int, int] | None = None) -> int | None:
+        """The line that sets `key` in `span` (default: the top level):
+        `key = `, `"key" = ` or a dotted `key.sub = `; else the first line of
+        the span holding the key as a whole word (a dotted key, `a.b`, as
+        the end of a longer one: `patch.a.b = `), else the span's first line
+        (its header: the key is missing there); at the top level, else the
+        first line of the text holding the key."""
+        first, last = span or self.top()
+        name = re.escape(key)
+        sets = re.compile(rf"^\s*(?:{name}|\"{name}\"|'{name}')\s*[.=]")
+        whole = re.compile(rf"(?<![\w.\"']){name}(?![\w\"'])")
+        # The end of a dotted key (`patch.fmu.plant.parameters = ...`).
+        dotted = re.compile(rf"(?<![\w\"']){name}(?![\w\"'])")
+        for found in (sets.search, whole.search, dotted.search):
+            for n in range(first, last + 1):
+                if found(self.lines[n - 1]):
+                    return n
+        if span is not None:
+            return first
+        return _line_of(self.text, key)
+
+
+def _is_number(value) -> bool:
+    """A finite number; TOML's true and false are not numbers here (Python's
+    bool is an int)."""
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+def _is_whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_tables(value) -> bool:
+    """An array of tables, as [[name]] headers write it."""
+    return isinstance(value, list) and all(isinstance(item, dict) for item in value)
+
+
+def _shown(value) -> str:
+    """A value as a message names it: as TOML writes a scalar, an array or a
+    table by its kind."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, dict):
+        return "(a table)"
+    if isinstance(value, list):
+        return "(an array of tables)" if value and _is_tables(value) else "(an array)"
+    shown = repr(value)
+    return shown if len(shown) <= 60 else shown[:57] + "..."
 
 
 SPEC_KEYS = {"study", "title", "report", "seed", "timeout", "template", "variable", "exclude",
@@ -196,6 +345,32 @@ SPEC_KEYS = {"study", "title", "report", "seed", "timeout", "template", "variabl
 #: largest tracking RMS as a share of the demanded amplitude, the smallest
 #: reduction of a coupling span by decoupling for a point to hold.
 REPORT_OPTIONS = {"tracking_limit": 0.05, "reduction_limit": 2.0}
+
+
+def _check_fmu_entries(fmu, label: str, fail_at) -> None:
+    """The FMU entries of a template or a patch, in the types this module
+    reads before the master sees them (a path, parameter sets, parameter
+    values by name); `fail_at(keys, problem)` makes the error at the line
+    of the keys' path (("fmu", instance, key))."""
+    if not isinstance(fmu, dict):
+        raise fail_at(("fmu",), f"{label}fmu {_shown(fmu)}: a table of FMUs by instance name")
+    for instance, entry in fmu.items():
+        where = f"{label}fmu.{instance}"
+        if not isinstance(entry, dict):
+            raise fail_at(("fmu", instance), f"{where} {_shown(entry)}: a table with path, "
+                                             f"parameter_sets and parameters")
+        if "path" in entry and not isinstance(entry["path"], str):
+            raise fail_at(("fmu", instance, "path"),
+                          f"{where}.path {_shown(entry['path'])}: a file name in quotes")
+        sets = entry.get("parameter_sets", [])
+        if not isinstance(sets, list) or not all(isinstance(s, str) for s in sets):
+            raise fail_at(("fmu", instance, "parameter_sets"),
+                          f"{where}.parameter_sets {_shown(sets)}: an array of file names in "
+                          f"quotes")
+        if not isinstance(entry.get("parameters", {}), dict):
+            raise fail_at(("fmu", instance, "parameters"),
+                          f"{where}.parameters {_shown(entry['parameters'])}: a table of values "
+                          f"by FMI name")
 
 
 def load_spec(path: str | Path) -> Spec:
@@ -218,110 +393,236 @@ def load_spec(path: str | Path) -> Spec:
             where = str(path)
         problem = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", str(e))
         raise SpecError(f"{where}: {problem}") from None
+    lines = _SpecLines(text)
 
     def fail(needle, problem):
         return _fail(path, text, needle, problem)
 
+    def fail_at(key, problem, span=None):
+        """The error at the line that sets `key` in `span` (the top level)."""
+        return fail(lines.key(key, span), problem)
+
     unknown = set(data) - SPEC_KEYS
     if unknown:
         key = sorted(unknown)[0]
-        raise fail(key, f"unknown key {key!r} (known: {', '.join(sorted(SPEC_KEYS))})")
+        raise fail_at(key, f"unknown key {key!r} (known: {', '.join(sorted(SPEC_KEYS))})")
     for key in ("study", "template"):
         if key not in data:
             raise fail(None, f"missing {key!r}")
     study = data["study"]
-    if not re.fullmatch(r"[A-Za-z0-9_.-]+", str(study)):
-        raise fail("study", f"study {study!r}: use letters, digits, '_', '-', '.'")
+    if not isinstance(study, str):
+        raise fail_at("study", f"study {_shown(study)}: a name in quotes (letters, digits, "
+                               f"'_', '-', '.')")
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", study):
+        raise fail_at("study", f"study {study!r}: use letters, digits, '_', '-', '.'")
+    title = data.get("title", study)
+    if not isinstance(title, str):
+        raise fail_at("title", f"title {_shown(title)}: a text in quotes")
+    seed = data.get("seed", 0)
+    if not _is_whole(seed) or seed < 0:
+        # numpy seeds its generators with whole numbers from 0 up.
+        raise fail_at("seed", f"seed {_shown(seed)}: a whole number, at least 0")
+    timeout = data.get("timeout")
+    if timeout is not None and (not _is_number(timeout) or timeout <= 0):
+        raise fail_at("timeout", f"timeout {_shown(timeout)}: a positive number of seconds")
+    template = data["template"]
+    template_span = lines.table_or_key("template")
+    if not isinstance(template, dict):
+        raise fail_at("template", f"template {_shown(template)}: a table ([template]), the "
+                                  f"scenario every run starts from")
+    if "fmu" in template:
+        def fail_in_template(keys, problem):
+            # An instance's own [template.fmu.<instance>] table, where it has one.
+            instance_span = lines.table(f"template.{'.'.join(keys[:2])}") if len(keys) > 1 \
+                else None
+            return fail_at(keys[-1], problem, instance_span or template_span)
+
+        _check_fmu_entries(template["fmu"], "template.", fail_in_template)
+
+    variable_entries = data.get("variable", [])
+    if not _is_tables(variable_entries):
+        raise fail_at("variable", f"variable {_shown(variable_entries)}: an array of tables, "
+                                  f"each a [[variable]] with name and values")
     variables = []
-    for entry in data.get("variable", []):
+    for index, entry in enumerate(variable_entries):
+        span = lines.table("variable", index)
         name = entry.get("name")
         extra = set(entry) - {"name", "values"}
         if extra:
             key = sorted(extra)[0]
-            raise fail(key, f"variable {name!r}: unknown key {key!r} (a variable has name "
-                            f"and values)")
-        if not name or "values" not in entry:
-            raise fail("[[variable]]", "every [[variable]] needs a name and values")
+            raise fail_at(key, f"variable {name!r}: unknown key {key!r} (a variable has name "
+                               f"and values)", span)
+        if "name" not in entry or "values" not in entry:
+            raise fail(span[0] if span else "[[variable]]",
+                       "every [[variable]] needs a name and values")
+        if not isinstance(name, str) or not name:
+            raise fail_at("name", f"variable name {_shown(name)}: a name in quotes", span)
         values = entry["values"]
-        if isinstance(values, dict):
+        if isinstance(values, dict) and values:
             cases = []
             for case_name, case in values.items():
+                case_span = lines.table(f"variable.values.{case_name}", within=span) or span
+                if not isinstance(case, dict):
+                    raise fail_at(case_name, f"case {name}.{case_name} {_shown(case)}: a table "
+                                             f"with vars and patch (values is an array of "
+                                             f"numbers or names, or a table of cases)", span)
                 bad = set(case) - {"vars", "patch"}
                 if bad:
                     raise fail(case_name, f"case {name}.{case_name}: unknown key "
                                           f"{sorted(bad)[0]!r} (a case has vars and patch)")
-                cases.append(Case(case_name, dict(case.get("vars", {})),
-                                  dict(case.get("patch", {}))))
+                case_vars = case.get("vars", {})
+                if not isinstance(case_vars, dict):
+                    raise fail_at("vars", f"case {name}.{case_name}: vars {_shown(case_vars)}: "
+                                          f"a table of numbers by name", case_span)
+                for var, value in case_vars.items():
+                    # Case variables exist for expressions, which compute
+                    # with numbers only.
+                    if not _is_number(value):
+                        raise fail_at(var, f"case {name}.{case_name}: vars.{var} "
+                                           f"{_shown(value)}: a finite number", case_span)
+                patch = case.get("patch", {})
+                if not isinstance(patch, dict):
+                    raise fail_at("patch", f"case {name}.{case_name}: patch {_shown(patch)}: a "
+                                           f"table merged into the template", case_span)
+                if "fmu" in patch:
+                    _check_fmu_entries(patch["fmu"], f"case {name}.{case_name}: patch.",
+                                       lambda keys, problem: fail_at(".".join(keys), problem,
+                                                                     case_span))
+                cases.append(Case(case_name, dict(case_vars), dict(patch)))
             values = cases
         elif not isinstance(values, list) or not values:
-            raise fail(name, f"variable {name!r}: values must be a non-empty list, or a table "
-                             f"of cases")
+            raise fail_at("values", f"variable {name!r}: values {_shown(values)}: a non-empty "
+                                    f"array of numbers or names, or a table of cases", span)
         else:
             for value in values:
                 if isinstance(value, bool) or not isinstance(value, (int, float, str)) or (
                         isinstance(value, float) and not math.isfinite(value)):
-                    raise fail(_quoted(text, name), f"variable {name!r}: value {value!r} is not a finite "
-                                       f"number or a name")
+                    raise fail(_quoted(text, name), f"variable {name!r}: value {_shown(value)} "
+                                                    f"is not a finite number or a name")
         variables.append(Variable(name, values))
     names = [v.name for v in variables]
+    metric_columns = {}
+    for metric in METRIC_UNITS:
+        for column in metric_columns_of(metric):
+            metric_columns[column] = metric
     for name in names:
         quoted = _quoted(text, name)
         if names.count(name) > 1:
             raise fail(quoted, f"two variables are named {name!r}")
-        if name in RESERVED_COLUMNS or str(name).startswith("factor."):
+        if name in RESERVED_COLUMNS or name.startswith("factor."):
             raise fail(quoted, f"variable {name!r}: the table has a column of that name "
                              f"({', '.join(sorted(RESERVED_COLUMNS))} and factor.* are its "
                              f"own); choose another name")
+        if name in metric_columns:
+            # The run's metric would overwrite the variable's value in its
+            # row (or the value the metric), and the table would not say.
+            metric = metric_columns[name]
+            end = "lower" if name.endswith("_min") else "upper"
+            what = (f"the master's metric {metric}" if metric == name else
+                    f"the {end} end of the master's range metric {metric}")
+            raise fail(quoted, f"variable {name!r}: the table has a metric column of that name "
+                               f"({what}); choose another name")
     exclude = data.get("exclude", [])
-    for rule in exclude:
-        for key in rule:
+    if not _is_tables(exclude):
+        raise fail_at("exclude", f"exclude {_shown(exclude)}: an array of tables, each an "
+                                 f"[[exclude]] of variable = value")
+    values_of = {v.name: [getattr(value, "name", value) for value in v.values]
+                 for v in variables}
+    for index, rule in enumerate(exclude):
+        span = lines.table("exclude", index)
+        if not rule:
+            raise fail(span[0] if span else "exclude",
+                       "an [[exclude]] without variable = value pairs would exclude every point")
+        for key, value in rule.items():
             if key not in names:
-                raise fail("exclude", f"exclude names {key!r}, which is not a variable")
+                raise fail_at(key, f"exclude names {key!r}, which is not a variable", span)
+            # A value the variable does not take (a typo, or the wrong type)
+            # would exclude nothing, without a word.
+            if isinstance(value, bool) or not any(
+                    value == known and not isinstance(known, bool) for known in values_of[key]):
+                raise fail_at(key, f"exclude: {key} {_shown(value)} is not one of the "
+                                   f"variable's values "
+                                   f"({', '.join(map(_shown, values_of[key]))})", span)
     mc = None
     if "monte_carlo" in data:
         m = data["monte_carlo"]
+        mc_span = lines.table_or_key("monte_carlo")
+        if not isinstance(m, dict):
+            raise fail_at("monte_carlo", f"monte_carlo {_shown(m)}: a table ([monte_carlo]) "
+                                         f"with samples, instance, vary, seed_parameter")
         bad = set(m) - {"samples", "instance", "vary", "seed_parameter"}
         if bad:
             raise fail(sorted(bad)[0], f"monte_carlo: unknown key {sorted(bad)[0]!r}")
+        groups = m.get("vary", [])
+        if not _is_tables(groups):
+            raise fail_at("vary", f"monte_carlo.vary {_shown(groups)}: an array of tables, "
+                                  f"each a [[monte_carlo.vary]] with match and relative", mc_span)
         vary = []
-        for group in m.get("vary", []):
+        for index, group in enumerate(groups):
+            span = lines.table("monte_carlo.vary", index) or mc_span
             bad = set(group) - {"match", "relative"}
             if bad:
                 raise fail(sorted(bad)[0], f"monte_carlo.vary: unknown key {sorted(bad)[0]!r} "
                                            "(a group has match and relative)")
             if "relative" not in group:
-                raise fail(group.get("match"), "monte_carlo.vary: every group needs `relative`, "
-                                               "the half width of its factors' range")
+                raise fail(group.get("match") if isinstance(group.get("match"), str) else
+                           (span[0] if span else "vary"),
+                           "monte_carlo.vary: every group needs `relative`, the half width of "
+                           "its factors' range")
+            if not isinstance(group.get("match"), str):
+                raise fail_at("match", f"monte_carlo.vary: match {_shown(group.get('match'))}: "
+                                       f"a regular expression in quotes", span)
             try:
                 pattern = re.compile(group["match"])
-            except (KeyError, re.error) as e:
-                raise fail("match", f"monte_carlo.vary: a regular expression `match` is "
-                                    f"needed ({e})") from None
-            relative = float(group["relative"])
-            if not 0.0 <= relative < 1.0:
-                raise fail("relative", f"monte_carlo.vary: relative {relative} outside [0, 1)")
-            vary.append(Vary(pattern, relative))
-        samples = int(m.get("samples", 0))
-        if samples < 1:
-            raise fail("samples", "monte_carlo.samples must be at least 1")
-        mc = MonteCarlo(samples, m.get("instance", master.PLANT_INSTANCE), vary,
-                        m.get("seed_parameter"))
+            except re.error as e:
+                raise fail_at("match", f"monte_carlo.vary: a regular expression `match` is "
+                                       f"needed ({e})", span) from None
+            relative = group["relative"]
+            if not _is_number(relative) or not 0.0 <= relative < 1.0:
+                raise fail_at("relative", f"monte_carlo.vary: relative {_shown(relative)} "
+                                          f"outside [0, 1)", span)
+            vary.append(Vary(pattern, float(relative)))
+        if "samples" not in m:
+            raise fail_at("samples", "monte_carlo: samples, the number of plants drawn, is "
+                                     "missing", mc_span)
+        samples = m["samples"]
+        if not _is_whole(samples) or samples < 1:
+            raise fail_at("samples", f"monte_carlo.samples {_shown(samples)}: a whole number, "
+                                     f"at least 1", mc_span)
+        instance = m.get("instance", master.PLANT_INSTANCE)
+        if not isinstance(instance, str):
+            raise fail_at("instance", f"monte_carlo.instance {_shown(instance)}: an FMU "
+                                      f"instance's name in quotes", mc_span)
+        seed_parameter = m.get("seed_parameter")
+        if seed_parameter is not None and (not isinstance(seed_parameter, str)
+                                           or not seed_parameter):
+            raise fail_at("seed_parameter", f"monte_carlo.seed_parameter "
+                                            f"{_shown(seed_parameter)}: a parameter's FMI name "
+                                            f"in quotes", mc_span)
+        mc = MonteCarlo(samples, instance, vary, seed_parameter)
     report_options = data.get("report_options", {})
+    options_span = lines.table_or_key("report_options")
+    if not isinstance(report_options, dict):
+        raise fail_at("report_options", f"report_options {_shown(report_options)}: a table "
+                                        f"([report_options])")
     bad = set(report_options) - set(REPORT_OPTIONS)
     if bad:
         raise fail(sorted(bad)[0], f"report_options: unknown key {sorted(bad)[0]!r} (known: "
                                    f"{', '.join(sorted(REPORT_OPTIONS))})")
     for key, value in report_options.items():
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= 0:
-            raise fail(key, f"report_options.{key} {value!r}: a positive number")
+        if not _is_number(value) or value <= 0:
+            raise fail_at(key, f"report_options.{key} {_shown(value)}: a positive number",
+                          options_span)
     report = data.get("report", "none")
-    if report not in REPORT_VARIABLES:
-        raise fail("report", f"report {report!r}: one of {', '.join(sorted(REPORT_VARIABLES))}")
+    if not isinstance(report, str) or report not in REPORT_VARIABLES:
+        raise fail_at("report", f"report {_shown(report)}: one of "
+                                f"{', '.join(sorted(REPORT_VARIABLES))}")
     missing = REPORT_VARIABLES[report] - set(names)
     if missing:
-        raise fail("report", f"report {report!r} reads the variables "
-                             f"{', '.join(sorted(REPORT_VARIABLES[report]))}; the spec has no "
-                             f"{', '.join(sorted(missing))} (report = \"none\" for a table alone)")
+        raise fail_at("report", f"report {report!r} reads the variables "
+                                f"{', '.join(sorted(REPORT_VARIABLES[report]))}; the spec has "
+                                f"no {', '.join(sorted(missing))} (report = \"none\" for a "
+                                f"table alone)")
     if report != "none":
         decoupling = next(v for v in variables if v.name == "decoupling")
         cases = {getattr(value, "name", value) for value in decoupling.values}
@@ -330,15 +631,16 @@ def load_spec(path: str | Path) -> Spec:
                                      f"cases \"off\" and \"on\"; the spec has "
                                      f"{sorted(map(str, cases))}")
     if report == "robustness" and "monte_carlo" not in data:
-        raise fail("report", "report 'robustness' summarizes a [monte_carlo]; the spec has none")
-    timeout = data.get("timeout")
+        raise fail_at("report", "report 'robustness' summarizes a [monte_carlo]; the spec has "
+                                "none")
     runs_per_task = data.get("runs_per_task", RUNS_PER_TASK)
-    if not isinstance(runs_per_task, int) or isinstance(runs_per_task, bool) or runs_per_task < 1:
-        raise fail("runs_per_task", f"runs_per_task {runs_per_task!r}: a whole number, at least 1")
-    return Spec(path=path, text=text, study=study, title=data.get("title", study),
-                report=report, seed=int(data.get("seed", 0)),
+    if not _is_whole(runs_per_task) or runs_per_task < 1:
+        raise fail_at("runs_per_task", f"runs_per_task {_shown(runs_per_task)}: a whole "
+                                       f"number, at least 1")
+    return Spec(path=path, text=text, study=study, title=title,
+                report=report, seed=seed,
                 timeout=float(timeout) if timeout is not None else None,
-                template=data["template"], variables=variables, exclude=exclude,
+                template=template, variables=variables, exclude=exclude,
                 monte_carlo=mc, report_options=report_options,
                 runs_per_task=runs_per_task)
 
@@ -432,16 +734,24 @@ def canonical(value) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"))
 
 
+def _fmu_file(spec: Spec, instance: str, entry: dict) -> Path:
+    """The .fmu file of an instance's entry, which must exist."""
+    if "path" not in entry:
+        raise _fail(spec.path, spec.text, instance, f"fmu.{instance}: no path (its .fmu file)")
+    path = spec.file(entry["path"])
+    if not path.is_file():
+        raise _fail(spec.path, spec.text, entry["path"],
+                    f"fmu.{instance}: {path} does not exist (run `make fmus`)")
+    return path
+
+
 def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict) -> dict:
     """Replaces FMU paths by their content digests (collected in `fmus`) and
     folds parameter sets into the parameter values."""
     scenario = copy.deepcopy(scenario)
     for instance, entry in scenario.get("fmu", {}).items():
-        path = spec.file(entry["path"])
+        path = _fmu_file(spec, instance, entry)
         if path not in fmus:
-            if not path.is_file():
-                raise _fail(spec.path, spec.text, entry["path"],
-                            f"fmu.{instance}: {path} does not exist (run `make fmus`)")
             fmus[path] = _digest(path)
         entry["path"] = f"fmu:{fmus[path]}"
         values = {}
@@ -453,6 +763,9 @@ def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict) -> dict:
                 except (OSError, json.JSONDecodeError) as e:
                     raise _fail(spec.path, spec.text, name, f"parameter set {set_path}: {e}") \
                         from None
+                if not isinstance(sets[set_path], dict):
+                    raise _fail(spec.path, spec.text, name,
+                                f"parameter set {set_path}: not an object of values by FMI name")
             values.update(sets[set_path])
         values.update(entry.get("parameters", {}))
         entry["parameters"] = values
@@ -535,7 +848,9 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
         if not _excluded(point, spec.exclude):
             points.append((point, env, patch))
     if not points:
-        raise _fail(spec.path, spec.text, None, "the grid is empty (every point excluded)")
+        first_rule = _SpecLines(spec.text).table("exclude")
+        raise _fail(spec.path, spec.text, first_rule[0] if first_rule else "exclude",
+                    "the grid is empty (every point excluded)")
 
     mc = spec.monte_carlo
     vary_names: dict[int, list[str]] = {}
@@ -543,9 +858,11 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
     if mc is not None:
         plant_entry = spec.template.get("fmu", {}).get(mc.instance)
         if plant_entry is None:
-            raise _fail(spec.path, spec.text, "monte_carlo",
+            lines = _SpecLines(spec.text)
+            raise _fail(spec.path, spec.text,
+                        lines.key("instance", lines.table_or_key("monte_carlo")),
                         f"monte_carlo.instance {mc.instance!r} is not an FMU of the template")
-        plant_path = spec.file(plant_entry["path"])
+        plant_path = _fmu_file(spec, mc.instance, plant_entry)
         nominal_start = _plant_parameters(plant_path)
         for g, group in enumerate(mc.vary):
             vary_names[g] = sorted(n for n in nominal_start if group.pattern.search(n))
@@ -773,19 +1090,132 @@ def read_rows(out: Path, study: str) -> list[dict]:
     return rows
 
 
-def _rows_to_table(rows: list[dict], spec: Spec | None = None):
+def _fmu_variable_units(path: Path) -> dict[str, str | None]:
+    """The unit of every variable of an FMU, from its modelDescription
+    (None where it declares none)."""
+    from fmpy import read_model_description
+
+    description = read_model_description(str(path))
+    return {v.name: v.unit or (v.declaredType.unit if v.declaredType else None)
+            for v in description.modelVariables}
+
+
+def _unit_at(keys: tuple, fmu_units: dict[str, dict]) -> str | None:
+    """The unit of the scenario's value at `keys` (piezo-cosim's scenario
+    format): a time, a sine's frequency or phase, an FMU parameter, or a
+    signal's level in the unit of the input it drives; None where the format
+    does not fix one."""
+    match keys:
+        case ("duration",) | ("step",) | ("metrics", "from"):
+            return "s"
+        case ("metrics", "spacing") | ("metrics", "contour", *_):
+            return "um"
+        case ("fmu", instance, "parameters", name):
+            return fmu_units.get(instance, {}).get(name)
+        case ("signal", _, "start" | "approach"):
+            return "s"
+        case ("signal", _, "sines", _, "frequency"):
+            return "Hz"
+        case ("signal", _, "sines", _, "phase"):
+            return "rad"
+        case ("signal", port, "offset") | ("signal", port, "sines", _, "amplitude"):
+            instance, _, name = str(port).partition(".")
+            return fmu_units.get(instance, {}).get(name)
+    return None
+
+
+def variable_units(spec: Spec) -> dict[str, str]:
+    """The unit of each numeric variable of the grid whose value the spec
+    gives, as it is (`= name`), to quantities of one known unit: an FMU
+    parameter (its modelDescription's unit), a signal's offset or amplitude
+    (the unit of the input it drives), a sine's frequency or phase, a time.
+    A variable that only enters expressions (`= amplitude * y_stroke`, a
+    share of the stroke) or feeds quantities of different units has none."""
+    numeric = {v.name for v in spec.variables
+               if all(_is_number(value) for value in v.values)}
+    patches = [case.patch for v in spec.variables for case in v.values
+               if isinstance(case, Case)]
+    # An instance's FMUs: the template's, and any a case puts in its place.
+    files: dict[str, set[Path]] = {}
+    for tree in (spec.template, *patches):
+        for instance, entry in tree.get("fmu", {}).items():
+            if isinstance(entry.get("path"), str) and spec.file(entry["path"]).is_file():
+                files.setdefault(instance, set()).add(spec.file(entry["path"]))
+    fmu_units: dict[str, dict] = {}
+    for instance, paths in files.items():
+        tables = [_fmu_variable_units(path) for path in sorted(paths)]
+        fmu_units[instance] = {}
+        for name in set().union(*tables):
+            declared = {table.get(name) for table in tables}
+            # A unit the instance's FMUs do not agree on is not the variable's.
+            fmu_units[instance][name] = declared.pop() if len(declared) == 1 else None
+    uses: dict[str, set] = {}
+
+    def walk(value, keys: tuple) -> None:
+        if isinstance(value, dict):
+            for key, item in value.items():
+                walk(item, (*keys, key))
+        elif isinstance(value, list):
+            for index, item in enumerate(value):
+                walk(item, (*keys, index))
+        elif isinstance(value, str) and value.startswith("="):
+            name = value[1:].strip()
+            if name in numeric:
+                uses.setdefault(name, set()).add(_unit_at(keys, fmu_units))
+
+    for tree in (spec.template, *patches):
+        walk(tree, ())
+    return {name: units.pop() for name, units in uses.items()
+            if len(units) == 1 and None not in units}
+
+
+def column_units(spec: Spec, runs: list[Run]) -> dict[str, str]:
+    """The unit of every column of the study's table that holds a quantity:
+    the table's own (OWN_COLUMN_UNITS), the metrics' (METRIC_UNITS; a
+    figure of the driven axis in the unit of the runs' driven axes, each
+    named where the table mixes them), the Monte Carlo factors' and the
+    variables' (variable_units)."""
+    units = dict(OWN_COLUMN_UNITS)
+    driven = {run.scenario["metrics"].get("driven") for run in runs
+              if isinstance(run.scenario.get("metrics"), dict)}
+    for metric, unit in METRIC_UNITS.items():
+        if isinstance(unit, dict):
+            axes_of: dict[str, list] = {}
+            for axis in (a for a in unit if a in driven):
+                axes_of.setdefault(unit[axis], []).append(axis)
+            if not axes_of:
+                continue
+            unit = "; ".join(u if len(axes_of) == 1 else f"{u} (metrics.driven = {', '.join(a)})"
+                             for u, a in axes_of.items())
+        for column in metric_columns_of(metric):
+            units[column] = unit
+    for run in runs:
+        for name in run.values:
+            if name.startswith("factor."):
+                units[name] = FACTOR_UNIT
+    units.update(variable_units(spec))
+    return units
+
+
+def _rows_to_table(rows: list[dict], spec: Spec | None = None,
+                   units: dict[str, str] | None = None):
+    """The rows as an Arrow table: the spec in the schema's metadata, and
+    each column's unit, where it has one, in its field's (b"unit")."""
     import pyarrow as pa
 
     # Rows differ in their metrics (a y run has no coupling_y_span, a failed
     # run none at all): every column any row has, in order of appearance.
     names = list(dict.fromkeys(name for row in rows for name in row))
     table = pa.table({name: [row.get(name) for row in rows] for name in names})
+    units = units or {}
+    fields = [field.with_metadata({b"unit": units[field.name].encode()})
+              if field.name in units else field for field in table.schema]
+    meta = None
     if spec is not None:
         meta = {b"study": spec.study.encode(), b"spec": spec.text.encode(),
                 b"title": spec.title.encode(), b"report": spec.report.encode(),
                 b"report_options": json.dumps(spec.report_options).encode()}
-        table = table.replace_schema_metadata(meta)
-    return table
+    return pa.Table.from_arrays(table.columns, schema=pa.schema(fields, metadata=meta))
 
 
 def _write_atomically(table, path: Path) -> None:
@@ -796,9 +1226,10 @@ def _write_atomically(table, path: Path) -> None:
     os.replace(scratch, path)
 
 
-def consolidate(out: Path, spec: Spec, keys: dict[str, int]) -> int:
-    """Folds the journal into the table: each run once, in run order.
-    Returns the number of rows."""
+def consolidate(out: Path, spec: Spec, keys: dict[str, int],
+                units: dict[str, str] | None = None) -> int:
+    """Folds the journal into the table: each run once, in run order, the
+    columns' `units` in its schema. Returns the number of rows."""
     rows = read_rows(out, spec.study)
     unique = {}
     for row in rows:
@@ -808,7 +1239,7 @@ def consolidate(out: Path, spec: Spec, keys: dict[str, int]) -> int:
             unique[row["key"]] = row
     ordered = sorted(unique.values(), key=lambda r: r["run"])
     if ordered:
-        _write_atomically(_rows_to_table(ordered, spec), table_path(out, spec.study))
+        _write_atomically(_rows_to_table(ordered, spec, units), table_path(out, spec.study))
     journal_path(out, spec.study).unlink(missing_ok=True)
     return len(ordered)
 
@@ -850,7 +1281,7 @@ def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> None:
             continue
         seen.add(signature)
         scenario = copy.deepcopy(run.scenario)
-        for entry in scenario["fmu"].values():
+        for entry in scenario.get("fmu", {}).values():
             entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
         try:
             master.check(scenario)
@@ -869,16 +1300,20 @@ def _progress_lines(done: int, total: int, failed: int, started: float, study: s
 
 
 def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: str = "auto",
-              on_row=None, checked: bool = False) -> dict:
+              on_row=None, checked: bool = False, on_interrupt=None) -> dict:
     """Runs every run of `spec` not yet in DIR/<study>.parquet on `client`'s
     cluster. `on_row(row, done)` is called after each row (tests use it to
     kill a worker mid-sweep); `checked` says `check_scenarios` passed on all
-    of its runs already. Returns a summary."""
+    of its runs already; `on_interrupt()` is called on Ctrl-C before the
+    tasks still out are cancelled (main silences a LocalCluster's logs).
+    Returns a summary (`interrupted`: Ctrl-C ended it, the rows received
+    are in the table)."""
     from distributed import as_completed
 
     out.mkdir(parents=True, exist_ok=True)
     runs, fmus = expand(spec)
     keys = {run.key: run.index for run in runs}
+    units = column_units(spec, runs)
     if restart:
         # The spec is checked before anything is deleted: a typo keeps the table.
         if not checked:
@@ -898,7 +1333,7 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     summary = {"study": spec.study, "runs": len(runs), "skipped": len(runs) - len(todo),
                "executed": 0, "failed": 0, "timeouts": 0, "lost": 0, "interrupted": False}
     if not todo:
-        summary["rows"] = consolidate(out, spec, keys)
+        summary["rows"] = consolidate(out, spec, keys, units)
         return summary
     if not checked:
         check_scenarios(todo, fmus, spec)
@@ -907,30 +1342,31 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
         return {digest: client.scatter(path.read_bytes(), broadcast=True, hash=True)
                 for digest, path in fmus.items()}
 
-    data = scatter()
-    workers = len(client.scheduler_info().get("workers", {}))
-    tasks = batches(todo, workers, spec.runs_per_task)
-    futures = [client.submit(execute_runs, task, data, spec.timeout,
-                             key="runs-" + hashlib.sha256(
-                                 "".join(run.key for run in task).encode()).hexdigest()[:32],
-                             pure=True)
-               for task in tasks]
-    task_of = {future.key: task for future, task in zip(futures, tasks)}
-    tries = {future.key: 0 for future in futures}
     mode = progress
     if mode == "auto":
         mode = "bar" if sys.stdout.isatty() else "lines"
-    if mode == "bar":
-        from distributed.diagnostics.progressbar import progress as dask_progress
-
-        threading.Thread(target=dask_progress, args=(futures,), kwargs={"multi": False},
-                         daemon=True).start()
     journal = Journal(out, spec.study)
     started = last_line = time.monotonic()
     done = 0
     printed_at = None  # the `done` of the last progress line
-    pending = as_completed(futures)
+    futures = []
     try:
+        data = scatter()
+        workers = len(client.scheduler_info().get("workers", {}))
+        tasks = batches(todo, workers, spec.runs_per_task)
+        futures += [client.submit(execute_runs, task, data, spec.timeout,
+                                  key="runs-" + hashlib.sha256(
+                                      "".join(run.key for run in task).encode()).hexdigest()[:32],
+                                  pure=True)
+                    for task in tasks]
+        task_of = {future.key: task for future, task in zip(futures, tasks)}
+        tries = {future.key: 0 for future in futures}
+        if mode == "bar":
+            from distributed.diagnostics.progressbar import progress as dask_progress
+
+            threading.Thread(target=dask_progress, args=(futures,), kwargs={"multi": False},
+                             daemon=True).start()
+        pending = as_completed(futures)
         for future in pending:
             try:
                 rows = future.result()
@@ -972,30 +1408,117 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                 _progress_lines(done, len(todo), summary["failed"], started, spec.study)
                 printed_at = done
     except KeyboardInterrupt:
+        # Ctrl-C, wherever it lands once the runs are being sent: the rows
+        # received so far are in the journal and go into the table below;
+        # the tasks still out are dropped, and the next invocation runs
+        # their runs.
         summary["interrupted"] = True
+        if on_interrupt is not None:
+            on_interrupt()
         client.cancel(futures)
     finally:
         journal.close()
-        summary["rows"] = consolidate(out, spec, keys)
+        summary["rows"] = consolidate(out, spec, keys, units)
         summary["wall_s"] = time.monotonic() - started
     if mode == "lines" and not summary["interrupted"] and printed_at != done:
         _progress_lines(done, len(todo), summary["failed"], started, spec.study)
     return summary
 
 
+#: A preload (the text of a module) for a LocalCluster's workers. Ctrl-C in
+#: a terminal interrupts its whole foreground process group: the worker
+#: processes, and the masters they run, would die with tracebacks of their
+#: own, and a master killed mid-run would come back as a failed run. Each
+#: worker, a restarted one too, ignores SIGINT once it has started (its
+#: masters inherit that), so that an interrupt is this process's alone to
+#: handle: run_sweep and main end the study in order.
+WORKER_PRELOAD = """
+import signal
+
+
+def dask_setup(worker):
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+"""
+
+
+@contextlib.contextmanager
 def make_client(scheduler: str | None, workers: int | None):
     """A client of an existing scheduler, or of a LocalCluster of `workers`
-    single-threaded processes (default: one per core)."""
-    from distributed import Client, LocalCluster
-
+    single-threaded processes (default: one per core), closed on leaving."""
     if scheduler:
-        return Client(scheduler, timeout="30s")
-    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                           processes=True, dashboard_address=None)
-    return Client(cluster)
+        from distributed import Client
+
+        with Client(scheduler, timeout="30s") as client:
+            yield client
+        return
+    from multiprocessing import resource_tracker
+
+    # A worker process starts ignoring SIGINT when its preload runs, a second
+    # or so after it starts. Until the cluster is up this thread holds an
+    # interrupt back (raised once the cluster is there to close in order),
+    # and so do the threads it starts: distributed's, when this is its first
+    # import (the command line's case), whose worker processes inherit the
+    # blocked signal. multiprocessing's resource tracker, started with the
+    # first process, would unblock SIGINT in the thread that starts it: it
+    # is started first.
+    resource_tracker.ensure_running()
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        from distributed import Client, LocalCluster
+
+        with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                          processes=True, dashboard_address=None,
+                          preload=[WORKER_PRELOAD]) as cluster, Client(cluster) as client:
+            try:
+                # A held interrupt is taken here and raised as such: let
+                # through by the unblocking, it may land in a callback
+                # (distributed's garbage collection diagnostics), where
+                # Python reports an exception and drops it.
+                interrupted = signal.sigtimedwait({signal.SIGINT}, 0)
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+                if interrupted:
+                    raise KeyboardInterrupt
+                yield client
+            except KeyboardInterrupt:
+                silence_cluster_logs(client)
+                raise
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+def silence_cluster_logs(client) -> None:
+    """Silences dask's logs in this process and in `client`'s workers (a
+    LocalCluster's, whose logs are this process's output) before an
+    interrupted study drops its tasks: the scheduler and the workers would
+    report every task cancelled and every scattered FMU lost, which is what
+    an interrupt means."""
+    import logging
+
+    def silence():
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+    silence()
+    try:
+        client.run(silence)
+    except Exception:  # noqa: BLE001 - a worker already gone has nothing to say
+        pass
 
 
 def main(argv=None) -> int:
+    # The keys of each study's runs, by study, once expanded: what an
+    # interrupt says is kept is the rows of these runs in the tables.
+    run_keys: dict[str, set] = {}
+    args = None
+    try:
+        args = _arguments(argv)
+        return _run_studies(args, run_keys)
+    except KeyboardInterrupt:
+        print(interrupted_message(run_keys, args.out if args else None,
+                                  bool(args and args.restart)), file=sys.stderr)
+        return 130
+
+
+def _arguments(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("specs", nargs="+", type=Path, help="sweep spec files (TOML)")
     parser.add_argument("--out", type=Path, default=Path("out/sweep"),
@@ -1009,7 +1532,29 @@ def main(argv=None) -> int:
     parser.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto",
                         help="dask's progress bar (a terminal), periodic lines, or nothing")
     parser.add_argument("--no-report", action="store_true", help="do not write report.md")
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def interrupted_message(run_keys: dict, out: Path | None, restart: bool) -> str:
+    """The one line an interrupted command ends with: the runs of each study
+    its table keeps (the rows received before the interrupt, and those of
+    earlier invocations), and how to resume: the same command, which skips
+    them, but without --restart, which would discard them."""
+    kept = []
+    for study, keys in run_keys.items():
+        rows = {row.get("key") for row in read_rows(out, study)} & keys
+        kept.append(f"{len(rows)} of {len(keys)} runs of {study} kept in "
+                    f"{table_path(out, study)}")
+    resume = ("run the same command without --restart to resume (with it, to start over)"
+              if restart else "run the same command again to resume")
+    if not kept:
+        return f"interrupted before any run: {resume}"
+    return f"interrupted: {'; '.join(kept)}; {resume}"
+
+
+def _run_studies(args, run_keys: dict) -> int:
+    """main's work: the specs checked, their runs sent, the report written;
+    the exit status. A KeyboardInterrupt is left to main."""
     try:
         specs = [load_spec(path) for path in args.specs]
         master.binary()
@@ -1022,6 +1567,7 @@ def main(argv=None) -> int:
             # last spec fails now, not after the first ones have run.
             runs, fmus = expand(spec)
             check_scenarios(runs, fmus, spec)
+            run_keys[spec.study] = {run.key for run in runs}
     except (SpecError, FileNotFoundError) as e:
         print(e, file=sys.stderr)
         return 2
@@ -1032,18 +1578,19 @@ def main(argv=None) -> int:
         for spec in specs:
             try:
                 summary = run_sweep(spec, args.out, client, args.restart, args.progress,
-                                    checked=True)
+                                    checked=True, on_interrupt=None if args.scheduler else
+                                    lambda: silence_cluster_logs(client))
             except SpecError as e:
                 print(e, file=sys.stderr)
                 return 2
+            if summary["interrupted"]:
+                # The rows received are in the table; main says how many.
+                raise KeyboardInterrupt
             print(f"{spec.study}: {summary['executed']} runs executed "
                   f"({summary['failed']} failed, {summary['timeouts']} timed out), "
                   f"{summary['skipped']} already in the table; "
                   f"{summary['rows']} rows in {table_path(args.out, spec.study)}"
                   + (f"; {summary['wall_s']:.1f} s" if "wall_s" in summary else ""), flush=True)
-            if summary["interrupted"]:
-                print("interrupted: run the same command again to continue", file=sys.stderr)
-                return 130
             failed += summary["failed"]
             if summary["timeouts"]:
                 timed_out += summary["timeouts"]

@@ -109,12 +109,18 @@ def local_sweep(spec_path, out, workers, **kwargs):
 
 
 @pytest.fixture(scope="module")
-def reference_table(spec_path, tmp_path_factory):
-    """The spec's table from a LocalCluster of one worker."""
+def reference_out(spec_path, tmp_path_factory):
+    """The folder of the spec's table from a LocalCluster of one worker."""
     out = tmp_path_factory.mktemp("one-worker")
     summary = local_sweep(spec_path, out, workers=1)
     assert summary["executed"] == RUNS and summary["failed"] == 0, summary
-    return rows_of(out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def reference_table(reference_out):
+    """The spec's table from a LocalCluster of one worker."""
+    return rows_of(reference_out)
 
 
 def test_a_local_cluster_sweep_makes_one_row_per_run(spec_path, reference_table):
@@ -144,6 +150,47 @@ def test_a_local_cluster_sweep_makes_one_row_per_run(spec_path, reference_table)
     assert rows[5]["coupling_x2_range_min"] == direct["coupling_x2_range"][0]
 
 
+def test_the_table_carries_each_columns_unit(reference_out):
+    """Each column that holds a quantity has its unit in its Arrow field's
+    metadata (b"unit"): a variable the unit of what it sets in the FMUs (the
+    amplitude of controller.y_ref, by the FMU's modelDescription), a metric
+    its definition's, a Monte Carlo factor a ratio; the columns that name or
+    number a run have none."""
+    import pyarrow.parquet as pq
+    from fmpy import read_model_description
+
+    schema = pq.read_schema(sweep.table_path(reference_out, "small"))
+    units = {field.name: field.metadata[b"unit"].decode() for field in schema
+             if field.metadata and b"unit" in field.metadata}
+    controller = {v.name: v.unit for v in read_model_description(str(CONTROLLER)).modelVariables}
+    expected = {"frequency": "Hz", "amplitude": controller["y_ref"], "tracking_rms": "um",
+                "tracking_max": "um", "demand_span": "um", "coupling_x2_span": "um",
+                "coupling_x2_range_min": "um", "coupling_x2_range_max": "um",
+                "command_saturation": "1", "samples": "1", "factor.pzt[1].A": "1",
+                "factor.amplifier.gain": "1", "steps": "1", "warnings": "1",
+                "simulated_s": "s", "wall_s": "s", "task_s": "s"}
+    assert controller["y_ref"] == "um"
+    assert {name: units.get(name) for name in expected} == expected
+    metric_columns = {column for metric in sweep.METRIC_UNITS
+                      for column in sweep.metric_columns_of(metric)}
+    assert {name for name in schema.names if name in metric_columns} <= set(units)
+    for name in ("run", "key", "status", "error", "worker", "seed", "sample", "decoupling"):
+        assert name in schema.names and name not in units, name
+    assert schema.metadata[b"study"] == b"small", "the spec stays in the schema's metadata"
+
+
+def test_a_figure_of_the_driven_axis_has_the_unit_of_each_axis():
+    """A table of runs driven on x, y and theta_z holds tracking figures in
+    um and in rad: the unit says which is which. The envelope's amplitude and
+    held demand are shares of a stroke, used in expressions only: the FMUs
+    give them no unit, and the table claims none."""
+    spec = sweep.load_spec(REPO_ROOT / "demo" / "sweeps" / "envelope.toml")
+    units = sweep.column_units(spec, sweep.expand(spec)[0])
+    assert units["tracking_rms"] == "um (metrics.driven = x, y); rad (metrics.driven = theta)"
+    assert (units["coupling_y_span"], units["frequency"]) == ("um", "Hz")
+    assert "amplitude" not in units and "held" not in units
+
+
 def test_the_same_spec_gives_the_same_table_on_two_workers(spec_path, reference_table,
                                                           tmp_path):
     summary = local_sweep(spec_path, tmp_path, workers=2)
@@ -154,8 +201,12 @@ def test_the_same_spec_gives_the_same_table_on_two_workers(spec_path, reference_
 
 
 def test_an_interrupted_sweep_continues_where_it_stopped(tmp_path):
-    """Ctrl-C (SIGINT) to `python -m demo.sweep` once the first rows are in;
-    the same command again runs only what is missing."""
+    """Ctrl-C once the first rows are in, as a terminal sends it: SIGINT to
+    the whole process group of `python -m demo.sweep`, its dask workers and
+    their masters too. The command ends with one line, the runs kept and how
+    to resume, and status 130; the workers' tracebacks and dask's logs of
+    the cancelled tasks were printed before. The same command again runs
+    only what is missing."""
     spec_path = tmp_path / "longer.toml"
     # Long enough (a few seconds at about 50 ms a run) that the interrupt
     # lands while runs are still going on a fast machine too.
@@ -169,9 +220,10 @@ def test_an_interrupted_sweep_continues_where_it_stopped(tmp_path):
     # runner's shell without job control) hands its commands an ignored
     # SIGINT, which Python then keeps ignoring, and the sweep ran to its end;
     # the child gets the default disposition back, so Python raises
-    # KeyboardInterrupt as a user's terminal would have it.
+    # KeyboardInterrupt as a user's terminal would have it. In a process
+    # group of its own, the interrupt reaches it and its descendants only.
     child = subprocess.Popen(command, cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True,
+                             stderr=subprocess.PIPE, text=True, process_group=0,
                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     journal = sweep.journal_path(out, "small")
     deadline = time.monotonic() + 120
@@ -180,17 +232,27 @@ def test_an_interrupted_sweep_continues_where_it_stopped(tmp_path):
             if child.poll() is not None or time.monotonic() > deadline:
                 pytest.fail("no rows journalled: " + child.communicate()[1])
             time.sleep(0.01)
-        child.send_signal(signal.SIGINT)
+        os.killpg(child.pid, signal.SIGINT)
         stdout, stderr = child.communicate(timeout=120)
     finally:
         if child.poll() is None:
-            child.kill()
+            os.killpg(child.pid, signal.SIGKILL)
             child.wait()
     assert child.returncode == 130, (stdout, stderr)
-    assert "interrupted" in stderr
     assert not journal.exists(), "the journal is folded into the table"
     first = rows_of(out)
     assert 2 <= len(first) < runs, len(first)
+    assert stderr == (f"interrupted: {len(first)} of {runs} runs of small kept in "
+                      f"{sweep.table_path(out, 'small')}; run the same command again to "
+                      f"resume\n"), stderr
+    # Nothing of the study is left running: the cluster's processes and
+    # their masters have ended with it.
+    deadline = time.monotonic() + 30
+    with contextlib.suppress(ProcessLookupError):
+        while time.monotonic() < deadline:
+            os.killpg(child.pid, 0)
+            time.sleep(0.1)
+        pytest.fail("processes of the interrupted study are still running")
     done = subprocess.run(command, cwd=REPO_ROOT, env=env, capture_output=True, text=True,
                           timeout=300)
     assert done.returncode == 0, done.stderr
@@ -446,6 +508,186 @@ def test_a_variable_named_as_a_table_column_is_refused(tmp_path):
                            match=rf"^{bad}:{line}: variable '{re.escape(name)}': the table "
                                  rf"has a column of that name"):
             sweep.load_spec(bad)
+
+
+def test_a_variable_named_as_a_metric_column_is_refused(tmp_path):
+    """A variable `tracking_rms` was overwritten in every row by the run's
+    metric of that name (and `coupling_x2_range_min` by one end of a range
+    metric), and the table kept one of the two values without a word."""
+    bad = tmp_path / "bad.toml"
+    for name, clash in (
+            ("tracking_rms", "the master's metric tracking_rms"),
+            ("samples", "the master's metric samples"),
+            ("y_error_max", "the master's metric y_error_max"),
+            ("coupling_x2_range_min", "the lower end of the master's range metric "
+                                      "coupling_x2_range"),
+            ("theta_error_range_max", "the upper end of the master's range metric "
+                                      "theta_error_range")):
+        text = SPEC.replace('name = "amplitude"', f'name = "{name}"').replace(
+            '"= amplitude"', f'"= {name}"')
+        bad.write_text(text)
+        line = text.splitlines().index(f'name = "{name}"') + 1
+        with pytest.raises(sweep.SpecError) as e:
+            sweep.load_spec(bad)
+        assert str(e.value) == (f"{bad}:{line}: variable '{name}': the table has a metric "
+                                f"column of that name ({clash}); choose another name")
+
+
+def test_the_metric_definitions_are_the_masters_metrics():
+    """The names a variable may not take and the units the table carries come
+    from sweep.METRIC_UNITS: it names every metric the master computes
+    (piezo-cosim/src/metrics.rs), no more."""
+    source = (REPO_ROOT / "piezo-cosim" / "src" / "metrics.rs").read_text()
+    computed = set(re.findall(r'm\.insert\(\s*"(\w+)"', source))
+    assert len(computed) > 20, computed
+    assert set(sweep.METRIC_UNITS) == computed
+    # A range is written with range_value; a name that says "range" is one.
+    ranges = set(re.findall(r'm\.insert\(\s*"(\w+)"\.into\(\),\s*range_value', source))
+    assert ranges == {m for m in computed if m.endswith("_range")}
+
+
+#: A spec with every key of the format written, one to a line.
+FULL_SPEC = SPEC.replace('seed = 7\n', 'title = "A small study"\nreport = "none"\nseed = 7\n'
+                                       'timeout = 60\nruns_per_task = 5\n').replace(
+    "[monte_carlo]\n", '[monte_carlo]\ninstance = "plant"\n').replace(
+    "[variable.values.off]\n", "[variable.values.off]\nvars = { k = 1.0 }\n") + """
+[[exclude]]
+frequency = 10.0
+decoupling = "on"
+
+[report_options]
+tracking_limit = 0.05
+reduction_limit = 2.0
+"""
+
+#: Values of the wrong type for a key, as TOML writes them.
+WRONG_VALUES = ('"text"', "-1", "2.5", "true", "[]", "[1.0, 2.0]", '["a"]', "{ a = 1.0 }",
+                "nan")
+
+
+def test_every_key_of_the_spec_format_refuses_a_wrong_type_at_its_line(tmp_path):
+    """Each `key = value` line of a spec with every key of the format, its
+    value replaced by each of WRONG_VALUES: the spec is read and expanded
+    as before, or refused as a SpecError that names the file and a line;
+    a value of another type than the line's own, at that line (a variable's
+    value: at its name's line). A string where numbers were expected, a
+    negative or fractional count or seed, a boolean where a number was
+    expected, a table where an array was, ended in Python tracebacks, or
+    were taken (`seed = true`, `samples = 2.5`)."""
+    import tomllib
+
+    def toml_type(value: str) -> type:
+        return type(tomllib.loads(f"x = {value}")["x"])
+
+    bad = tmp_path / "bad.toml"
+    lines = FULL_SPEC.splitlines()
+    sweep.expand(sweep.load_spec(_written(bad, FULL_SPEC)))
+    refused = 0
+    for number, line in enumerate(lines, 1):
+        setting = re.match(r"^([\w.\"\[\]]+) = (.*)$", line)
+        if not setting:
+            continue
+        key, own = setting.groups()
+        for value in WRONG_VALUES:
+            text = "\n".join(lines[:number - 1] + [f"{key} = {value}"] + lines[number:])
+            try:
+                sweep.expand(sweep.load_spec(_written(bad, text)))
+            except sweep.SpecError as e:
+                refused += 1
+                where = re.match(rf"{re.escape(str(bad))}:(\d+): ", str(e))
+                assert where, (line, value, str(e))
+                if toml_type(value) is toml_type(own):
+                    # A value of the right type may fail where it is used
+                    # (a variable renamed: the rule that excludes by it).
+                    continue
+                named = int(where.group(1))
+                if key == "values":
+                    name_line = max(n for n, row in enumerate(lines[:number], 1)
+                                    if row.startswith("name = "))
+                    assert named in (number, name_line), (line, value, str(e))
+                else:
+                    assert named == number, (line, value, str(e))
+    assert refused > 100, refused
+
+
+def _written(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def test_wrong_types_in_a_spec_are_named_with_file_line_and_problem(tmp_path):
+    """The cases of the issue, and the tables given where arrays are
+    expected (and back): each message names the file, the line and what the
+    key takes."""
+    bad = tmp_path / "bad.toml"
+    mc_group = "[[monte_carlo.vary]]\nmatch = '^amplifier\\.gain$'\nrelative = 0.03\n"
+    assert mc_group in SPEC
+    for text, at, problem in (
+            (SPEC.replace("values = [5.0, 10.0]", 'values = "5.0, 10.0"'),
+             'values = "5.0, 10.0"',
+             "variable 'frequency': values '5.0, 10.0': a non-empty array of numbers or "
+             "names, or a table of cases"),
+            (SPEC.replace("samples = 2", "samples = -1"), "samples = -1",
+             "monte_carlo.samples -1: a whole number, at least 1"),
+            (SPEC.replace("samples = 2", "samples = 2.5"), "samples = 2.5",
+             "monte_carlo.samples 2.5: a whole number, at least 1"),
+            (SPEC.replace("seed = 7", "seed = -7"), "seed = -7",
+             "seed -7: a whole number, at least 0"),
+            (SPEC.replace("seed = 7", "seed = 7.5"), "seed = 7.5",
+             "seed 7.5: a whole number, at least 0"),
+            (SPEC.replace("seed = 7", "seed = 7\nruns_per_task = 2.5"), "runs_per_task = 2.5",
+             "runs_per_task 2.5: a whole number, at least 1"),
+            (SPEC.replace("relative = 0.03", "relative = true"), "relative = true",
+             "monte_carlo.vary: relative true outside [0, 1)"),
+            (SPEC.replace("seed = 7", "seed = 7\ntimeout = true"), "timeout = true",
+             "timeout true: a positive number of seconds"),
+            (SPEC + "[report_options]\ntracking_limit = true\n", "tracking_limit = true",
+             "report_options.tracking_limit true: a positive number"),
+            (SPEC + '[exclude]\nfrequency = 5.0\n', "[exclude]",
+             "exclude (a table): an array of tables, each an [[exclude]] of variable = value"),
+            (SPEC + '[[exclude]]\nfrequency = 7.0\n', "frequency = 7.0",
+             "exclude: frequency 7.0 is not one of the variable's values (5.0, 10.0)"),
+            (SPEC.replace(mc_group, "").replace("[[monte_carlo.vary]]", "[monte_carlo.vary]"),
+             "[monte_carlo.vary]",
+             "monte_carlo.vary (a table): an array of tables, each a [[monte_carlo.vary]] "
+             "with match and relative"),
+            (SPEC.replace("[monte_carlo]", "[[monte_carlo]]"), "[[monte_carlo]]",
+             "monte_carlo (an array of tables): a table ([monte_carlo]) with samples, "
+             "instance, vary, seed_parameter"),
+            (SPEC.replace("[variable.values.off]\n", "[variable.values.off]\nvars = [1.0]\n"),
+             "vars = [1.0]", "case decoupling.off: vars (an array): a table of numbers by name"),
+            (SPEC.replace("[variable.values.off]\n",
+                          "[variable.values.off]\nvars = { k = 'a' }\n"),
+             "vars = { k = 'a' }", "case decoupling.off: vars.k 'a': a finite number"),
+            (SPEC.replace("{ decoupling = true }", "[true]"),
+             "patch.fmu.controller.parameters = [true]",
+             "case decoupling.on: patch.fmu.controller.parameters (an array): a table of "
+             "values by FMI name"),
+            (SPEC.replace(f'path = "{CONTROLLER}"', "path = 3"), "path = 3",
+             "template.fmu.controller.path 3: a file name in quotes"),
+            (SPEC.replace('seed_parameter = "noise.seed"', "seed_parameter = 1"),
+             "seed_parameter = 1",
+             "monte_carlo.seed_parameter 1: a parameter's FMI name in quotes"),
+            (SPEC.replace('study = "small"', "study = 3"), "study = 3",
+             "study 3: a name in quotes (letters, digits, '_', '-', '.')")):
+        bad.write_text(text)
+        line = text.splitlines().index(at) + 1
+        with pytest.raises(sweep.SpecError) as e:
+            sweep.expand(sweep.load_spec(bad))
+        assert str(e.value) == f"{bad}:{line}: {problem}"
+
+
+def test_a_spec_error_ends_the_command_with_status_2_and_no_traceback(tmp_path):
+    bad = tmp_path / "bad.toml"
+    text = SPEC.replace("samples = 2", "samples = 2.5")
+    bad.write_text(text)
+    done = subprocess.run([sys.executable, "-m", "demo.sweep", str(bad), "--out",
+                           str(tmp_path / "out"), "--no-report"], cwd=REPO_ROOT,
+                          capture_output=True, text=True, timeout=120)
+    line = text.splitlines().index("samples = 2.5") + 1
+    assert (done.returncode, done.stdout) == (2, ""), done
+    assert done.stderr == f"{bad}:{line}: monte_carlo.samples 2.5: a whole number, at least 1\n"
+    assert not (tmp_path / "out").exists()
 
 
 def test_restart_keeps_the_table_when_the_spec_does_not_run(spec_path, reference_table,
