@@ -67,6 +67,18 @@ def binary() -> Path:
     return path
 
 
+def metrics() -> dict:
+    """Every metric a run can report: {name: {"unit", "range",
+    "description"}}, as `piezo-cosim metrics` prints it (a driven-axis
+    figure's unit by axis: {"x": "um", "y": "um", "theta": "rad"})."""
+    done = subprocess.run([str(binary()), "metrics"], capture_output=True, text=True,
+                          timeout=60)
+    if done.returncode != 0:
+        raise MasterError(done.stderr.strip() or f"piezo-cosim exited with {done.returncode}",
+                          done.returncode)
+    return json.loads(done.stdout)
+
+
 def connections() -> list[dict]:
     """The stage's closed loop as the master's connection table, from
     demo.cosim's wiring (the same table the master uses by default)."""

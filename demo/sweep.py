@@ -12,8 +12,8 @@ The expanded runs go to dask in tasks of up to `runs_per_task` runs (default
 master process (`piezo-cosim batch`) that returns one row per run; the rows
 land in DIR/<study>.parquet, one per run: every swept value, the seed, the
 metrics, the wall time, each column's unit (where it has one) in its Arrow
-field's metadata (b"unit": the FMUs' units for variables, METRIC_UNITS for
-metrics).
+field's metadata (b"unit": the FMUs' units for variables, the master's for
+metrics, `piezo-cosim metrics`).
 
 - Runs go to a LocalCluster of N worker processes (default: one per core), or
   to an existing cluster (`dask scheduler`, `dask worker`) with --scheduler.
@@ -115,35 +115,27 @@ OWN_COLUMN_UNITS = {"steps": "1", "simulated_s": "s", "warnings": "1", "wall_s":
                     "task_s": "s"}
 #: A Monte Carlo factor (factor.<parameter>) is a ratio to the nominal value.
 FACTOR_UNIT = "1"
-#: The unit of a figure of the driven axis (tracking, the demand's span), by
-#: the scenario's metrics.driven: the FMUs' units of the references and the
-#: sensors, um for x and y, rad for theta_z.
-DRIVEN_AXIS_UNITS = {"x": "um", "y": "um", "theta": "rad"}
-#: Every metric the master writes (piezo-cosim/src/metrics.rs, whose test
-#: here keeps the two lists equal) and its unit there: errors and couplings
-#: in um, in rad for theta_z; "1" for a count or a share of the window. A
-#: metric named *_range is a [min, max] pair, two columns in the table
-#: (flatten_metrics).
-METRIC_UNITS = {
-    "samples": "1",
-    "tracking_max": DRIVEN_AXIS_UNITS, "tracking_rms": DRIVEN_AXIS_UNITS,
-    "demand_span": DRIVEN_AXIS_UNITS,
-    "coupling_x_span": "um", "coupling_x2_span": "um", "coupling_x2_range": "um",
-    "coupling_x3_span": "um", "coupling_x3_range": "um",
-    "coupling_y_span": "um", "coupling_y_range": "um",
-    "contour_2norm": "um", "contour_rms": "um", "contour_samples": "1",
-    "x_error_range": "um", "y_error_range": "um", "x_error_max": "um", "y_error_max": "um",
-    "theta_error_range": "rad", "theta_error_max": "rad",
-    "pose_coupling_x_span": "um", "pose_coupling_x2_span": "um",
-    "pose_coupling_x3_span": "um", "pose_coupling_y_span": "um",
-    "command_saturation": "1",
-}
+_METRIC_DEFINITIONS: dict | None = None
+
+
+def metric_definitions() -> dict:
+    """Every metric the master writes: {name: {"unit", "range",
+    "description"}} (`piezo-cosim metrics`; names and units are written in
+    its metrics.rs only). A figure of the driven axis has its unit by axis,
+    {"x": "um", "y": "um", "theta": "rad"}; a range is a [min, max] pair,
+    two columns in the table (flatten_metrics)."""
+    global _METRIC_DEFINITIONS
+    if _METRIC_DEFINITIONS is None:
+        _METRIC_DEFINITIONS = master.metrics()
+    return _METRIC_DEFINITIONS
 
 
 def metric_columns_of(metric: str) -> list[str]:
     """The table's columns of a metric: its name, or <name>_min and
     <name>_max for a range."""
-    return [f"{metric}_min", f"{metric}_max"] if metric.endswith("_range") else [metric]
+    if metric_definitions()[metric]["range"]:
+        return [f"{metric}_min", f"{metric}_max"]
+    return [metric]
 
 
 class SpecError(ValueError):
@@ -502,7 +494,7 @@ def load_spec(path: str | Path) -> Spec:
         variables.append(Variable(name, values))
     names = [v.name for v in variables]
     metric_columns = {}
-    for metric in METRIC_UNITS:
+    for metric in metric_definitions():
         for column in metric_columns_of(metric):
             metric_columns[column] = metric
     for name in names:
@@ -1171,17 +1163,21 @@ def variable_units(spec: Spec) -> dict[str, str]:
 
 def column_units(spec: Spec, runs: list[Run]) -> dict[str, str]:
     """The unit of every column of the study's table that holds a quantity:
-    the table's own (OWN_COLUMN_UNITS), the metrics' (METRIC_UNITS; a
+    the table's own (OWN_COLUMN_UNITS), the metrics' (metric_definitions; a
     figure of the driven axis in the unit of the runs' driven axes, each
     named where the table mixes them), the Monte Carlo factors' and the
     variables' (variable_units)."""
     units = dict(OWN_COLUMN_UNITS)
     driven = {run.scenario["metrics"].get("driven") for run in runs
               if isinstance(run.scenario.get("metrics"), dict)}
-    for metric, unit in METRIC_UNITS.items():
+    for metric, definition in metric_definitions().items():
+        unit = definition["unit"]
         if isinstance(unit, dict):
             axes_of: dict[str, list] = {}
-            for axis in (a for a in unit if a in driven):
+            # JSON sorts the axes by name; the table names them x, y, theta.
+            order = ("x", "y", "theta")
+            axes = sorted(unit, key=lambda a: (order.index(a) if a in order else len(order), a))
+            for axis in (a for a in axes if a in driven):
                 axes_of.setdefault(unit[axis], []).append(axis)
             if not axes_of:
                 continue

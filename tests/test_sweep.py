@@ -146,6 +146,7 @@ def test_a_local_cluster_sweep_makes_one_row_per_run(spec_path, reference_table)
     for entry in scenario["fmu"].values():
         entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
     direct = master.run(scenario)["metrics"]
+    assert set(direct) <= set(sweep.metric_definitions()), "the master's own list names them"
     assert rows[5]["tracking_rms"] == direct["tracking_rms"]
     assert rows[5]["coupling_x2_range_min"] == direct["coupling_x2_range"][0]
 
@@ -171,7 +172,7 @@ def test_the_table_carries_each_columns_unit(reference_out):
                 "simulated_s": "s", "wall_s": "s", "task_s": "s"}
     assert controller["y_ref"] == "um"
     assert {name: units.get(name) for name in expected} == expected
-    metric_columns = {column for metric in sweep.METRIC_UNITS
+    metric_columns = {column for metric in sweep.metric_definitions()
                       for column in sweep.metric_columns_of(metric)}
     assert {name for name in schema.names if name in metric_columns} <= set(units)
     for name in ("run", "key", "status", "error", "worker", "seed", "sample", "decoupling"):
@@ -535,15 +536,16 @@ def test_a_variable_named_as_a_metric_column_is_refused(tmp_path):
 
 def test_the_metric_definitions_are_the_masters_metrics():
     """The names a variable may not take and the units the table carries come
-    from sweep.METRIC_UNITS: it names every metric the master computes
-    (piezo-cosim/src/metrics.rs), no more."""
-    source = (REPO_ROOT / "piezo-cosim" / "src" / "metrics.rs").read_text()
-    computed = set(re.findall(r'm\.insert\(\s*"(\w+)"', source))
-    assert len(computed) > 20, computed
-    assert set(sweep.METRIC_UNITS) == computed
-    # A range is written with range_value; a name that says "range" is one.
-    ranges = set(re.findall(r'm\.insert\(\s*"(\w+)"\.into\(\),\s*range_value', source))
-    assert ranges == {m for m in computed if m.endswith("_range")}
+    from the master (`piezo-cosim metrics`, whose own test ties the list to
+    what it computes): every metric a run writes is there, with its unit."""
+    definitions = sweep.metric_definitions()
+    assert definitions == master.metrics()
+    assert definitions["coupling_x2_range"] == {
+        "unit": "um", "range": True, "description": "[min, max] of e_x2 in a y run"}
+    assert definitions["tracking_rms"]["unit"] == {"x": "um", "y": "um", "theta": "rad"}
+    assert sweep.metric_columns_of("coupling_x2_range") == ["coupling_x2_range_min",
+                                                           "coupling_x2_range_max"]
+    assert sweep.metric_columns_of("coupling_x2_span") == ["coupling_x2_span"]
 
 
 #: A spec with every key of the format written, one to a line.

@@ -63,6 +63,9 @@ enum Command {
         /// Scenario file (.toml or .json), or `-` for JSON on stdin.
         scenario: PathBuf,
     },
+    /// Prints every metric a run can report as JSON: {name: {unit, range,
+    /// description}}, the unit of a driven-axis figure by axis.
+    Metrics,
 }
 
 /// Asks the kernel to kill this process when its parent ends, then checks
@@ -273,6 +276,17 @@ fn main() -> ExitCode {
             return batch(&scenarios, &mut *results);
         }
         Command::Check { scenario } => (scenario, None, None, true),
+        Command::Metrics => {
+            let json = piezo_cosim::metrics::definitions_json();
+            let text = serde_json::to_string_pretty(&json).expect("JSON prints");
+            return match writeln!(results, "{text}") {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("{e}");
+                    ExitCode::FAILURE
+                }
+            };
+        }
     };
     if let Some(path) = &series_path
         && path.extension().is_none_or(|e| e != "csv")

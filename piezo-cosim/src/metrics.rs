@@ -17,6 +17,197 @@ use crate::scenario::{CONTROLLER, Driven, MetricsSpec, PLANT};
 /// Metric name → number, or [min, max] for a range.
 pub type Metrics = Map<String, Value>;
 
+/// The unit of a metric's values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MetricUnit {
+    /// The same for every run: "um", "rad", or "1" (a count or a share).
+    Fixed(&'static str),
+    /// The driven axis's: um for x and y, rad for θ_z.
+    DrivenAxis,
+}
+
+/// A metric the master computes (`compute` writes no other).
+#[derive(Clone, Copy, Debug)]
+pub struct MetricDefinition {
+    pub name: &'static str,
+    pub unit: MetricUnit,
+    /// A [min, max] pair rather than one number.
+    pub range: bool,
+    pub description: &'static str,
+}
+
+const fn metric(
+    name: &'static str,
+    unit: MetricUnit,
+    range: bool,
+    description: &'static str,
+) -> MetricDefinition {
+    MetricDefinition {
+        name,
+        unit,
+        range,
+        description,
+    }
+}
+
+const UM: MetricUnit = MetricUnit::Fixed("um");
+const RAD: MetricUnit = MetricUnit::Fixed("rad");
+const ONE: MetricUnit = MetricUnit::Fixed("1");
+
+/// Every metric, with its unit: what `piezo-cosim metrics` prints and what
+/// tools that tabulate the results (demo/sweep.py) read, so that names and
+/// units are written here only. Which ones a run writes depends on its
+/// `metrics.driven` and `metrics.pose`.
+pub const METRICS: &[MetricDefinition] = &[
+    metric("samples", ONE, false, "samples in the window"),
+    metric(
+        "tracking_max",
+        MetricUnit::DrivenAxis,
+        false,
+        "largest |error| of the driven axis (x, y, theta)",
+    ),
+    metric(
+        "tracking_rms",
+        MetricUnit::DrivenAxis,
+        false,
+        "RMS error of the driven axis",
+    ),
+    metric(
+        "demand_span",
+        MetricUnit::DrivenAxis,
+        false,
+        "span of the driven axis's demand (twice a sine's amplitude)",
+    ),
+    metric(
+        "coupling_x_span",
+        UM,
+        false,
+        "span of e_x in a y run (Table 3)",
+    ),
+    metric(
+        "coupling_x2_span",
+        UM,
+        false,
+        "span of e_x2, the x sensor s2's coupling error, in a y run",
+    ),
+    metric(
+        "coupling_x2_range",
+        UM,
+        true,
+        "[min, max] of e_x2 in a y run",
+    ),
+    metric(
+        "coupling_x3_span",
+        UM,
+        false,
+        "span of e_x3, the x sensor s3's coupling error, in a y run",
+    ),
+    metric(
+        "coupling_x3_range",
+        UM,
+        true,
+        "[min, max] of e_x3 in a y run",
+    ),
+    metric(
+        "coupling_y_span",
+        UM,
+        false,
+        "span of e_y in an x or theta run (Table 3)",
+    ),
+    metric(
+        "coupling_y_range",
+        UM,
+        true,
+        "[min, max] of e_y in an x or theta run",
+    ),
+    metric(
+        "contour_2norm",
+        UM,
+        false,
+        "2-norm of the circle's contour error (Fig. 12)",
+    ),
+    metric("contour_rms", UM, false, "RMS contour error"),
+    metric("contour_samples", ONE, false, "samples the 2-norm sums"),
+    metric("x_error_range", UM, true, "[min, max] of e_x (xy runs)"),
+    metric(
+        "y_error_range",
+        UM,
+        true,
+        "[min, max] of e_y (xy and ytheta runs)",
+    ),
+    metric("x_error_max", UM, false, "largest |e_x| (xy runs)"),
+    metric(
+        "y_error_max",
+        UM,
+        false,
+        "largest |e_y| (xy and ytheta runs)",
+    ),
+    metric(
+        "theta_error_range",
+        RAD,
+        true,
+        "[min, max] of e_theta (ytheta runs)",
+    ),
+    metric(
+        "theta_error_max",
+        RAD,
+        false,
+        "largest |e_theta| (ytheta runs)",
+    ),
+    metric(
+        "pose_coupling_x_span",
+        UM,
+        false,
+        "span of the noise-free x pose in a y run",
+    ),
+    metric(
+        "pose_coupling_x2_span",
+        UM,
+        false,
+        "span of the noise-free pose at s2 in a y run",
+    ),
+    metric(
+        "pose_coupling_x3_span",
+        UM,
+        false,
+        "span of the noise-free pose at s3 in a y run",
+    ),
+    metric(
+        "pose_coupling_y_span",
+        UM,
+        false,
+        "span of the noise-free y pose in an x or theta run",
+    ),
+    metric(
+        "command_saturation",
+        ONE,
+        false,
+        "share of the window in which a command sits at a limit of the command range",
+    ),
+];
+
+/// [`METRICS`] as JSON: `{name: {unit, range, description}}`, a driven-axis
+/// unit as `{"x": "um", "y": "um", "theta": "rad"}`.
+pub fn definitions_json() -> Value {
+    let unit = |unit: MetricUnit| match unit {
+        MetricUnit::Fixed(unit) => json!(unit),
+        MetricUnit::DrivenAxis => json!({"x": "um", "y": "um", "theta": "rad"}),
+    };
+    Value::Object(
+        METRICS
+            .iter()
+            .map(|m| {
+                let definition = json!({
+                    "unit": unit(m.unit),
+                    "range": m.range,
+                    "description": m.description,
+                });
+                (m.name.to_owned(), definition)
+            })
+            .collect(),
+    )
+}
+
 /// The demands, by input of the controller.
 const REFERENCES: [&str; 3] = ["x_ref", "y_ref", "theta_ref"];
 /// The sensors the errors are read from: s1 reads y, s2 and s3 the x pair.
@@ -334,5 +525,67 @@ mod tests {
         // Without `pose`, no pose figures (and no pose outputs needed).
         let m = compute(&spec(Driven::X), &times, 2.0, &columns, &constant);
         assert!(m.keys().all(|k| !k.starts_with("pose_")));
+    }
+
+    #[test]
+    fn every_metric_written_is_defined_and_every_definition_is_written() {
+        let times = [0.0, 0.5, 1.0, 1.5];
+        let ramp = [0.0, 0.5, 1.0, 1.5];
+        let columns: BTreeMap<&str, &[f64]> = [
+            "plant.s1",
+            "plant.s2",
+            "plant.s3",
+            "plant.x",
+            "plant.y",
+            "plant.theta_z",
+            "controller.x_ref",
+            "controller.y_ref",
+            "controller.theta_ref",
+        ]
+        .into_iter()
+        .map(|port| (port, &ramp[..]))
+        .collect();
+        let constant = |_: &str| 0.0;
+        let mut written = std::collections::BTreeSet::new();
+        for driven in [
+            Driven::X,
+            Driven::Y,
+            Driven::Theta,
+            Driven::Xy,
+            Driven::Ytheta,
+        ] {
+            for pose in [false, true] {
+                let run = MetricsSpec {
+                    pose,
+                    ..spec(driven)
+                };
+                for (name, value) in compute(&run, &times, 2.0, &columns, &constant) {
+                    let definition = METRICS
+                        .iter()
+                        .find(|m| m.name == name)
+                        .unwrap_or_else(|| panic!("{name} is written but not in METRICS"));
+                    assert_eq!(
+                        definition.range,
+                        value.is_array(),
+                        "{name}: range or number"
+                    );
+                    written.insert(name);
+                }
+            }
+        }
+        let defined: std::collections::BTreeSet<String> =
+            METRICS.iter().map(|m| m.name.to_owned()).collect();
+        assert_eq!(written, defined, "METRICS names a metric no run writes");
+    }
+
+    #[test]
+    fn the_definitions_print_with_their_units() {
+        let json = definitions_json();
+        assert_eq!(json["coupling_x2_range"]["unit"], json!("um"));
+        assert_eq!(json["coupling_x2_range"]["range"], json!(true));
+        assert_eq!(json["theta_error_max"]["unit"], json!("rad"));
+        assert_eq!(json["tracking_rms"]["unit"]["theta"], json!("rad"));
+        assert_eq!(json["command_saturation"]["unit"], json!("1"));
+        assert_eq!(json.as_object().unwrap().len(), METRICS.len());
     }
 }
