@@ -236,7 +236,7 @@ def feedforward_xy_section(results: dict) -> list[str]:
         f"loop (eq. 7-16) leaves {x_model_based:.4f} um. A line would take {y_best:.1f} % off "
         f"the coupling of y from x ({y_floor:.4f} um left) if the held axis answered exactly; "
         "at the home it does not: the identified D3 is clipped to a constant there by its "
-        f"cutoff q3 = {xy200s['decoupling_params.q[3]']:.2f} um (fitted on seed 000's "
+        f"cutoff q3 = {xy200s['compensation.q[3]']:.2f} um (fitted on seed 000's "
         "single-axis runs scaled to 0-113 um, where that coupling flattens at the top), and the "
         "y inverse model "
         f"that would carry a correction errs by {y_error:.2f} um at the home.",

@@ -570,7 +570,11 @@ def load_spec(path: str | Path) -> Spec:
                 raise fail_at("match", f"monte_carlo.vary: a regular expression `match` is "
                                        f"needed ({e})", span) from None
             relative = group["relative"]
-            if not _is_number(relative) or not 0.0 <= relative < 1.0:
+            if not _is_number(relative):
+                raise fail_at("relative", f"monte_carlo.vary: relative {_shown(relative)}: a "
+                                          f"number in [0, 1), the half width of the factors' "
+                                          f"range", span)
+            if not 0.0 <= relative < 1.0:
                 raise fail_at("relative", f"monte_carlo.vary: relative {_shown(relative)} "
                                           f"outside [0, 1)", span)
             vary.append(Vary(pattern, float(relative)))
@@ -1164,25 +1168,21 @@ def variable_units(spec: Spec) -> dict[str, str]:
 def column_units(spec: Spec, runs: list[Run]) -> dict[str, str]:
     """The unit of every column of the study's table that holds a quantity:
     the table's own (OWN_COLUMN_UNITS), the metrics' (metric_definitions; a
-    figure of the driven axis in the unit of the runs' driven axes, each
-    named where the table mixes them), the Monte Carlo factors' and the
-    variables' (variable_units)."""
+    figure of the driven axis in the unit of the runs' driven axes, none
+    where they mix um and rad), the Monte Carlo factors' and the variables'
+    (variable_units)."""
     units = dict(OWN_COLUMN_UNITS)
     driven = {run.scenario["metrics"].get("driven") for run in runs
               if isinstance(run.scenario.get("metrics"), dict)}
     for metric, definition in metric_definitions().items():
         unit = definition["unit"]
         if isinstance(unit, dict):
-            axes_of: dict[str, list] = {}
-            # JSON sorts the axes by name; the table names them x, y, theta.
-            order = ("x", "y", "theta")
-            axes = sorted(unit, key=lambda a: (order.index(a) if a in order else len(order), a))
-            for axis in (a for a in axes if a in driven):
-                axes_of.setdefault(unit[axis], []).append(axis)
-            if not axes_of:
+            # A column of runs driven on x and on theta_z mixes um and rad:
+            # it claims no unit, as a variable whose values differ in unit.
+            units_of_runs = {unit[axis] for axis in unit if axis in driven}
+            if len(units_of_runs) != 1:
                 continue
-            unit = "; ".join(u if len(axes_of) == 1 else f"{u} (metrics.driven = {', '.join(a)})"
-                             for u, a in axes_of.items())
+            unit = units_of_runs.pop()
         for column in metric_columns_of(metric):
             units[column] = unit
     for run in runs:
@@ -1539,8 +1539,11 @@ def interrupted_message(run_keys: dict, out: Path | None, restart: bool) -> str:
     kept = []
     for study, keys in run_keys.items():
         rows = {row.get("key") for row in read_rows(out, study)} & keys
-        kept.append(f"{len(rows)} of {len(keys)} runs of {study} kept in "
-                    f"{table_path(out, study)}")
+        if rows:
+            kept.append(f"{len(rows)} of {len(keys)} runs of {study} kept in "
+                        f"{table_path(out, study)}")
+        else:
+            kept.append(f"no run of {study} kept ({len(keys)} to run)")
     resume = ("run the same command without --restart to resume (with it, to start over)"
               if restart else "run the same command again to resume")
     if not kept:

@@ -502,11 +502,20 @@ def test_container_names_form_a_tree():
     assert description.variableNamingConvention == "structured"
     names = {v.name for v in description.modelVariables}
     clashes = []
-    for name in names:
-        # Every prefix that ends before a '.' or '[' outside an index is a group.
-        depth = 0
+    for name in (n for n in names if not n.startswith("der(")):
+        # Every prefix that ends before a '.' or '[' outside an index or a
+        # quoted identifier ('x.y', with escapes such as \') is a group.
+        depth, quoted, escaped = 0, False, False
         for at, character in enumerate(name):
-            if character == "[":
+            if escaped:
+                escaped = False
+            elif quoted and character == "\\":
+                escaped = True
+            elif character == "'":
+                quoted = not quoted
+            elif quoted:
+                continue
+            elif character == "[":
                 if depth == 0 and name[:at] in names:
                     clashes.append(f"{name[:at]} / {name}")
                 depth += 1

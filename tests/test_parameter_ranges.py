@@ -203,7 +203,8 @@ PHYSICAL_RANGE_CASES = [
     # a subnormal value, inside (0, ...) but below the declared min (the
     # smallest normal double): the message says why it is refused
     ("FlexureStage", {"amplifier.gain": 1e-310}, "amplifier.gain", "= 1e-310",
-     "(0, inf] (a subnormal double: the range starts at the smallest normal double"),
+     "(0, inf] (a subnormal double: the range ends at the smallest normal double, "
+     "2.2250738585072014e-308, as the declared min says)"),
     # a zero sensor spacing L (theta = (s2 - s3) / L)
     ("PiezoController", {"L": 0.0}, "L", "= 0", "(0, inf]"),
     ("FlexureStage", {"L": 0.0}, "L", "= 0", "(0, inf]"),
@@ -232,6 +233,18 @@ def test_parameters_out_of_physical_range_are_refused(envs, model_name, values, 
     assert name in text, text
     assert value_text in text, text
     assert rule in text, text
+
+
+def test_values_far_from_one_are_written_short_and_only_subnormals_get_the_note(envs):
+    """A value is written as the description writes numbers (1e300, not 301
+    digits), and the subnormal note goes only where it explains a refusal:
+    -1e-310 is refused for being negative."""
+    for values, shown in (({"amplifier.gain": -1e-310}, "= -1e-310 is outside"),
+                          ({"solver.max_voltage_step": 1e300}, "= 1e300 is outside")):
+        text = " ".join(r.text for r in refused_at_exit_initialization(envs["FlexureStage"],
+                                                                       values))
+        assert shown in text and "subnormal" not in text, text
+        assert max(len(line) for line in text.splitlines()) < 300, text
 
 
 #: Sample periods that are not a positive finite number.

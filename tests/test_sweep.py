@@ -180,16 +180,28 @@ def test_the_table_carries_each_columns_unit(reference_out):
     assert schema.metadata[b"study"] == b"small", "the spec stays in the schema's metadata"
 
 
-def test_a_figure_of_the_driven_axis_has_the_unit_of_each_axis():
+def test_a_figure_of_the_driven_axis_has_a_unit_only_where_the_runs_share_one():
     """A table of runs driven on x, y and theta_z holds tracking figures in
-    um and in rad: the unit says which is which. The envelope's amplitude and
-    held demand are shares of a stroke, used in expressions only: the FMUs
-    give them no unit, and the table claims none."""
+    um and in rad: such a column claims no unit (a reader that parses units
+    gets none rather than a sentence), as a variable whose values differ. A
+    table of y runs holds um. The envelope's amplitude and held demand are
+    shares of a stroke, used in expressions only: the FMUs give them no
+    unit, and the table claims none."""
     spec = sweep.load_spec(REPO_ROOT / "demo" / "sweeps" / "envelope.toml")
-    units = sweep.column_units(spec, sweep.expand(spec)[0])
-    assert units["tracking_rms"] == "um (metrics.driven = x, y); rad (metrics.driven = theta)"
+    runs = sweep.expand(spec)[0]
+    units = sweep.column_units(spec, runs)
+    assert {run.scenario["metrics"]["driven"] for run in runs} == {"x", "y", "theta"}
+    assert "tracking_rms" not in units and "demand_span" not in units
     assert (units["coupling_y_span"], units["frequency"]) == ("um", "Hz")
     assert "amplitude" not in units and "held" not in units
+    y_runs = [run for run in runs if run.scenario["metrics"]["driven"] == "y"]
+    assert sweep.column_units(spec, y_runs)["tracking_rms"] == "um"
+
+
+def test_an_interrupt_before_any_row_says_no_run_is_kept(tmp_path):
+    message = sweep.interrupted_message({"small": {"k1", "k2"}}, tmp_path / "none", False)
+    assert message == ("interrupted: no run of small kept (2 to run); run the same command "
+                       "again to resume")
 
 
 def test_the_same_spec_gives_the_same_table_on_two_workers(spec_path, reference_table,
@@ -640,7 +652,8 @@ def test_wrong_types_in_a_spec_are_named_with_file_line_and_problem(tmp_path):
             (SPEC.replace("seed = 7", "seed = 7\nruns_per_task = 2.5"), "runs_per_task = 2.5",
              "runs_per_task 2.5: a whole number, at least 1"),
             (SPEC.replace("relative = 0.03", "relative = true"), "relative = true",
-             "monte_carlo.vary: relative true outside [0, 1)"),
+             "monte_carlo.vary: relative true: a number in [0, 1), the half width of the "
+             "factors' range"),
             (SPEC.replace("seed = 7", "seed = 7\ntimeout = true"), "timeout = true",
              "timeout true: a positive number of seconds"),
             (SPEC + "[report_options]\ntracking_limit = true\n", "tracking_limit = true",

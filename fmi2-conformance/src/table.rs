@@ -175,29 +175,44 @@ pub fn ports_have_flat_names<M: CoSimModel>() {
     }
 }
 
+/// How a structured name uses a group: `a[1]` as an array, `a.b` as a
+/// record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Group {
+    Array,
+    Record,
+}
+
 /// The groups a structured name belongs to, outermost first: `a.b[2].c`
-/// gives `a`, `a.b` (the array) and `a.b[2]`. Dots and brackets inside a
-/// quoted identifier (`'x.y'`) or an index do not split.
-fn enclosing_groups(name: &str) -> Vec<&str> {
+/// gives `a` (a record), `a.b` (an array) and `a.b[2]` (a record). Dots and
+/// brackets inside a quoted identifier (`'x.y'`, with FMI's escapes such as
+/// `\'`) or an index do not split.
+fn enclosing_groups(name: &str) -> Vec<(&str, Group)> {
     let mut groups = Vec::new();
-    let (mut quoted, mut depth) = (false, 0usize);
+    let (mut quoted, mut escaped, mut depth) = (false, false, 0usize);
     for (at, character) in name.char_indices() {
+        if escaped {
+            escaped = false;
+            continue;
+        }
         match character {
+            '\\' if quoted => escaped = true,
             '\'' => quoted = !quoted,
-            '[' if !quoted => {
+            _ if quoted => {}
+            '[' => {
                 if depth == 0 {
-                    groups.push(&name[..at]);
+                    groups.push((&name[..at], Group::Array));
                 }
                 depth += 1;
             }
-            ']' if !quoted => {
+            ']' => {
                 depth = depth.saturating_sub(1);
                 if depth == 0 && name[at + 1..].starts_with('.') {
-                    groups.push(&name[..=at]);
+                    groups.push((&name[..=at], Group::Record));
                 }
             }
-            '.' if !quoted && depth == 0 && !name[..at].ends_with(']') => {
-                groups.push(&name[..at]);
+            '.' if depth == 0 && !name[..at].ends_with(']') => {
+                groups.push((&name[..at], Group::Record));
             }
             _ => {}
         }
@@ -205,30 +220,44 @@ fn enclosing_groups(name: &str) -> Vec<&str> {
     groups
 }
 
-/// Under `variableNamingConvention="structured"` the names form a tree, and
-/// no variable is also a group of others (`d` beside `d.k[1]`, or `v`
-/// beside `v[1]`): importers that build the tree (Simulink's structured
-/// parameters, Modelica wrappers, tree views) have no place for a value on
-/// a branch. Derivatives, `der(...)`, are names of their own and skipped.
+/// Under `variableNamingConvention="structured"` the names form a tree: no
+/// variable is also a group of others (`d` beside `d.k[1]`, or `v` beside
+/// `v[1]`), and no group is both an array and a record (`a[1]` beside
+/// `a.b`). Importers that build the tree (Simulink's structured parameters,
+/// Modelica wrappers, tree views) have no place for a value on a branch nor
+/// for a branch of two kinds. Derivatives, `der(...)`, are names of their
+/// own and skipped.
 pub fn structured_names_form_a_tree<M: CoSimModel>() {
     let names: Vec<&str> = M::variables().iter().map(|v| v.name).collect();
     let clashes = variables_on_branches(&names);
     assert!(clashes.is_empty(), "{}", clashes.join("\n"));
 }
 
-/// Each name of `names` that is also a group of another, as a message.
+/// What keeps `names` from forming a tree, as messages: each name that is
+/// also a group of another, and each group used as an array and a record.
 fn variables_on_branches(names: &[&str]) -> Vec<String> {
     let all: std::collections::HashSet<&str> = names.iter().copied().collect();
-    names
-        .iter()
-        .filter(|name| !name.starts_with("der("))
-        .flat_map(|name| {
-            enclosing_groups(name)
-                .into_iter()
-                .filter(|group| all.contains(group))
-                .map(move |group| format!("`{group}` is a variable and the group of `{name}`"))
-        })
-        .collect()
+    let mut kinds: std::collections::BTreeMap<&str, (Group, &str)> = Default::default();
+    let mut clashes = Vec::new();
+    for name in names.iter().filter(|name| !name.starts_with("der(")) {
+        for (group, kind) in enclosing_groups(name) {
+            if all.contains(group) {
+                clashes.push(format!("`{group}` is a variable and the group of `{name}`"));
+            }
+            match kinds.get(group) {
+                Some(&(first, by)) if first != kind => clashes.push(format!(
+                    "`{group}` is an array in `{}` and a record in `{}`",
+                    if first == Group::Array { by } else { name },
+                    if first == Group::Array { name } else { by }
+                )),
+                Some(_) => {}
+                None => {
+                    kinds.insert(group, (kind, name));
+                }
+            }
+        }
+    }
+    clashes
 }
 
 /// Every parameter records where the model keeps it (a serde path, as in
@@ -334,43 +363,61 @@ pub fn ports_have_units<M: CoSimModel>(ports: &[(&str, &str)]) {
 /// recorded name still has its recorded reference, and every variable of the
 /// table is recorded. Value references are append-only: a moved or removed
 /// variable fails here, and a new variable fails until its line is appended
-/// to the record (the message gives the lines). A name may change only at
-/// its reference, and only when the record says so: `<value reference>
-/// <name> (was <old name>)`. Importers that key on references keep working;
-/// the note keeps the old name findable for those that key on names.
+/// to the record (the message gives the lines). A released line never
+/// changes; a name changes at its reference only by an appended line
+/// `renamed <value reference> <old name> <new name>`, whose old name must be
+/// the one the reference has at that point of the record. Importers that key
+/// on references keep working; the line keeps the old name findable.
 pub fn value_references_are_append_only<M>(variables: &[Variable<M>], record: &str) {
-    let mut recorded = 0;
-    let mut changed = Vec::new();
+    let mut names: Vec<&str> = Vec::new();
     for (number, line) in record.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let (vr, name) = line
-            .split_once(' ')
-            .and_then(|(vr, rest)| {
-                let name = match rest.split_once(" (was ") {
-                    Some((name, old)) if old.ends_with(')') && !old.contains(' ') => name,
-                    Some(_) => return None,
-                    None => rest,
-                };
-                Some((vr.parse::<usize>().ok()?, name))
-            })
-            .filter(|(_, name)| !name.contains(' '))
-            .unwrap_or_else(|| {
-                panic!(
-                    "record line {}: {line:?} is not `<value reference> <name>` \
-                     or `<value reference> <name> (was <old name>)`",
+        let words: Vec<&str> = line.split(' ').collect();
+        match words.as_slice() {
+            [vr, name] if vr.parse::<usize>().is_ok() => {
+                assert_eq!(
+                    vr.parse::<usize>().unwrap(),
+                    names.len(),
+                    "record line {}: references must run 0, 1, 2, ... in order",
                     number + 1
-                )
-            });
-        assert_eq!(
-            vr,
-            recorded,
-            "record line {}: references must run 0, 1, 2, ... in order",
-            number + 1
-        );
-        recorded += 1;
+                );
+                names.push(name);
+            }
+            ["renamed", vr, old, new] if vr.parse::<usize>().is_ok() => {
+                let vr = vr.parse::<usize>().unwrap();
+                let now = names.get(vr).unwrap_or_else(|| {
+                    panic!(
+                        "record line {}: reference {vr} is not recorded above",
+                        number + 1
+                    )
+                });
+                assert_eq!(
+                    now,
+                    old,
+                    "record line {}: reference {vr} is named {now} at that point, not {old}",
+                    number + 1
+                );
+                assert_ne!(
+                    old,
+                    new,
+                    "record line {}: a rename to the same name",
+                    number + 1
+                );
+                names[vr] = new;
+            }
+            _ => panic!(
+                "record line {}: {line:?} is not `<value reference> <name>` or \
+                 `renamed <value reference> <old name> <new name>`",
+                number + 1
+            ),
+        }
+    }
+    let recorded = names.len();
+    let mut changed = Vec::new();
+    for (vr, name) in names.into_iter().enumerate() {
         match variables.iter().position(|v| v.name == name) {
             Some(now) if now == vr => {}
             Some(now) => changed.push(format!("{name}: {vr} in the record, {now} now")),
@@ -463,11 +510,22 @@ mod tests {
 
     #[test]
     fn groups_of_structured_names() {
-        assert_eq!(enclosing_groups("a"), Vec::<&str>::new());
-        assert_eq!(enclosing_groups("a.b[2].c"), ["a", "a.b", "a.b[2]"]);
-        assert_eq!(enclosing_groups("v[1,2]"), ["v"]);
-        assert_eq!(enclosing_groups("'x.y'.z"), ["'x.y'"]);
-        assert_eq!(enclosing_groups("m[i.j]"), ["m"]);
+        let groups =
+            |name| -> Vec<&str> { enclosing_groups(name).into_iter().map(|(g, _)| g).collect() };
+        assert_eq!(groups("a"), Vec::<&str>::new());
+        assert_eq!(groups("a.b[2].c"), ["a", "a.b", "a.b[2]"]);
+        assert_eq!(
+            enclosing_groups("a.b[2].c")
+                .into_iter()
+                .map(|(_, kind)| kind)
+                .collect::<Vec<_>>(),
+            [Group::Record, Group::Array, Group::Record]
+        );
+        assert_eq!(groups("v[1,2]"), ["v"]);
+        assert_eq!(groups("'x.y'.z"), ["'x.y'"]);
+        // FMI's escaped quote inside a quoted identifier does not end it.
+        assert_eq!(groups("'it\\'s.a'.z"), ["'it\\'s.a'"]);
+        assert_eq!(groups("m[i.j]"), ["m"]);
     }
 
     #[test]
@@ -481,24 +539,44 @@ mod tests {
                 "`v` is a variable and the group of `v[1]`",
             ]
         );
+        assert_eq!(
+            variables_on_branches(&["a[1]", "a.b"]),
+            ["`a` is an array in `a[1]` and a record in `a.b`"]
+        );
     }
 
     #[test]
     fn a_rename_recorded_at_its_reference_passes() {
-        let record = "0 a\n1 b2 (was b)\n2 c\n";
-        value_references_are_append_only(&[real("a"), real("b2"), real("c")], record);
+        let record = format!("{RECORD}renamed 1 b b2\n");
+        value_references_are_append_only(&[real("a"), real("b2"), real("c")], &record);
+        // Renamed twice: each line starts from the name the one before left.
+        let record = format!("{record}renamed 1 b2 b3\n");
+        value_references_are_append_only(&[real("a"), real("b3"), real("c")], &record);
     }
 
     #[test]
-    #[should_panic(expected = "b (1) is no longer in the table")]
-    fn a_rename_without_its_note_fails() {
-        value_references_are_append_only(&[real("a"), real("b2"), real("c")], RECORD);
+    #[should_panic(expected = "reference 1 is named b at that point, not x")]
+    fn a_rename_of_a_name_the_reference_does_not_have_fails() {
+        let record = format!("{RECORD}renamed 1 x b2\n");
+        value_references_are_append_only(&[real("a"), real("b2"), real("c")], &record);
+    }
+
+    #[test]
+    #[should_panic(expected = "a rename to the same name")]
+    fn a_rename_to_the_same_name_fails() {
+        value_references_are_append_only(&TABLE, &format!("{RECORD}renamed 1 b b\n"));
+    }
+
+    #[test]
+    #[should_panic(expected = "reference 7 is not recorded above")]
+    fn a_rename_of_an_unrecorded_reference_fails() {
+        value_references_are_append_only(&TABLE, &format!("{RECORD}renamed 7 g h\n"));
     }
 
     #[test]
     #[should_panic(expected = "is not `<value reference> <name>`")]
-    fn a_malformed_rename_note_fails() {
-        value_references_are_append_only(&TABLE, "0 a\n1 b (was\n2 c\n");
+    fn a_malformed_line_fails() {
+        value_references_are_append_only(&TABLE, "0 a\n1 b (was x)\n2 c\n");
     }
 
     #[test]

@@ -1336,30 +1336,36 @@ fn parameter_out_of_range<M>(var: &Variable<M>, model: &M) -> Option<String> {
             let below = r.min.is_some_and(|min| value.is_nan() || value < min);
             let above = r.max.is_some_and(|max| value.is_nan() || value > max);
             // An open end at 0 is declared as the smallest normal double, so
-            // a subnormal value is refused though it lies inside "(0, ...":
-            // say why, or the message contradicts itself.
-            let subnormal = value != 0.0
-                && value.abs() < f64::MIN_POSITIVE
-                && (below && r.min == Some(f64::MIN_POSITIVE)
-                    || above && r.max == Some(-f64::MIN_POSITIVE));
-            // Display writes every digit of a subnormal (300 and more).
-            let shown = if subnormal {
-                format!("{value:e}")
-            } else {
-                value.to_string()
+            // a subnormal value of the right sign is refused though it lies
+            // inside "(0, ...": say why, or the message contradicts itself.
+            let subnormal = |bound: Option<f64>, which: &str| {
+                let inside_the_open_end = match bound {
+                    Some(min) if min == f64::MIN_POSITIVE => value > 0.0,
+                    Some(max) if max == -f64::MIN_POSITIVE => value < 0.0,
+                    _ => false,
+                };
+                (inside_the_open_end && value.abs() < f64::MIN_POSITIVE).then(|| {
+                    format!(
+                        " (a subnormal double: the range ends at the smallest normal double, \
+                         {}, as the declared {which} says)",
+                        format_real(bound.unwrap_or_default())
+                    )
+                })
             };
             (below || above).then(|| {
+                let note = if below {
+                    subnormal(r.min, "min")
+                } else {
+                    subnormal(r.max, "max")
+                };
                 format!(
-                    "parameter {} = {shown} is outside its allowed range {}, {}{}",
+                    "parameter {} = {} is outside its allowed range {}, {}{}",
                     var.name,
+                    // Not Display: it writes every digit of 1e-300.
+                    format_real(value),
                     r.min.map_or("[-inf".to_owned(), lower_end),
                     r.max.map_or("inf]".to_owned(), upper_end),
-                    if subnormal {
-                        " (a subnormal double: the range starts at the smallest normal \
-                         double, 2.2250738585072014e-308, as the declared min says)"
-                    } else {
-                        ""
-                    }
+                    note.unwrap_or_default()
                 )
             })
         }

@@ -528,16 +528,16 @@ const Y_MODEL: &[Variable<PiezoControllerFmu>] =
     &inverse_pi_parameters!("y", "Inverse P-I model of y (PZT1)", y_model);
 
 // Δk, Δb, p, q of the four compensations D_i (seed 000 eq. 11, Table 2).
-const DECOUPLING_DK: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling_params", dk,
+const DECOUPLING_DK: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", dk,
         "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um], D4 on theta_zd [um/mdeg] (Guo et al. eq. 11)",
         "", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
-const DECOUPLING_DB: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling_params", db,
+const DECOUPLING_DB: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", db,
         "Offset Δb_i of compensation D_i (Guo et al. eq. 11)",
         "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
-const DECOUPLING_P: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling_params", p,
+const DECOUPLING_P: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", p,
         "Upper cutoff p_i of compensation D_i (Guo et al. eq. 11)",
         "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
-const DECOUPLING_Q: &[Variable<PiezoControllerFmu>] = &indexed!("decoupling_params", q,
+const DECOUPLING_Q: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", q,
         "Lower cutoff q_i of compensation D_i (Guo et al. eq. 11)",
         "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
 

@@ -71,7 +71,7 @@ fn model_parameters_have_structured_names() {
     }
     for field in ["dk", "db", "p", "q"] {
         for i in 1..=4 {
-            has(format!("decoupling_params.{field}[{i}]"));
+            has(format!("compensation.{field}[{i}]"));
         }
     }
     for name in [

@@ -195,12 +195,46 @@ impl OpenFmus {
 impl Loaded<'_> {
     fn variable(&self, variable: &str, port: &str) -> Result<&VariableInfo, RunError> {
         self.archive.fmu.find(variable).ok_or_else(|| {
+            let names = self.archive.fmu.variables.iter().map(|v| v.name.as_str());
+            let hint = meant(variable, names)
+                .map(|name| format!(" (did you mean {name:?}?)"))
+                .unwrap_or_default();
             RunError::Scenario(format!(
-                "{port}: {} has no variable {variable:?}",
+                "{port}: {} has no variable {variable:?}{hint}",
                 self.archive.path.display()
             ))
         })
     }
+}
+
+/// The name of `names` that `wanted` most likely means: the only one with
+/// the same name inside its group (a group renamed, as PiezoController's
+/// `decoupling.dk[1]` became `compensation.dk[1]`), else the only one
+/// closest to it within a few typing errors. None when no name stands out.
+fn meant<'a>(wanted: &str, names: impl Iterator<Item = &'a str> + Clone) -> Option<&'a str> {
+    let only = |mut found: std::vec::IntoIter<&'a str>| match (found.next(), found.next()) {
+        (Some(name), None) => Some(name),
+        _ => None,
+    };
+    let inside = |name: &str| name.split_once('.').map(|(_, rest)| rest.to_owned());
+    if let Some(leaf) = inside(wanted) {
+        let regrouped: Vec<&str> = names
+            .clone()
+            .filter(|name| inside(name).as_deref() == Some(leaf.as_str()))
+            .collect();
+        if let Some(name) = only(regrouped.into_iter()) {
+            return Some(name);
+        }
+    }
+    let typos = (wanted.chars().count() / 5).max(2);
+    let distance = |name: &str| strsim::levenshtein(wanted, name);
+    let closest = names.clone().map(distance).min().filter(|&d| d <= typos)?;
+    only(
+        names
+            .filter(|name| distance(name) == closest)
+            .collect::<Vec<_>>()
+            .into_iter(),
+    )
 }
 
 /// The log of an instance as one line.
@@ -640,4 +674,38 @@ fn failed_or_warned(
         slot.name,
         log_text(&log)
     )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::meant;
+
+    const NAMES: [&str; 7] = [
+        "x_ref",
+        "feedback_y",
+        "compensation.dk[1]",
+        "compensation.dk[2]",
+        "x.k[1]",
+        "y.k[1]",
+        "decoupling",
+    ];
+
+    #[test]
+    fn a_renamed_group_and_a_typo_are_found() {
+        let names = NAMES.iter().copied();
+        assert_eq!(
+            meant("decoupling.dk[1]", names.clone()),
+            Some("compensation.dk[1]")
+        );
+        assert_eq!(meant("feedbak_y", names.clone()), Some("feedback_y"));
+        assert_eq!(meant("x_reff", names.clone()), Some("x_ref"));
+    }
+
+    #[test]
+    fn no_name_is_offered_where_none_stands_out() {
+        let names = NAMES.iter().copied();
+        // Two groups hold k[1], and both are one edit away.
+        assert_eq!(meant("z.k[1]", names.clone()), None);
+        assert_eq!(meant("amplifier.gain", names.clone()), None);
+    }
 }

@@ -97,19 +97,13 @@ impl Range {
         }
     }
 
-    /// Whether `value` is finite and within both ends.
+    /// Whether `value` is finite and within both ends: between the inclusive
+    /// [`Range::min_value`] and [`Range::max_value`] the FMUs declare, so
+    /// that a model and its FMU agree (a subnormal is not inside `> 0`).
     pub fn contains(&self, value: f64) -> bool {
-        let above_min = match self.min {
-            Bound::Unbounded => true,
-            Bound::Closed(min) => value >= min,
-            Bound::Open(min) => value > min,
-        };
-        let below_max = match self.max {
-            Bound::Unbounded => true,
-            Bound::Closed(max) => value <= max,
-            Bound::Open(max) => value < max,
-        };
-        value.is_finite() && above_min && below_max
+        value.is_finite()
+            && self.min_value().is_none_or(|min| value >= min)
+            && self.max_value().is_none_or(|max| value <= max)
     }
 
     /// The range as a condition on `name`: `n >= 1 (finite)`,
@@ -192,10 +186,17 @@ pub struct ParamError {
 
 impl fmt::Display for ParamError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // Display alone writes every digit of 1e-300.
+        let magnitude = self.value.abs();
+        let value = if self.value == 0.0 || (1e-4..1e7).contains(&magnitude) {
+            format!("{}", self.value)
+        } else {
+            format!("{:e}", self.value)
+        };
         write!(
             f,
-            "parameter {} = {} is out of range (allowed: {})",
-            self.parameter, self.value, self.allowed
+            "parameter {} = {value} is out of range (allowed: {})",
+            self.parameter, self.allowed
         )
     }
 }
@@ -226,6 +227,8 @@ mod tests {
             (Some(f64::MIN_POSITIVE), Some(1.0 - f64::EPSILON / 2.0))
         );
         assert!(damping.contains(damping.min_value().unwrap()));
+        // A subnormal lies below the smallest normal double the FMU declares.
+        assert!(!damping.contains(1e-310) && !Range::POSITIVE.contains(5e-324));
         assert!(damping.contains(damping.max_value().unwrap()));
         assert_eq!(step.min_value(), Some(1e-4));
     }
@@ -246,6 +249,11 @@ mod tests {
             .unwrap_err();
         assert_eq!(e.parameter, "coupling.y_from_pzt2.n");
         assert_eq!(e.allowed, "n >= 1 (finite)");
+        let tiny = Range::POSITIVE.check("amplifier.gain", 1e-310).unwrap_err();
+        assert_eq!(
+            tiny.to_string(),
+            "parameter amplifier.gain = 1e-310 is out of range (allowed: gain > 0 (finite))"
+        );
         assert_eq!(
             Range::FINITE.check("p", f64::NAN).unwrap_err().allowed,
             "finite"
