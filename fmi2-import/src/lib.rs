@@ -31,6 +31,7 @@ use fmi_sys::fmi2::Fmi2Binding;
 pub mod archive;
 mod cdylib;
 pub mod model_exchange;
+pub mod parameter_set;
 
 pub use cdylib::{cdylib_path, cdylib_sources};
 

@@ -18,12 +18,11 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::time::Instant;
 
+use fmi2_import::parameter_set::{TypedValue, meant};
 use fmi2_import::{Causality, FmuArchive, Instance, LogRecord, OK, VariableInfo, WARNING};
 
 use crate::metrics::{self, Metrics};
-use crate::scenario::{
-    CONTROLLER, Connection, ParameterValue, Scenario, ScenarioError, split_port,
-};
+use crate::scenario::{CONTROLLER, Connection, Scenario, ScenarioError, split_port};
 
 /// What to keep of a run besides its metrics.
 #[derive(Clone, Copy, Debug, Default)]
@@ -104,14 +103,6 @@ enum Source {
     Output(usize),
     /// Index of a signal (its value at t_k + preview·h).
     Signal(usize),
-}
-
-/// A value ready for the setter of its variable's type.
-#[derive(Clone, Copy, Debug)]
-enum Typed {
-    Real(f64),
-    Integer(i32),
-    Boolean(bool),
 }
 
 /// One FMU of the run: what it reads and writes at each step.
@@ -205,36 +196,6 @@ impl Loaded<'_> {
             ))
         })
     }
-}
-
-/// The name of `names` that `wanted` most likely means: the only one with
-/// the same name inside its group (a group renamed, as PiezoController's
-/// `decoupling.dk[1]` became `compensation.dk[1]`), else the only one
-/// closest to it within a few typing errors. None when no name stands out.
-fn meant<'a>(wanted: &str, names: impl Iterator<Item = &'a str> + Clone) -> Option<&'a str> {
-    let only = |mut found: std::vec::IntoIter<&'a str>| match (found.next(), found.next()) {
-        (Some(name), None) => Some(name),
-        _ => None,
-    };
-    let inside = |name: &str| name.split_once('.').map(|(_, rest)| rest.to_owned());
-    if let Some(leaf) = inside(wanted) {
-        let regrouped: Vec<&str> = names
-            .clone()
-            .filter(|name| inside(name).as_deref() == Some(leaf.as_str()))
-            .collect();
-        if let Some(name) = only(regrouped.into_iter()) {
-            return Some(name);
-        }
-    }
-    let typos = (wanted.chars().count() / 5).max(2);
-    let distance = |name: &str| strsim::levenshtein(wanted, name);
-    let closest = names.clone().map(distance).min().filter(|&d| d <= typos)?;
-    only(
-        names
-            .filter(|name| distance(name) == closest)
-            .collect::<Vec<_>>()
-            .into_iter(),
-    )
 }
 
 /// The log of an instance as one line.
@@ -393,7 +354,7 @@ pub fn run_with(
     }
 
     // Parameter values by FMI name, typed by the variable.
-    let mut parameters: Vec<Vec<(u32, Typed)>> = Vec::with_capacity(loaded.len());
+    let mut parameters: Vec<Vec<(u32, TypedValue)>> = Vec::with_capacity(loaded.len());
     let mut parameter_value: BTreeMap<String, f64> = BTreeMap::new();
     for l in &loaded {
         let spec = &scenario.fmu[&l.name];
@@ -408,33 +369,20 @@ pub fn run_with(
             let info = l
                 .variable(&name, &port)
                 .map_err(|e| RunError::Scenario(format!("{e}{}", given_in())))?;
-            let value = match (info.kind, value) {
-                ("Real", ParameterValue::Number(v)) => Typed::Real(v),
-                ("Integer", ParameterValue::Number(v))
-                    if v.fract() == 0.0 && v.abs() <= f64::from(i32::MAX) =>
-                {
-                    Typed::Integer(v as i32)
-                }
-                ("Boolean", ParameterValue::Boolean(v)) => Typed::Boolean(v),
-                (kind, value) => {
-                    let wanted = match kind {
-                        "Real" => "a number",
-                        "Integer" | "Enumeration" => "a whole number",
-                        "Boolean" => "true or false",
-                        _ => "no value from a scenario",
-                    };
-                    return Err(RunError::Scenario(format!(
-                        "{port} is {} {kind} variable, which takes {wanted}; {value} was given{}",
-                        if kind.starts_with(['A', 'E', 'I', 'O', 'U']) {
-                            "an"
-                        } else {
-                            "a"
-                        },
-                        given_in()
-                    )));
-                }
-            };
-            if let Typed::Real(v) = value {
+            let value = value.typed(info.kind).map_err(|wanted| {
+                let kind = info.kind;
+                let article = if kind.starts_with(['A', 'E', 'I', 'O', 'U']) {
+                    "an"
+                } else {
+                    "a"
+                };
+                RunError::Scenario(format!(
+                    "{port} is {article} {kind} variable, which takes {wanted}; {value} was \
+                     given{}",
+                    given_in()
+                ))
+            })?;
+            if let TypedValue::Real(v) = value {
                 parameter_value.insert(port, v);
             }
             typed.push((info.vr, value));
@@ -484,12 +432,8 @@ pub fn run_with(
             0.0,
             &mut warnings,
         )?;
-        for (vr, value) in typed {
-            let (call, status) = match *value {
-                Typed::Real(v) => ("fmi2SetReal", slot.instance.set_real(&[*vr], &[v])),
-                Typed::Integer(v) => ("fmi2SetInteger", slot.instance.set_integer(&[*vr], &[v])),
-                Typed::Boolean(v) => ("fmi2SetBoolean", slot.instance.set_boolean(&[*vr], &[v])),
-            };
+        for &(vr, value) in typed {
+            let (call, status) = slot.instance.set_typed(vr, value);
             check(slot, call, status, 0.0, &mut warnings)?;
         }
         let status = slot.instance.exit_init();
@@ -674,38 +618,4 @@ fn failed_or_warned(
         slot.name,
         log_text(&log)
     )))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::meant;
-
-    const NAMES: [&str; 7] = [
-        "x_ref",
-        "feedback_y",
-        "compensation.dk[1]",
-        "compensation.dk[2]",
-        "x.k[1]",
-        "y.k[1]",
-        "decoupling",
-    ];
-
-    #[test]
-    fn a_renamed_group_and_a_typo_are_found() {
-        let names = NAMES.iter().copied();
-        assert_eq!(
-            meant("decoupling.dk[1]", names.clone()),
-            Some("compensation.dk[1]")
-        );
-        assert_eq!(meant("feedbak_y", names.clone()), Some("feedback_y"));
-        assert_eq!(meant("x_reff", names.clone()), Some("x_ref"));
-    }
-
-    #[test]
-    fn no_name_is_offered_where_none_stands_out() {
-        let names = NAMES.iter().copied();
-        // Two groups hold k[1], and both are one edit away.
-        assert_eq!(meant("z.k[1]", names.clone()), None);
-        assert_eq!(meant("amplifier.gain", names.clone()), None);
-    }
 }

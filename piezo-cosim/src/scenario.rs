@@ -105,14 +105,8 @@ pub struct FmuSpec {
     pub parameters: BTreeMap<String, ParameterValue>,
 }
 
-/// A parameter value; the variable's own type decides the setter (a whole
-/// number for an Integer, true/false for a Boolean).
-#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
-#[serde(untagged)]
-pub enum ParameterValue {
-    Boolean(bool),
-    Number(f64),
-}
+pub use fmi2_import::parameter_set::ParameterValue;
+use fmi2_import::parameter_set::json_problem;
 
 /// `from` output drives `to` input, both `instance.variable`.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -491,49 +485,10 @@ fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
-/// serde_json's message without the place it ends with ("at line 3 column
-/// 7"), which the messages here lead with as `file:line:column`.
-fn json_problem(error: &serde_json::Error) -> String {
-    let message = error.to_string();
-    let place = format!(" at line {} column {}", error.line(), error.column());
-    match message.strip_suffix(&place) {
-        Some(problem) => problem.to_owned(),
-        None => message,
-    }
-}
-
 /// Reads a parameter set `{ "<FMI name>": value, ... }` (the format of
 /// dist/presets/*.json).
 pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, ScenarioError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| ScenarioError(format!("{}: {e}", path.display())))?;
-    let map: serde_json::Map<String, serde_json::Value> =
-        serde_json::from_str(&text).map_err(|e| {
-            ScenarioError(format!(
-                "{}:{}:{}: {}",
-                path.display(),
-                e.line(),
-                e.column(),
-                json_problem(&e)
-            ))
-        })?;
-    map.into_iter()
-        .map(|(name, value)| {
-            let value = match value {
-                serde_json::Value::Bool(b) => ParameterValue::Boolean(b),
-                serde_json::Value::Number(n) => {
-                    ParameterValue::Number(n.as_f64().expect("serde_json numbers convert to f64"))
-                }
-                other => {
-                    return Err(ScenarioError(format!(
-                        "{}: parameter {name}: {other} is neither a number nor a Boolean",
-                        path.display()
-                    )));
-                }
-            };
-            Ok((name, value))
-        })
-        .collect()
+    fmi2_import::parameter_set::read_parameter_set(path).map_err(ScenarioError)
 }
 
 impl FmuSpec {
@@ -560,15 +515,6 @@ impl FmuSpec {
             .rev()
             .find(|set| read_parameter_set(set).is_ok_and(|v| v.iter().any(|(n, _)| n == name)))
             .map(PathBuf::as_path)
-    }
-}
-
-impl std::fmt::Display for ParameterValue {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            ParameterValue::Boolean(b) => write!(f, "{b}"),
-            ParameterValue::Number(v) => write!(f, "{v}"),
-        }
     }
 }
 

@@ -275,7 +275,7 @@ fn a_scenario_that_does_not_fit_is_refused_by_name() {
     std::fs::remove_file(&set).ok();
     assert!(
         error.to_string().contains(&format!(
-            "controller.x.cc: {} has no variable \"x.cc\" (given in {})",
+            "controller.x.cc: {} has no variable \"x.cc\" (did you mean \"x.c\"?) (given in {})",
             fmus.controller.display(),
             set.display()
         )),

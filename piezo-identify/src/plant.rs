@@ -8,6 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
+use fmi2_import::parameter_set::{TypedValue, meant};
 use fmi2_import::{FmuArchive, Instance, OK, WARNING};
 use piezo_models::{ControllerParams, PiezoController};
 
@@ -43,46 +44,7 @@ pub struct PlantFmu {
     parameters: Vec<(String, u32, TypedValue)>,
 }
 
-/// A parameter value as a parameter-set JSON holds it (the variable's own
-/// type decides Real or Integer).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum ParameterValue {
-    Number(f64),
-    Boolean(bool),
-}
-
-/// A value ready for the setter of its variable's type.
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum TypedValue {
-    Real(f64),
-    Integer(i32),
-    Boolean(bool),
-}
-
-/// Reads a parameter set `{ "<FMI name>": value, ... }` (the format
-/// `flexure-stage-parameters` writes).
-pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let map: serde_json::Map<String, serde_json::Value> = serde_json::from_str(&text)
-        .map_err(|e| format!("{}:{}:{}: {e}", path.display(), e.line(), e.column()))?;
-    map.into_iter()
-        .map(|(name, value)| {
-            let value = match value {
-                serde_json::Value::Bool(b) => ParameterValue::Boolean(b),
-                serde_json::Value::Number(n) => {
-                    ParameterValue::Number(n.as_f64().expect("serde_json numbers convert to f64"))
-                }
-                other => {
-                    return Err(format!(
-                        "{}: parameter {name}: {other} is neither a number nor a Boolean",
-                        path.display()
-                    ));
-                }
-            };
-            Ok((name, value))
-        })
-        .collect()
-}
+pub use fmi2_import::parameter_set::{ParameterValue, read_parameter_set};
 
 impl PlantFmu {
     /// Unpacks `path` (modelDescription.xml and this platform's binary) and
@@ -125,25 +87,21 @@ impl PlantFmu {
                 path: self.path.clone(),
                 problem,
             };
-            let variable = self
-                .archive
-                .fmu
-                .find(name)
-                .ok_or_else(|| problem(format!("no parameter {name}")))?;
-            let typed = match (variable.kind, value) {
-                ("Real", ParameterValue::Number(v)) => TypedValue::Real(*v),
-                ("Integer", ParameterValue::Number(v))
-                    if v.fract() == 0.0 && v.abs() <= f64::from(i32::MAX) =>
-                {
-                    TypedValue::Integer(*v as i32)
-                }
-                ("Boolean", ParameterValue::Boolean(v)) => TypedValue::Boolean(*v),
-                (kind, value) => {
-                    return Err(problem(format!(
-                        "{name} is a {kind} variable; the parameter set gives {value:?}"
-                    )));
-                }
-            };
+            let fmu = &self.archive.fmu;
+            let variable = fmu.find(name).ok_or_else(|| {
+                let names = fmu.variables.iter().map(|v| v.name.as_str());
+                let hint = meant(name, names)
+                    .map(|name| format!(" (did you mean {name:?}?)"))
+                    .unwrap_or_default();
+                problem(format!("no parameter {name}{hint}"))
+            })?;
+            let typed = value.typed(variable.kind).map_err(|wanted| {
+                let kind = variable.kind;
+                problem(format!(
+                    "{name} is a {kind} variable, which takes {wanted}; the parameter set \
+                     gives {value}"
+                ))
+            })?;
             self.parameters.push((name.clone(), variable.vr, typed));
         }
         Ok(self)
@@ -191,17 +149,7 @@ impl PlantFmu {
         let status = session.instance.enter_init();
         session.check("fmi2EnterInitializationMode", status)?;
         for (_, vr, value) in &self.parameters {
-            let (call, status) = match value {
-                TypedValue::Real(v) => ("fmi2SetReal", session.instance.set_real(&[*vr], &[*v])),
-                TypedValue::Integer(v) => (
-                    "fmi2SetInteger",
-                    session.instance.set_integer(&[*vr], &[*v]),
-                ),
-                TypedValue::Boolean(v) => (
-                    "fmi2SetBoolean",
-                    session.instance.set_boolean(&[*vr], &[*v]),
-                ),
-            };
+            let (call, status) = session.instance.set_typed(*vr, *value);
             session.check(call, status)?;
         }
         let status = session.instance.exit_init();

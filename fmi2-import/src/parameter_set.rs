@@ -1,0 +1,213 @@
+//! Parameter values by FMI name, as a host sets them between
+//! fmi2EnterInitializationMode and fmi2ExitInitializationMode: the JSON
+//! parameter sets `{ "<FMI name>": value, ... }` (what an FMU crate's
+//! `*-parameters` binary writes), a value typed by its variable's type, and
+//! the name a user most likely meant by one the FMU does not have.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::{Instance, sys};
+
+/// A parameter value as JSON holds it; the variable's own type decides the
+/// setter (a whole number for an Integer, true/false for a Boolean).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum ParameterValue {
+    Boolean(bool),
+    Number(f64),
+}
+
+impl std::fmt::Display for ParameterValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ParameterValue::Boolean(b) => write!(f, "{b}"),
+            ParameterValue::Number(v) => write!(f, "{v}"),
+        }
+    }
+}
+
+/// A value ready for the setter of its variable's type.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TypedValue {
+    Real(f64),
+    Integer(i32),
+    Boolean(bool),
+}
+
+impl ParameterValue {
+    /// The value for a variable of FMI type `kind` ("Real", "Integer",
+    /// "Boolean", ...), or what such a variable takes ("a whole number").
+    pub fn typed(self, kind: &str) -> Result<TypedValue, &'static str> {
+        match (kind, self) {
+            ("Real", ParameterValue::Number(v)) => Ok(TypedValue::Real(v)),
+            ("Integer", ParameterValue::Number(v))
+                if v.fract() == 0.0 && v.abs() <= f64::from(i32::MAX) =>
+            {
+                Ok(TypedValue::Integer(v as i32))
+            }
+            ("Boolean", ParameterValue::Boolean(v)) => Ok(TypedValue::Boolean(v)),
+            ("Real", _) => Err("a number"),
+            ("Integer" | "Enumeration", _) => Err("a whole number"),
+            ("Boolean", _) => Err("true or false"),
+            _ => Err("no value set by name"),
+        }
+    }
+}
+
+impl Instance<'_> {
+    /// Sets one typed value; returns the FMI function called and its status.
+    pub fn set_typed(&self, vr: u32, value: TypedValue) -> (&'static str, sys::fmi2Status) {
+        match value {
+            TypedValue::Real(v) => ("fmi2SetReal", self.set_real(&[vr], &[v])),
+            TypedValue::Integer(v) => ("fmi2SetInteger", self.set_integer(&[vr], &[v])),
+            TypedValue::Boolean(v) => ("fmi2SetBoolean", self.set_boolean(&[vr], &[v])),
+        }
+    }
+}
+
+/// Reads a parameter set `{ "<FMI name>": value, ... }`, sorted by name. A
+/// malformed file is named with its line and column.
+pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let map: serde_json::Map<String, serde_json::Value> =
+        serde_json::from_str(&text).map_err(|e| {
+            format!(
+                "{}:{}:{}: {}",
+                path.display(),
+                e.line(),
+                e.column(),
+                json_problem(&e)
+            )
+        })?;
+    map.into_iter()
+        .map(|(name, value)| match value {
+            serde_json::Value::Bool(b) => Ok((name, ParameterValue::Boolean(b))),
+            serde_json::Value::Number(n) => {
+                let v = n.as_f64().expect("serde_json numbers convert to f64");
+                Ok((name, ParameterValue::Number(v)))
+            }
+            other => Err(format!(
+                "{}: parameter {name}: {other} is neither a number nor a Boolean",
+                path.display()
+            )),
+        })
+        .collect()
+}
+
+/// serde_json's message without the place it ends with ("at line 3 column
+/// 7"), for messages that lead with it as `file:line:column`.
+pub fn json_problem(error: &serde_json::Error) -> String {
+    let message = error.to_string();
+    let place = format!(" at line {} column {}", error.line(), error.column());
+    match message.strip_suffix(&place) {
+        Some(problem) => problem.to_owned(),
+        None => message,
+    }
+}
+
+/// The name of `names` that `wanted` most likely means: the only one with
+/// the same name inside its group (a group renamed, as PiezoController's
+/// `decoupling.dk[1]` became `compensation.dk[1]`), else the only one
+/// closest to it within a few typing errors. None when no name stands out.
+pub fn meant<'a>(wanted: &str, names: impl Iterator<Item = &'a str> + Clone) -> Option<&'a str> {
+    fn only<'a>(mut found: impl Iterator<Item = &'a str>) -> Option<&'a str> {
+        match (found.next(), found.next()) {
+            (Some(name), None) => Some(name),
+            _ => None,
+        }
+    }
+    let inside = |name: &str| name.split_once('.').map(|(_, rest)| rest.to_owned());
+    if let Some(leaf) = inside(wanted)
+        && let Some(name) = only(
+            names
+                .clone()
+                .filter(|name| inside(name).as_deref() == Some(leaf.as_str())),
+        )
+    {
+        return Some(name);
+    }
+    let typos = (wanted.chars().count() / 5).max(2);
+    let distance = |name: &str| strsim::levenshtein(wanted, name);
+    let closest = names.clone().map(distance).min().filter(|&d| d <= typos)?;
+    only(names.filter(|name| distance(name) == closest))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const NAMES: [&str; 7] = [
+        "x_ref",
+        "feedback_y",
+        "compensation.dk[1]",
+        "compensation.dk[2]",
+        "x.k[1]",
+        "y.k[1]",
+        "decoupling",
+    ];
+
+    #[test]
+    fn a_renamed_group_and_a_typo_are_found() {
+        let names = NAMES.iter().copied();
+        assert_eq!(
+            meant("decoupling.dk[1]", names.clone()),
+            Some("compensation.dk[1]")
+        );
+        assert_eq!(meant("feedbak_y", names.clone()), Some("feedback_y"));
+        assert_eq!(meant("x_reff", names.clone()), Some("x_ref"));
+    }
+
+    #[test]
+    fn no_name_is_offered_where_none_stands_out() {
+        let names = NAMES.iter().copied();
+        // Two groups hold k[1], and both are one edit away.
+        assert_eq!(meant("z.k[1]", names.clone()), None);
+        assert_eq!(meant("amplifier.gain", names.clone()), None);
+    }
+
+    #[test]
+    fn a_value_is_typed_by_its_variable() {
+        use ParameterValue::{Boolean, Number};
+        assert_eq!(Number(2.5).typed("Real"), Ok(TypedValue::Real(2.5)));
+        assert_eq!(Number(3.0).typed("Integer"), Ok(TypedValue::Integer(3)));
+        assert_eq!(Number(3.5).typed("Integer"), Err("a whole number"));
+        assert_eq!(Number(1e10).typed("Integer"), Err("a whole number"));
+        assert_eq!(
+            Boolean(true).typed("Boolean"),
+            Ok(TypedValue::Boolean(true))
+        );
+        assert_eq!(Boolean(true).typed("Real"), Err("a number"));
+        assert_eq!(Number(1.0).typed("Boolean"), Err("true or false"));
+        assert_eq!(Number(1.0).typed("String"), Err("no value set by name"));
+    }
+
+    #[test]
+    fn a_parameter_set_is_read_and_a_bad_one_named_by_its_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = dir.path().join("good.json");
+        std::fs::write(&good, r#"{"b": true, "a": 1.5}"#).unwrap();
+        assert_eq!(
+            read_parameter_set(&good).unwrap(),
+            [
+                ("a".to_owned(), ParameterValue::Number(1.5)),
+                ("b".to_owned(), ParameterValue::Boolean(true))
+            ]
+        );
+        let bad = dir.path().join("bad.json");
+        std::fs::write(&bad, "{\"x.c\": 1,\n\"L\" 2}").unwrap();
+        assert_eq!(
+            read_parameter_set(&bad).unwrap_err(),
+            format!("{}:2:5: expected `:`", bad.display())
+        );
+        std::fs::write(&bad, r#"{"name": "text"}"#).unwrap();
+        assert_eq!(
+            read_parameter_set(&bad).unwrap_err(),
+            format!(
+                "{}: parameter name: \"text\" is neither a number nor a Boolean",
+                bad.display()
+            )
+        );
+    }
+}
