@@ -898,12 +898,19 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                 for name, factor in factors.items():
                     start, low, high = nominal_start[name]
                     nominal = parameters.get(name, start)
-                    if (low is not None and nominal < low) or (high is not None and nominal > high):
+                    if not _is_number(nominal):
+                        problem = (f"{mc.instance}.{name} = {_shown(nominal)}: the Monte Carlo "
+                                   f"perturbs it, so it must be a number")
+                    elif (low is not None and nominal < low) or (high is not None
+                                                                 and nominal > high):
                         # Perturbed, it would be held at the bound without a
                         # word: the nominal value is itself refused.
                         problem = (f"{mc.instance}.{name} = {nominal:g} (the nominal value the "
                                    f"Monte Carlo perturbs) is outside its declared range "
                                    f"{_range_text(low, high)}")
+                    else:
+                        problem = None
+                    if problem:
                         own_values, set_names = origin
                         given_in = [n for n in set_names if name in sets[spec.file(n)]]
                         if name not in own_values and given_in:
@@ -1283,7 +1290,40 @@ def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> None:
             master.check(scenario)
         except master.MasterError as e:
             cases = ", ".join(f"{k} = {v}" for k, v in signature) or "the template"
+            # A value the master cannot read is named by its key in the
+            # scenario it was sent (`<stdin>:1:253: metrics.driven: ...`): the
+            # place in that JSON means nothing to the spec's reader; the key's
+            # line in the spec's template does.
+            unread = re.match(r"^<stdin>:\d+:\d+: ([^:\s]+): (.*)$", str(e), re.DOTALL)
+            if unread:
+                key, problem = unread.groups()
+                line = _template_line(_SpecLines(spec.text), key)
+                where = f"{spec.path}:{line}" if line else str(spec.path)
+                raise SpecError(f"{where}: template {key}: {problem} (in the scenario of "
+                                f"{cases})") from None
             raise SpecError(f"{spec.path}: the scenario of {cases} does not run: {e}") from None
+
+
+def _template_line(lines: _SpecLines, key: str) -> int | None:
+    """The line of the spec that sets the scenario key `key` (a dotted path,
+    `metrics.driven`, `fmu.plant.parameters.noise.seed`) in its [template]:
+    the key in the deepest table of the path written as a header, or None
+    where the template does not write it (a named case's patch)."""
+    parts = key.split(".")
+    for depth in range(len(parts) - 1, -1, -1):
+        table = ".".join(["template", *parts[:depth]])
+        span = lines.table(table)
+        if span is None:
+            continue
+        rest = parts[depth:]
+        # The rest is a key of that table, possibly dotted or quoted
+        # (`"noise.seed" = `), or inside an inline table of its first part.
+        for name in (".".join(rest), rest[-1], rest[0]):
+            found = lines.key(name, span)
+            if found != span[0] or lines.header(found) is None:
+                return found
+        return None
+    return None
 
 
 def _progress_lines(done: int, total: int, failed: int, started: float, study: str) -> None:

@@ -375,5 +375,5 @@ def test_a_batch_file_resolves_paths_from_its_folder_and_names_bad_lines(tmp_pat
     results = [json.loads(line) for line in done.stdout.splitlines()]
     assert [(r["line"], r["status"]) for r in results] == [(1, "ok"), (2, "error"), (4, "ok")]
     assert results[1]["exit"] == 2
-    assert results[1]["error"].startswith(f"{runs}:2:26: invalid type: integer `3`")
+    assert results[1]["error"].startswith(f"{runs}:2:26: fmu: invalid type: integer `3`")
     assert results[0]["metrics"] == results[2]["metrics"]

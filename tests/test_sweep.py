@@ -596,8 +596,11 @@ def test_every_key_of_the_spec_format_refuses_a_wrong_type_at_its_line(tmp_path)
     bad = tmp_path / "bad.toml"
     lines = FULL_SPEC.splitlines()
     sweep.expand(sweep.load_spec(_written(bad, FULL_SPEC)))
-    refused = 0
+    refused, accepted, table = 0, [], ""
     for number, line in enumerate(lines, 1):
+        header = re.match(r"^\[+([^\]]+)\]+$", line)
+        if header:
+            table = header.group(1)
         setting = re.match(r"^([\w.\"\[\]]+) = (.*)$", line)
         if not setting:
             continue
@@ -606,6 +609,14 @@ def test_every_key_of_the_spec_format_refuses_a_wrong_type_at_its_line(tmp_path)
             text = "\n".join(lines[:number - 1] + [f"{key} = {value}"] + lines[number:])
             try:
                 sweep.expand(sweep.load_spec(_written(bad, text)))
+                # Taken: only a value of the line's own kind may be (a
+                # number for a number), or one in the scenario template,
+                # which the master checks (test_a_template_value_of_the_wrong_
+                # type_is_named_by_its_key).
+                numbers = {toml_type(value), toml_type(own)} <= {int, float}
+                if not (table.startswith("template") or numbers
+                        or toml_type(value) is toml_type(own)):
+                    accepted.append(f"{line!r} -> {value}")
             except sweep.SpecError as e:
                 refused += 1
                 where = re.match(rf"{re.escape(str(bad))}:(\d+): ", str(e))
@@ -621,7 +632,43 @@ def test_every_key_of_the_spec_format_refuses_a_wrong_type_at_its_line(tmp_path)
                     assert named in (number, name_line), (line, value, str(e))
                 else:
                     assert named == number, (line, value, str(e))
+    assert not accepted, "taken though of another kind:\n" + "\n".join(accepted)
     assert refused > 100, refused
+
+
+#: (the template's text, replaced by, the message after `file:line: `).
+TEMPLATE_VALUES = {
+    "metrics": ('driven = "y"', "driven = true",
+                "template metrics.driven: expected value (in the scenario of decoupling = off)"),
+    "signal": ("offset = 6.0\nsines", 'offset = "text"\nsines',
+               'template signal.controller.y_ref.offset: invalid type: string "text", expected '
+               "f64 (in the scenario of decoupling = off)"),
+    "parameter": ('"noise.enabled" = true }', '"noise.enabled" = true, "mode.x.damping" = "low" }',
+                  'template fmu.plant.parameters.mode.x.damping: invalid type: string "low", '
+                  "expected a number, or true or false (in the scenario of decoupling = off)"),
+    # A parameter the Monte Carlo perturbs is read before the master sees it.
+    "perturbed": ('"noise.enabled" = true }', '"noise.enabled" = true, "amplifier.gain" = "high" }',
+                  "plant.amplifier.gain = 'high': the Monte Carlo perturbs it, so it must be a "
+                  "number"),
+}
+
+
+@pytest.mark.parametrize("case", TEMPLATE_VALUES)
+def test_a_template_value_of_the_wrong_type_is_named_by_its_key(tmp_path, case):
+    """The template goes to the master as JSON, which reads it: a value it
+    cannot read is named by its key and its line in the spec, not by a
+    column of the JSON the spec's reader never sees (nor by a traceback, as
+    a perturbed parameter's string was)."""
+    old, new, message = TEMPLATE_VALUES[case]
+    text = SPEC.replace(old, new)
+    assert text != SPEC
+    bad = _written(tmp_path / "bad.toml", text)
+    line = next(n for n, row in enumerate(text.splitlines(), 1) if new.split("\n")[0] in row)
+    done = subprocess.run([sys.executable, "-m", "demo.sweep", str(bad), "--out",
+                           str(tmp_path / "out")], capture_output=True, text=True,
+                          cwd=REPO_ROOT, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip() == f"{bad}:{line}: {message}", done.stderr
 
 
 def _written(path: Path, text: str) -> Path:

@@ -12,11 +12,38 @@ use crate::{Instance, sys};
 
 /// A parameter value as JSON holds it; the variable's own type decides the
 /// setter (a whole number for an Integer, true/false for a Boolean).
-#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum ParameterValue {
     Boolean(bool),
     Number(f64),
+}
+
+impl<'de> Deserialize<'de> for ParameterValue {
+    /// By hand rather than `untagged`, whose error for a string says only
+    /// that no variant matched: this one says what a value may be.
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Value;
+        impl serde::de::Visitor<'_> for Value {
+            type Value = ParameterValue;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a number, or true or false")
+            }
+            fn visit_bool<E>(self, v: bool) -> Result<ParameterValue, E> {
+                Ok(ParameterValue::Boolean(v))
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<ParameterValue, E> {
+                Ok(ParameterValue::Number(v))
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<ParameterValue, E> {
+                Ok(ParameterValue::Number(v as f64))
+            }
+            fn visit_u64<E>(self, v: u64) -> Result<ParameterValue, E> {
+                Ok(ParameterValue::Number(v as f64))
+            }
+        }
+        deserializer.deserialize_any(Value)
+    }
 }
 
 impl std::fmt::Display for ParameterValue {
@@ -181,6 +208,19 @@ mod tests {
         assert_eq!(Boolean(true).typed("Real"), Err("a number"));
         assert_eq!(Number(1.0).typed("Boolean"), Err("true or false"));
         assert_eq!(Number(1.0).typed("String"), Err("no value set by name"));
+    }
+
+    #[test]
+    fn a_value_of_another_kind_is_refused_saying_what_a_value_may_be() {
+        let parsed = |text| serde_json::from_str::<ParameterValue>(text);
+        assert_eq!(parsed("3").unwrap(), ParameterValue::Number(3.0));
+        assert_eq!(parsed("-2.5").unwrap(), ParameterValue::Number(-2.5));
+        assert_eq!(parsed("false").unwrap(), ParameterValue::Boolean(false));
+        let error = parsed("\"3\"").unwrap_err().to_string();
+        assert!(
+            error.starts_with("invalid type: string \"3\", expected a number, or true or false"),
+            "{error}"
+        );
     }
 
     #[test]

@@ -212,13 +212,8 @@ impl Scenario {
     /// Parses scenario text; `origin` names it in errors (a file name, `-`).
     pub fn parse(text: &str, json: bool, origin: &str) -> Result<Scenario, ScenarioError> {
         let scenario: Scenario = if json {
-            serde_json::from_str(text).map_err(|e| {
-                ScenarioError(format!(
-                    "{origin}:{}:{}: {}",
-                    e.line(),
-                    e.column(),
-                    json_problem(&e)
-                ))
+            from_json(text).map_err(|(line, column, problem)| {
+                ScenarioError(format!("{origin}:{line}:{column}: {problem}"))
             })?
         } else {
             toml::from_str(text).map_err(|e| {
@@ -250,13 +245,9 @@ impl Scenario {
         origin: &str,
         line: usize,
     ) -> Result<Scenario, ScenarioError> {
-        let scenario: Scenario = serde_json::from_str(text).map_err(|e| {
+        let scenario: Scenario = from_json(text).map_err(|(_, column, problem)| {
             // The text is one line of the file: the file's line is the place.
-            ScenarioError(format!(
-                "{origin}:{line}:{}: {}",
-                e.column(),
-                json_problem(&e)
-            ))
+            ScenarioError(format!("{origin}:{line}:{column}: {problem}"))
         })?;
         scenario
             .validate()
@@ -485,6 +476,26 @@ fn line_and_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// A scenario from JSON text, or the line, the column and the problem,
+/// which names the key it is at (`metrics.driven: unknown variant ...`).
+fn from_json(text: &str) -> Result<Scenario, (usize, usize, String)> {
+    let located = |key: &str, error: serde_json::Error| {
+        let problem = match key {
+            // The document itself, or the text ended before a key.
+            "." | "?" => json_problem(&error),
+            key => format!("{key}: {}", json_problem(&error)),
+        };
+        (error.line(), error.column(), problem)
+    };
+    let mut reader = serde_json::Deserializer::from_str(text);
+    let scenario = serde_path_to_error::deserialize(&mut reader).map_err(|e| {
+        let key = e.path().to_string();
+        located(&key, e.into_inner())
+    })?;
+    reader.end().map_err(|e| located(".", e))?;
+    Ok(scenario)
+}
+
 /// Reads a parameter set `{ "<FMI name>": value, ... }` (the format of
 /// dist/presets/*.json).
 pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, ScenarioError> {
@@ -552,7 +563,7 @@ path = "c.fmu"
             .unwrap_err()
             .0;
         assert!(
-            e.starts_with("runs.jsonl:7:26: invalid type: integer `3`"),
+            e.starts_with("runs.jsonl:7:26: fmu: invalid type: integer `3`"),
             "{e}"
         );
         assert!(!e.contains("at line 1"), "{e}");
@@ -568,7 +579,7 @@ path = "c.fmu"
             .unwrap_err()
             .0;
         assert!(
-            e.starts_with("run.json:2:20: invalid type: string \"long\""),
+            e.starts_with("run.json:2:20: duration: invalid type: string \"long\""),
             "{e}"
         );
         assert!(!e.contains("at line"), "{e}");
