@@ -270,6 +270,44 @@ pub fn reversals(u: &[f64], flags: &[bool], threshold: f64) -> Vec<usize> {
     reversals
 }
 
+/// The travels between consecutive turning points of `u` over the samples
+/// where `flags` is set (turning points as [`reversals`] finds them, at 1 %
+/// of `span`): the sizes of the loops and half-loops the samples run.
+pub fn loop_travels(u: &[f64], flags: &[bool], span: f64) -> Vec<f64> {
+    reversals(u, flags, REVERSAL_SPAN_FRACTION * span)
+        .windows(2)
+        .map(|w| (u[w[1]] - u[w[0]]).abs())
+        .collect()
+}
+
+/// When the scored samples run smaller loops than the fitted ones: the
+/// median travel between their turning points, and the fitted samples' 10th
+/// percentile of it, if the first is under half the second (a model then
+/// answers loops of a size it was not fitted on: small loops are where
+/// hysteresis models differ most, P-I's first backlash threshold, Bouc-Wen's
+/// minor loops). None with fewer than two travels in either part.
+pub fn smaller_loops(u: &[f64], fitted: &[bool], scored: &[bool]) -> Option<(f64, f64)> {
+    let (low, high) = u
+        .iter()
+        .zip(fitted)
+        .filter(|(_, f)| **f)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (v, _)| {
+            (lo.min(*v), hi.max(*v))
+        });
+    let span = high - low;
+    if span.is_nan() || span <= 0.0 {
+        return None;
+    }
+    let mut fitted_travels = loop_travels(u, fitted, span);
+    let mut scored_travels = loop_travels(u, scored, span);
+    if fitted_travels.len() < 2 || scored_travels.len() < 2 {
+        return None;
+    }
+    let scored_median = percentile(&mut scored_travels, 0.5)?;
+    let fitted_small = percentile(&mut fitted_travels, 0.1)?;
+    (scored_median < 0.5 * fitted_small).then_some((scored_median, fitted_small))
+}
+
 /// The end of the first loading of `u` from sample `from` (before `to`):
 /// the second turning point of at least 1 % of `span`. Until the input has
 /// turned at both ends of a cycle, a hysteresis model's state still depends
@@ -395,5 +433,31 @@ mod tests {
     #[test]
     fn a_constant_input_has_no_thresholds() {
         assert!(thresholds(&[1.0; 50], 0.01, &SegmentOptions::default()).is_none());
+    }
+
+    /// Sines of `amplitude` about 5 V, `cycles` of 100 samples each.
+    fn sine(amplitude: f64, cycles: usize) -> Vec<f64> {
+        (0..100 * cycles)
+            .map(|n| 5.0 + amplitude * (2.0 * std::f64::consts::PI * n as f64 / 100.0).sin())
+            .collect()
+    }
+
+    #[test]
+    fn scored_loops_smaller_than_any_fitted_are_found() {
+        // Fit part: 4 cycles of amplitude 4; scored part: 4 of amplitude 1.
+        let u = [sine(4.0, 4), sine(1.0, 4)].concat();
+        let fitted: Vec<bool> = (0..u.len()).map(|n| n < 400).collect();
+        let scored: Vec<bool> = fitted.iter().map(|f| !f).collect();
+        let (scored_median, fitted_small) = smaller_loops(&u, &fitted, &scored).unwrap();
+        assert!((scored_median - 2.0).abs() < 0.01, "{scored_median}");
+        assert!((fitted_small - 8.0).abs() < 0.01, "{fitted_small}");
+        // Loops of the fitted size, or half of it, are no news.
+        for amplitude in [4.0, 2.5] {
+            let u = [sine(4.0, 4), sine(amplitude, 4)].concat();
+            assert_eq!(smaller_loops(&u, &fitted, &scored), None, "{amplitude}");
+        }
+        // Too few turning points to tell.
+        let short: Vec<bool> = (0..u.len()).map(|n| n >= 760).collect();
+        assert_eq!(smaller_loops(&u, &fitted, &short), None);
     }
 }

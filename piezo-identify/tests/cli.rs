@@ -1083,3 +1083,45 @@ fn a_validation_file_at_another_rate_is_refused() {
     ]);
     assert!(taken.status.success(), "{}", stderr(&taken));
 }
+
+/// A record whose second half runs 1 Hz loops of `scored_amplitude` about
+/// 6 um where its first ran loops of 4 um (the paper's y inverse model
+/// gives the voltage), at 100 Hz.
+fn write_two_amplitude_record(path: &Path, scored_amplitude: f64) {
+    let params: InversePiParams = InversePiModels::paper().y;
+    let y: Vec<f64> = (0..1200)
+        .map(|n| {
+            let t = n as f64 * 0.01;
+            let amplitude = if n < 600 { 4.0 } else { scored_amplitude };
+            6.0 - amplitude * (2.0 * std::f64::consts::PI * t).cos()
+        })
+        .collect();
+    let u = inverse_pi_trajectory(&params, &y, 0.01);
+    let mut text = String::from("time,volts,microns\n");
+    for (n, (y, u)) in y.iter().zip(&u).enumerate() {
+        text.push_str(&format!("{},{u},{y}\n", n as f64 * 0.01));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn scored_loops_smaller_than_the_fitted_ones_get_a_note() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("loops.csv");
+    let note = "note: the scored displacement runs smaller loops than the fitted one";
+    write_two_amplitude_record(&path, 1.0);
+    let summary = quick_split_fit(&path, "time", "volts", "microns");
+    let line = summary
+        .lines()
+        .find(|line| line.starts_with(note))
+        .unwrap_or_else(|| panic!("no note in:\n{summary}"));
+    // Loops of 2 um (1 um about the centre) against the fitted 8 um.
+    assert!(
+        line.contains("median travel between turning points 2.000 um")
+            && line.contains("10th percentile 8.000 um"),
+        "{line}"
+    );
+    write_two_amplitude_record(&path, 4.0);
+    let summary = quick_split_fit(&path, "time", "volts", "microns");
+    assert!(!summary.contains(note), "{summary}");
+}

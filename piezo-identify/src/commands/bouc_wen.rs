@@ -15,8 +15,8 @@ use piezo_identify::protocol::{
 use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, load_validation, open_plant};
 use super::progress::Reporter;
 use super::report::{
-    describe, describe_columns, pad, print_extrapolation, print_figure, print_plan, range_excess,
-    write_json, write_predictions,
+    describe, describe_columns, pad, print_extrapolation, print_figure, print_plan,
+    print_smaller_loops, range_excess, write_json, write_predictions,
 };
 
 #[derive(Args)]
@@ -284,14 +284,12 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
     print_forward_errors("fit part", &fit.fit_errors, refined, false);
     if let Some(unseen) = &fit.unseen {
         print_forward_errors("scored part (not seen by the fit)", unseen, refined, true);
+        let fitted = pad(&plan.fitted(), plan.samples);
         print_extrapolation(
             "input",
-            range_excess(
-                &record.input,
-                &pad(&plan.fitted(), plan.samples),
-                &plan.scored(),
-            ),
+            range_excess(&record.input, &fitted, &plan.scored()),
         );
+        print_smaller_loops("input", "V", &record.input, &fitted, &plan.scored());
     }
     let mut validation_errors = None;
     let mut zero_alignment = None;

@@ -13,8 +13,8 @@ use piezo_identify::validation::centred_moving_average;
 use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load, load_validation};
 use super::progress::Reporter;
 use super::report::{
-    describe, describe_columns, pad, print_extrapolation, print_figure, print_plan, range_excess,
-    write_json, write_predictions,
+    describe, describe_columns, pad, print_extrapolation, print_figure, print_plan,
+    print_smaller_loops, range_excess, write_json, write_predictions,
 };
 
 #[derive(Args)]
@@ -132,10 +132,9 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
     if let Some(unseen) = &fit.unseen {
         print_inverse_pi_errors("scored part (not seen by the fit)", unseen);
         let y = centred_moving_average(&record.output, fit.smoothing);
-        print_extrapolation(
-            "displacement",
-            range_excess(&y, &pad(&plan.fitted(), plan.samples), &plan.scored()),
-        );
+        let fitted = pad(&plan.fitted(), plan.samples);
+        print_extrapolation("displacement", range_excess(&y, &fitted, &plan.scored()));
+        print_smaller_loops("displacement", "um", &y, &fitted, &plan.scored());
     }
     let mut validation_errors = None;
     let mut zero_alignment = None;

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use piezo_identify::data::ColumnsUsed;
 use piezo_identify::protocol::{ErrorFigures, Plan};
+use piezo_identify::segments::smaller_loops;
 use piezo_identify::{Record, StartResult};
 
 pub(crate) fn describe(record: &Record, path: &str) -> String {
@@ -138,6 +139,22 @@ pub(crate) fn print_extrapolation(what: &str, excess: f64) {
         println!(
             "note: the scored {what} reaches {:.1} % of the fitted span beyond the fitted range; the models extrapolate there",
             100.0 * excess
+        );
+    }
+}
+
+/// A note when the scored `what` runs loops under half the size of the
+/// fitted ones ([`smaller_loops`]).
+pub(crate) fn print_smaller_loops(
+    what: &str,
+    unit: &str,
+    values: &[f64],
+    fitted: &[bool],
+    scored: &[bool],
+) {
+    if let Some((scored_median, fitted_small)) = smaller_loops(values, fitted, scored) {
+        println!(
+            "note: the scored {what} runs smaller loops than the fitted one (median travel between turning points {scored_median:.3} {unit}, the fit part's 10th percentile {fitted_small:.3} {unit}); the models were not fitted on loops that small"
         );
     }
 }
