@@ -112,6 +112,15 @@ fn line_of_port<'a>(
     if !instances.any(|name| name == instance) {
         return None;
     }
+    if let Some(line) = piezo_cosim::scenario::line_of_quoted(text, port) {
+        return Some(line);
+    }
+    line_in_instance_table(text, instance, variable)
+}
+
+/// The 1-based line of `text` that writes `key` (a whole name) inside the
+/// tables of `instance` (`[fmu.instance]` and its subtables).
+fn line_in_instance_table(text: &str, instance: &str, key: &str) -> Option<usize> {
     let is_name_char = |c: char| c.is_alphanumeric() || c == '_';
     let holds = |line: &str, needle: &str| {
         line.match_indices(needle).any(|(at, _)| {
@@ -120,13 +129,9 @@ fn line_of_port<'a>(
             !before.is_some_and(is_name_char) && !after.is_some_and(is_name_char)
         })
     };
-    let lines: Vec<&str> = text.lines().collect();
-    if let Some(line) = piezo_cosim::scenario::line_of_quoted(text, port) {
-        return Some(line);
-    }
     let own_table = [format!("[fmu.{instance}"), format!("[fmu.\"{instance}\"")];
     let mut inside = false;
-    for (at, line) in lines.iter().enumerate() {
+    for (at, line) in text.lines().enumerate() {
         let trimmed = line.trim_start();
         if trimmed.starts_with('[') {
             inside = own_table.iter().any(|table| {
@@ -134,11 +139,24 @@ fn line_of_port<'a>(
                     .strip_prefix(table.as_str())
                     .is_some_and(|rest| rest.starts_with(']') || rest.starts_with('.'))
             });
-        } else if inside && holds(line.split('#').next().unwrap_or(""), variable) {
+        } else if inside && holds(line.split('#').next().unwrap_or(""), key) {
             return Some(at + 1);
         }
     }
     None
+}
+
+/// The 1-based line of the `path` of the FMU an error message starts with
+/// (`/dist/F.fmu: No such file or directory`), `paths` being each
+/// instance's path as resolved.
+fn line_of_fmu_path<'a>(
+    text: &str,
+    message: &str,
+    mut paths: impl Iterator<Item = (&'a str, &'a Path)>,
+) -> Option<usize> {
+    let (instance, _) =
+        paths.find(|(_, path)| message.starts_with(&format!("{}: ", path.display())))?;
+    line_in_instance_table(text, instance, "path")
 }
 
 /// Where the results go: the process's standard output, moved to a
@@ -316,7 +334,14 @@ fn main() -> ExitCode {
                 // A scenario problem found against the FMUs (a misspelt
                 // variable, an unknown instance) is named where it is written.
                 (RunError::Scenario(message), Ok(text)) => {
-                    match line_of_port(&text, message, scenario.fmu.keys().map(String::as_str)) {
+                    let instances = scenario.fmu.keys().map(String::as_str);
+                    let paths = scenario
+                        .fmu
+                        .iter()
+                        .map(|(k, f)| (k.as_str(), f.path.as_path()));
+                    match line_of_port(&text, message, instances)
+                        .or_else(|| line_of_fmu_path(&text, message, paths))
+                    {
                         Some(line) => eprintln!("{}:{line}: {message}", scenario_path.display()),
                         None => eprintln!("{e}"),
                     }
@@ -359,7 +384,7 @@ fn main() -> ExitCode {
 
 #[cfg(test)]
 mod tests {
-    use super::line_of_port;
+    use super::{line_of_fmu_path, line_of_port};
 
     const SCENARIO: &str = r#"duration = 1.0
 # feedbak_y in a comment is not where it is written
@@ -392,5 +417,20 @@ offset = 0.0
         assert_eq!(line("controller.gain: c.fmu has no variable"), None);
         assert_eq!(line("stage.feedbak_y: no FMU instance"), None);
         assert_eq!(line("/tmp/c.fmu: cannot be opened"), None);
+    }
+
+    #[test]
+    fn a_missing_fmu_is_found_at_its_path() {
+        let paths = [
+            ("plant", std::path::Path::new("/work/p.fmu")),
+            ("controller", std::path::Path::new("/work/c.fmu")),
+        ];
+        let at = |message| line_of_fmu_path(SCENARIO, message, paths.into_iter());
+        assert_eq!(
+            at("/work/c.fmu: No such file or directory (os error 2)"),
+            Some(8)
+        );
+        assert_eq!(at("/work/p.fmu: not an FMU archive"), Some(4));
+        assert_eq!(at("/work/other.fmu: No such file"), None);
     }
 }

@@ -30,7 +30,7 @@
 //! would reach under 10 µm). Under it H_YY reaches only 31 µm against the
 //! stated 149.27 µm, and no common unit makes both printed actuator models
 //! match both strokes; so the preset scales each actuator model's output (p
-//! and q) to its stated stroke (X by 1.047, Y by 4.82) and takes the coupling
+//! and q) to its stated stroke (X by 1.253, Y by 4.884) and takes the coupling
 //! models as printed.
 //!
 //! # From the printed (rate-dependent) reading to the plant's
