@@ -952,7 +952,9 @@ def _noise_seed(scenario: dict):
     for entry in scenario.get("fmu", {}).values():
         seed = entry.get("parameters", {}).get("noise.seed")
         if seed is not None:
-            return int(seed)
+            # A seed that is not a whole number is the master's to refuse
+            # (check_scenarios names it at its line); the column stays empty.
+            return int(seed) if _is_number(seed) and float(seed).is_integer() else None
     return None
 
 
@@ -1297,11 +1299,43 @@ def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> None:
             unread = re.match(r"^<stdin>:\d+:\d+: ([^:\s]+): (.*)$", str(e), re.DOTALL)
             if unread:
                 key, problem = unread.groups()
-                line = _template_line(_SpecLines(spec.text), key)
+                lines = _SpecLines(spec.text)
+                # A named case's patch wins over the template: name it first.
+                patched = [(name, case) for name, case in signature
+                           if _patch_sets(_case_patch(spec, name, case), key.split("."))]
+                if patched:
+                    name, case = patched[-1]
+                    span = lines.table(f"variable.values.{case}")
+                    line = lines.key("patch", span) if span else None
+                    where = f"{spec.path}:{line}" if line else str(spec.path)
+                    raise SpecError(f"{where}: {name} = {case}: patch {key}: {problem}") from None
+                line = _template_line(lines, key)
                 where = f"{spec.path}:{line}" if line else str(spec.path)
-                raise SpecError(f"{where}: template {key}: {problem} (in the scenario of "
+                source = "template" if line else "scenario"
+                raise SpecError(f"{where}: {source} {key}: {problem} (in the scenario of "
                                 f"{cases})") from None
             raise SpecError(f"{spec.path}: the scenario of {cases} does not run: {e}") from None
+
+
+def _case_patch(spec: Spec, variable: str, case: str) -> dict:
+    """The patch of the named case `case` of variable `variable`."""
+    for v in spec.variables:
+        if v.name == variable:
+            for value in v.values:
+                if isinstance(value, Case) and value.name == case:
+                    return value.patch
+    return {}
+
+
+def _patch_sets(patch: dict, parts: list[str]) -> bool:
+    """Whether `patch` sets the scenario key whose dotted path is split into
+    `parts` (a key may itself hold dots: "controller.x_ref", "noise.seed")."""
+    if not parts:
+        return True
+    if not isinstance(patch, dict):
+        return False
+    return any(".".join(parts[:n]) in patch and _patch_sets(patch[".".join(parts[:n])], parts[n:])
+               for n in range(1, len(parts) + 1))
 
 
 def _template_line(lines: _SpecLines, key: str) -> int | None:

@@ -646,11 +646,25 @@ TEMPLATE_VALUES = {
     "parameter": ('"noise.enabled" = true }', '"noise.enabled" = true, "mode.x.damping" = "low" }',
                   'template fmu.plant.parameters.mode.x.damping: invalid type: string "low", '
                   "expected a number, or true or false (in the scenario of decoupling = off)"),
+    # A named case's patch, not the template, gives the value.
+    "patch": ("parameters = {{ decoupling = true }}".replace("{{", "{").replace("}}", "}"),
+              'parameters = { decoupling = "yes" }',
+              'decoupling = on: patch fmu.controller.parameters.decoupling: invalid type: '
+              'string "yes", expected a number, or true or false'),
     # A parameter the Monte Carlo perturbs is read before the master sees it.
     "perturbed": ('"noise.enabled" = true }', '"noise.enabled" = true, "amplifier.gain" = "high" }',
                   "plant.amplifier.gain = 'high': the Monte Carlo perturbs it, so it must be a "
                   "number"),
 }
+
+
+#: SPEC without its Monte Carlo study, whose seed_parameter would set
+#: noise.seed over the template's.
+GRID_SPEC = re.sub(r"\[monte_carlo\].*?(?=\n\[template\])", "", SPEC, flags=re.DOTALL)
+TEMPLATE_VALUES["seed"] = (
+    '"noise.enabled" = true }', '"noise.enabled" = true, "noise.seed" = "s" }',
+    'template fmu.plant.parameters.noise.seed: invalid type: string "s", expected a number, '
+    "or true or false (in the scenario of decoupling = off)")
 
 
 @pytest.mark.parametrize("case", TEMPLATE_VALUES)
@@ -660,8 +674,10 @@ def test_a_template_value_of_the_wrong_type_is_named_by_its_key(tmp_path, case):
     column of the JSON the spec's reader never sees (nor by a traceback, as
     a perturbed parameter's string was)."""
     old, new, message = TEMPLATE_VALUES[case]
-    text = SPEC.replace(old, new)
-    assert text != SPEC
+    spec = GRID_SPEC if case == "seed" else SPEC
+    assert "[monte_carlo]" not in GRID_SPEC and "[template]" in GRID_SPEC
+    text = spec.replace(old, new)
+    assert text != spec
     bad = _written(tmp_path / "bad.toml", text)
     line = next(n for n, row in enumerate(text.splitlines(), 1) if new.split("\n")[0] in row)
     done = subprocess.run([sys.executable, "-m", "demo.sweep", str(bad), "--out",

@@ -70,7 +70,7 @@ impl ParameterValue {
         match (kind, self) {
             ("Real", ParameterValue::Number(v)) => Ok(TypedValue::Real(v)),
             ("Integer", ParameterValue::Number(v))
-                if v.fract() == 0.0 && v.abs() <= f64::from(i32::MAX) =>
+                if v.fract() == 0.0 && (f64::from(i32::MIN)..=f64::from(i32::MAX)).contains(&v) =>
             {
                 Ok(TypedValue::Integer(v as i32))
             }
@@ -134,16 +134,22 @@ pub fn json_problem(error: &serde_json::Error) -> String {
     }
 }
 
-/// The name of `names` that `wanted` most likely means: the only one with
-/// the same name inside its group (a group renamed, as PiezoController's
-/// `decoupling.dk[1]` became `compensation.dk[1]`), else the only one
-/// closest to it within a few typing errors. None when no name stands out.
+/// The name of `names` that `wanted` most likely means: the only one that
+/// ends with it as a whole part (`x.p` for `bouc_wen.x.p`), else the only
+/// one with the same name inside its group (a group renamed, as
+/// PiezoController's `decoupling.dk[1]` became `compensation.dk[1]`), else
+/// the only one closest to it within a typing error per four characters.
+/// None when no name stands out.
 pub fn meant<'a>(wanted: &str, names: impl Iterator<Item = &'a str> + Clone) -> Option<&'a str> {
     fn only<'a>(mut found: impl Iterator<Item = &'a str>) -> Option<&'a str> {
         match (found.next(), found.next()) {
             (Some(name), None) => Some(name),
             _ => None,
         }
+    }
+    let tail = format!(".{wanted}");
+    if let Some(name) = only(names.clone().filter(|name| name.ends_with(&tail))) {
+        return Some(name);
     }
     let inside = |name: &str| name.split_once('.').map(|(_, rest)| rest.to_owned());
     if let Some(leaf) = inside(wanted)
@@ -155,7 +161,8 @@ pub fn meant<'a>(wanted: &str, names: impl Iterator<Item = &'a str> + Clone) -> 
     {
         return Some(name);
     }
-    let typos = (wanted.chars().count() / 5).max(2);
+    // Short names get one edit: two would make most of `x.p` another name.
+    let typos = (wanted.chars().count() / 4).max(1);
     let distance = |name: &str| strsim::levenshtein(wanted, name);
     let closest = names.clone().map(distance).min().filter(|&d| d <= typos)?;
     only(names.filter(|name| distance(name) == closest))
@@ -184,6 +191,13 @@ mod tests {
         );
         assert_eq!(meant("feedbak_y", names.clone()), Some("feedback_y"));
         assert_eq!(meant("x_reff", names.clone()), Some("x_ref"));
+        // A name given without its group is found by its ending, not by
+        // the two-edit neighbour `x.c`.
+        let names = ["x.c", "bouc_wen.x.p", "y.c", "translation.kp"];
+        assert_eq!(meant("x.p", names.into_iter()), Some("bouc_wen.x.p"));
+        // y's proportional gain is translation.kp's: its group renamed.
+        assert_eq!(meant("y.kp", names.into_iter()), Some("translation.kp"));
+        assert_eq!(meant("z.q", names.into_iter()), None);
     }
 
     #[test]
@@ -201,6 +215,14 @@ mod tests {
         assert_eq!(Number(3.0).typed("Integer"), Ok(TypedValue::Integer(3)));
         assert_eq!(Number(3.5).typed("Integer"), Err("a whole number"));
         assert_eq!(Number(1e10).typed("Integer"), Err("a whole number"));
+        assert_eq!(
+            Number(-2147483648.0).typed("Integer"),
+            Ok(TypedValue::Integer(i32::MIN))
+        );
+        assert_eq!(
+            Number(-2147483649.0).typed("Integer"),
+            Err("a whole number")
+        );
         assert_eq!(
             Boolean(true).typed("Boolean"),
             Ok(TypedValue::Boolean(true))

@@ -156,7 +156,12 @@ fn line_of_fmu_path<'a>(
 ) -> Option<usize> {
     let (instance, _) =
         paths.find(|(_, path)| message.starts_with(&format!("{}: ", path.display())))?;
-    line_in_instance_table(text, instance, "path")
+    line_in_instance_table(text, instance, "path").or_else(|| {
+        // A JSON scenario: the first "path" after the instance's key.
+        let key = text.find(&format!("\"{instance}\""))?;
+        let path = key + text[key..].find("\"path\"")?;
+        Some(text[..path].matches('\n').count() + 1)
+    })
 }
 
 /// Where the results go: the process's standard output, moved to a
@@ -432,5 +437,16 @@ offset = 0.0
         );
         assert_eq!(at("/work/p.fmu: not an FMU archive"), Some(4));
         assert_eq!(at("/work/other.fmu: No such file"), None);
+        let json = "{\"duration\": 1.0, \"fmu\": {\n  \"plant\": {\"path\": \"p.fmu\"},\n  \
+                    \"controller\":\n    {\"path\": \"c.fmu\"}}}";
+        let at = |message| line_of_fmu_path(json, message, paths.into_iter());
+        assert_eq!(
+            at("/work/p.fmu: No such file or directory (os error 2)"),
+            Some(2)
+        );
+        assert_eq!(
+            at("/work/c.fmu: No such file or directory (os error 2)"),
+            Some(4)
+        );
     }
 }
