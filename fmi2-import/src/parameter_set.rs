@@ -94,6 +94,16 @@ impl Instance<'_> {
     }
 }
 
+impl crate::Fmu {
+    /// What an unknown name's message adds: ` (did you mean "x.c"?)` with
+    /// the variable the user most likely meant ([`meant`]), else nothing.
+    pub fn hint_for(&self, unknown: &str) -> String {
+        meant(unknown, self.variables.iter().map(|v| v.name.as_str()))
+            .map(|name| format!(" (did you mean {name:?}?)"))
+            .unwrap_or_default()
+    }
+}
+
 /// Reads a parameter set `{ "<FMI name>": value, ... }`, sorted by name. A
 /// malformed file is named with its line and column.
 pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, String> {

@@ -18,7 +18,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::time::Instant;
 
-use fmi2_import::parameter_set::{TypedValue, meant};
+use fmi2_import::parameter_set::TypedValue;
 use fmi2_import::{Causality, FmuArchive, Instance, LogRecord, OK, VariableInfo, WARNING};
 
 use crate::metrics::{self, Metrics};
@@ -186,10 +186,7 @@ impl OpenFmus {
 impl Loaded<'_> {
     fn variable(&self, variable: &str, port: &str) -> Result<&VariableInfo, RunError> {
         self.archive.fmu.find(variable).ok_or_else(|| {
-            let names = self.archive.fmu.variables.iter().map(|v| v.name.as_str());
-            let hint = meant(variable, names)
-                .map(|name| format!(" (did you mean {name:?}?)"))
-                .unwrap_or_default();
+            let hint = self.archive.fmu.hint_for(variable);
             RunError::Scenario(format!(
                 "{port}: {} has no variable {variable:?}{hint}",
                 self.archive.path.display()

@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fmi2_import::parameter_set::{TypedValue, meant};
+use fmi2_import::parameter_set::TypedValue;
 use fmi2_import::{FmuArchive, Instance, OK, WARNING};
 use piezo_models::{ControllerParams, PiezoController};
 
@@ -88,13 +88,9 @@ impl PlantFmu {
                 problem,
             };
             let fmu = &self.archive.fmu;
-            let variable = fmu.find(name).ok_or_else(|| {
-                let names = fmu.variables.iter().map(|v| v.name.as_str());
-                let hint = meant(name, names)
-                    .map(|name| format!(" (did you mean {name:?}?)"))
-                    .unwrap_or_default();
-                problem(format!("no parameter {name}{hint}"))
-            })?;
+            let variable = fmu
+                .find(name)
+                .ok_or_else(|| problem(format!("no parameter {name}{}", fmu.hint_for(name))))?;
             let typed = value.typed(variable.kind).map_err(|wanted| {
                 let kind = variable.kind;
                 problem(format!(
