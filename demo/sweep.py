@@ -46,6 +46,7 @@ import ast
 import atexit
 import contextlib
 import copy
+import functools
 import hashlib
 import io
 import itertools
@@ -772,17 +773,23 @@ def _excluded(point: dict, rules: list[dict]) -> bool:
     return any(all(point.get(k) == v for k, v in rule.items()) for rule in rules)
 
 
-def _plant_parameters(fmu_path: Path) -> dict:
-    """Start value and declared range (min, max; None when open) of every
-    Real parameter of an FMU (fmpy reads the modelDescription)."""
+@functools.cache
+def _model_variables(fmu_path: Path) -> list:
+    """The variables of an FMU's modelDescription (fmpy reads it), read once
+    per file however many studies ask."""
     from fmpy import read_model_description
 
+    return read_model_description(str(fmu_path)).modelVariables
+
+
+def _plant_parameters(fmu_path: Path) -> dict:
+    """Start value and declared range (min, max; None when open) of every
+    Real parameter of an FMU."""
     def bound(value):
         return None if value is None else float(value)
 
-    description = read_model_description(str(fmu_path))
     return {v.name: (float(v.start), bound(v.min), bound(v.max))
-            for v in description.modelVariables
+            for v in _model_variables(fmu_path)
             if v.causality == "parameter" and v.type == "Real" and v.start is not None}
 
 
@@ -1098,11 +1105,8 @@ def read_rows(out: Path, study: str) -> list[dict]:
 def _fmu_variable_units(path: Path) -> dict[str, str | None]:
     """The unit of every variable of an FMU, from its modelDescription
     (None where it declares none)."""
-    from fmpy import read_model_description
-
-    description = read_model_description(str(path))
     return {v.name: v.unit or (v.declaredType.unit if v.declaredType else None)
-            for v in description.modelVariables}
+            for v in _model_variables(path)}
 
 
 def _unit_at(keys: tuple, fmu_units: dict[str, dict]) -> str | None:
