@@ -1300,13 +1300,14 @@ def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> None:
             # scenario it was sent (`<stdin>:1:253: metrics.driven: ...`): the
             # place in that JSON means nothing to the spec's reader; the key's
             # line in the spec's template does.
-            unread = re.match(r"^<stdin>:\d+:\d+: ([^:\s]+): (.*)$", str(e), re.DOTALL)
+            unread = re.match(rf"^<stdin>:\d+:\d+: ((?:{_QUOTED_KEY}|[^:\s\"])+): (.*)$", str(e),
+                              re.DOTALL)
             if unread:
                 key, problem = unread.groups()
                 lines = _SpecLines(spec.text)
                 # A named case's patch wins over the template: name it first.
                 patched = [(name, case) for name, case in signature
-                           if _patch_sets(_case_patch(spec, name, case), key.split("."))]
+                           if _patch_sets(_case_patch(spec, name, case), _key_parts(key))]
                 if patched:
                     name, case = patched[-1]
                     span = lines.table(f"variable.values.{case}")
@@ -1332,22 +1333,31 @@ def _case_patch(spec: Spec, variable: str, case: str) -> dict:
 
 
 def _patch_sets(patch: dict, parts: list[str]) -> bool:
-    """Whether `patch` sets the scenario key whose dotted path is split into
-    `parts` (a key may itself hold dots: "controller.x_ref", "noise.seed")."""
+    """Whether `patch` sets the scenario key whose path is `parts`."""
     if not parts:
         return True
-    if not isinstance(patch, dict):
-        return False
-    return any(".".join(parts[:n]) in patch and _patch_sets(patch[".".join(parts[:n])], parts[n:])
-               for n in range(1, len(parts) + 1))
+    return isinstance(patch, dict) and parts[0] in patch and _patch_sets(patch[parts[0]], parts[1:])
+
+
+#: A quoted key of a path the master names (`parameters."noise.seed"`): a
+#: JSON string, whose escapes are TOML's basic string's.
+_QUOTED_KEY = r'"(?:[^"\\]|\\.)*"'
+
+
+def _key_parts(key: str) -> list[str]:
+    """The keys of a path as the master writes it, `fmu.plant.parameters."noise.seed"`
+    -> ["fmu", "plant", "parameters", "noise.seed"]: dots part the keys, but
+    not in a quoted one (an FMI name that holds dots or brackets)."""
+    return [json.loads(part) if part.startswith('"') else part
+            for part in re.findall(rf"{_QUOTED_KEY}|[^.\"]+", key)]
 
 
 def _template_line(lines: _SpecLines, key: str) -> int | None:
     """The line of the spec that sets the scenario key `key` (a dotted path,
-    `metrics.driven`, `fmu.plant.parameters.noise.seed`) in its [template]:
+    `metrics.driven`, `fmu.plant.parameters."noise.seed"`) in its [template]:
     the key in the deepest table of the path written as a header, or None
     where the template does not write it (a named case's patch)."""
-    parts = key.split(".")
+    parts = _key_parts(key)
     for depth in range(len(parts) - 1, -1, -1):
         table = ".".join(["template", *parts[:depth]])
         span = lines.table(table)

@@ -639,12 +639,13 @@ def test_every_key_of_the_spec_format_refuses_a_wrong_type_at_its_line(tmp_path)
 #: (the template's text, replaced by, the message after `file:line: `).
 TEMPLATE_VALUES = {
     "metrics": ('driven = "y"', "driven = true",
-                "template metrics.driven: expected value (in the scenario of decoupling = off)"),
+                "template metrics.driven: invalid type: boolean `true`, expected one of `y`, `x`, "
+                "`theta`, `xy`, `ytheta` (in the scenario of decoupling = off)"),
     "signal": ("offset = 6.0\nsines", 'offset = "text"\nsines',
-               'template signal.controller.y_ref.offset: invalid type: string "text", expected '
+               'template signal."controller.y_ref".offset: invalid type: string "text", expected '
                "f64 (in the scenario of decoupling = off)"),
     "parameter": ('"noise.enabled" = true }', '"noise.enabled" = true, "mode.x.damping" = "low" }',
-                  'template fmu.plant.parameters.mode.x.damping: invalid type: string "low", '
+                  'template fmu.plant.parameters."mode.x.damping": invalid type: string "low", '
                   "expected a number, or true or false (in the scenario of decoupling = off)"),
     # A named case's patch, not the template, gives the value.
     "patch": ("parameters = {{ decoupling = true }}".replace("{{", "{").replace("}}", "}"),
@@ -663,7 +664,7 @@ TEMPLATE_VALUES = {
 GRID_SPEC = re.sub(r"\[monte_carlo\].*?(?=\n\[template\])", "", SPEC, flags=re.DOTALL)
 TEMPLATE_VALUES["seed"] = (
     '"noise.enabled" = true }', '"noise.enabled" = true, "noise.seed" = "s" }',
-    'template fmu.plant.parameters.noise.seed: invalid type: string "s", expected a number, '
+    'template fmu.plant.parameters."noise.seed": invalid type: string "s", expected a number, '
     "or true or false (in the scenario of decoupling = off)")
 
 

@@ -116,8 +116,10 @@ pub struct Connection {
     pub to: String,
 }
 
-/// Which experiment of the papers a run is, for its metrics.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+/// Which experiment of the papers a run is, for its metrics. Read by hand
+/// ([`Driven::NAMES`]): serde_json's derived reading answers a value of
+/// another kind (`driven = true`) with a bare "expected value".
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum Driven {
     /// A single-axis run on y: tracking in y, coupling in x, x2, x3 (Table 3).
@@ -130,6 +132,38 @@ pub enum Driven {
     Xy,
     /// y and theta_z together (eq. 16).
     Ytheta,
+}
+
+impl Driven {
+    /// Every value, and its name in a scenario (as Serialize writes it; a
+    /// test keeps the two equal).
+    pub const ALL: [Driven; 5] = [
+        Driven::Y,
+        Driven::X,
+        Driven::Theta,
+        Driven::Xy,
+        Driven::Ytheta,
+    ];
+    pub const NAMES: [&'static str; 5] = ["y", "x", "theta", "xy", "ytheta"];
+}
+
+impl<'de> Deserialize<'de> for Driven {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Name;
+        impl serde::de::Visitor<'_> for Name {
+            type Value = Driven;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                write!(f, "one of `{}`", Driven::NAMES.join("`, `"))
+            }
+            fn visit_str<E: serde::de::Error>(self, name: &str) -> Result<Driven, E> {
+                let known = Driven::NAMES.iter().position(|n| *n == name);
+                known
+                    .map(|i| Driven::ALL[i])
+                    .ok_or_else(|| E::unknown_variant(name, &Driven::NAMES))
+            }
+        }
+        deserializer.deserialize_str(Name)
+    }
 }
 
 /// How the metrics are taken.
@@ -489,11 +523,47 @@ fn from_json(text: &str) -> Result<Scenario, (usize, usize, String)> {
     };
     let mut reader = serde_json::Deserializer::from_str(text);
     let scenario = serde_path_to_error::deserialize(&mut reader).map_err(|e| {
-        let key = e.path().to_string();
+        let key = key_path(e.path());
         located(&key, e.into_inner())
     })?;
     reader.end().map_err(|e| located(".", e))?;
     Ok(scenario)
+}
+
+/// A key's path as a scenario writes it: `fmu.plant.parameters."noise.seed"`.
+/// serde_path_to_error joins every key with dots, so an FMI name that holds
+/// dots or brackets (`noise.seed`, `pzt[2].beta`) would read as several
+/// levels; such a key is quoted, as TOML quotes it.
+fn key_path(path: &serde_path_to_error::Path) -> String {
+    use serde_path_to_error::Segment;
+    if path.iter().next().is_none() {
+        return ".".to_owned();
+    }
+    let bare = |key: &str| {
+        !key.is_empty()
+            && key
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    };
+    let mut text = String::new();
+    for segment in path.iter() {
+        match segment {
+            Segment::Seq { index } => text.push_str(&format!("[{index}]")),
+            segment => {
+                if !text.is_empty() {
+                    text.push('.');
+                }
+                match segment {
+                    Segment::Map { key } if !bare(key) => {
+                        // JSON's escapes are TOML's basic string's.
+                        text.push_str(&serde_json::to_string(key).unwrap_or_default())
+                    }
+                    segment => text.push_str(&segment.to_string()),
+                }
+            }
+        }
+    }
+    text
 }
 
 /// Reads a parameter set `{ "<FMI name>": value, ... }` (the format of
@@ -547,6 +617,70 @@ path = "c.fmu"
         assert_eq!((s.step, s.preview, s.steps()), (1e-4, 2, 10_000));
         assert_eq!(s.connections(), stage_wiring());
         assert_eq!(s.connections().len(), 6);
+    }
+
+    #[test]
+    fn driven_reads_the_names_it_writes() {
+        for (driven, name) in Driven::ALL.iter().zip(Driven::NAMES) {
+            assert_eq!(
+                serde_json::to_string(driven).unwrap(),
+                format!("\"{name}\"")
+            );
+            assert_eq!(
+                serde_json::from_str::<Driven>(&format!("\"{name}\"")).unwrap(),
+                *driven
+            );
+        }
+    }
+
+    #[test]
+    fn a_driven_axis_of_another_kind_or_name_says_what_it_may_be() {
+        let base = r#"{"duration": 1.0, "fmu": {"plant": {"path": "p.fmu"},
+            "controller": {"path": "c.fmu"}}, "metrics": {"driven": DRIVEN}}"#;
+        for (value, problem) in [
+            (
+                "true",
+                "metrics.driven: invalid type: boolean `true`, expected one of `y`, `x`, `theta`, `xy`, `ytheta`",
+            ),
+            (
+                "\"z\"",
+                "metrics.driven: unknown variant `z`, expected one of `y`, `x`, `theta`, `xy`, `ytheta`",
+            ),
+        ] {
+            let text = base.replace("DRIVEN", value);
+            let e = Scenario::parse(&text, true, "s.json").unwrap_err().0;
+            // The line of the value, and the column serde_json stopped at.
+            assert!(
+                e.starts_with("s.json:2:") && e.ends_with(&format!(": {problem}")),
+                "{e}"
+            );
+            let toml = format!("{MINIMAL}\n[metrics]\ndriven = {value}\n");
+            let e = Scenario::parse(&toml, false, "s.toml").unwrap_err().0;
+            assert!(e.starts_with("s.toml:9:10: "), "{e}");
+            assert!(
+                e.contains("expected one of `y`, `x`, `theta`, `xy`, `ytheta`"),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_key_holding_dots_or_brackets_is_quoted_in_its_path() {
+        let text = r#"{"duration": 1.0, "fmu": {"plant": {"path": "p.fmu",
+            "parameters": {"noise.enabled": true, "pzt[2].beta": "high"}},
+            "controller": {"path": "c.fmu", "parameters": {"decoupling": "yes"}}}}"#;
+        let e = Scenario::parse(text, true, "s.json").unwrap_err().0;
+        assert!(
+            e.starts_with("s.json:2:71: fmu.plant.parameters.\"pzt[2].beta\": invalid type"),
+            "{e}"
+        );
+        let e = Scenario::parse(&text.replace("\"high\"", "1.0"), true, "s.json")
+            .unwrap_err()
+            .0;
+        assert!(
+            e.contains(": fmu.controller.parameters.decoupling: invalid type"),
+            "{e}"
+        );
     }
 
     #[test]
