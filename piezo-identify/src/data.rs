@@ -160,6 +160,10 @@ pub struct ReadOptions {
 pub struct Roles {
     pub input: &'static str,
     pub output: &'static str,
+    /// What each role's column measures, when the roles differ in it: a
+    /// column left to the default is then chosen by what its header says it
+    /// measures (its unit, or its name), not by its place alone.
+    pub quantities: Option<(Quantity, Quantity)>,
 }
 
 impl Roles {
@@ -167,7 +171,24 @@ impl Roles {
     pub const INPUT_OUTPUT: Roles = Roles {
         input: "input",
         output: "output",
+        quantities: Some((Quantity::Voltage, Quantity::Length)),
     };
+}
+
+/// What a column measures, as far as its header says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quantity {
+    Voltage,
+    Length,
+}
+
+impl Quantity {
+    fn name(self) -> &'static str {
+        match self {
+            Quantity::Voltage => "a voltage",
+            Quantity::Length => "a length",
+        }
+    }
 }
 
 /// A voltage/displacement record sampled at a fixed period.
@@ -239,6 +260,15 @@ pub enum Problem {
         "no column is left for the {role}: the header names {width}, and the others are taken or name a time (give --{role})"
     )]
     NoDefaultColumn { role: &'static str, width: usize },
+    #[error(
+        "the header names {count} columns of {quantity} that could be the {role} ({names}): give --{role}"
+    )]
+    AmbiguousDefault {
+        role: &'static str,
+        quantity: &'static str,
+        count: usize,
+        names: String,
+    },
     #[error("field {field} is both the {first} and the {second} column")]
     SameColumn {
         field: usize,
@@ -683,6 +713,93 @@ fn conversion_of(unit: &str) -> Option<(f64, &'static str)> {
     })
 }
 
+/// The unit column `index` is written in: its field of the units row, else
+/// the unit its header name ends with, in brackets (`Displacement [nm]`),
+/// after a slash (`u/mV`) or as a last word that is a length or voltage unit
+/// (`displacement_nm`, `Spannung mV`).
+fn written_unit(
+    index: usize,
+    header: Option<&(usize, Vec<String>)>,
+    units: Option<&(usize, Vec<String>)>,
+) -> Option<String> {
+    let from_row = units
+        .and_then(|(_, row)| row.get(index))
+        .map(|unit| bare_unit(unit))
+        .filter(|unit| !unit.is_empty());
+    let name = header.and_then(|(_, names)| names.get(index));
+    from_row
+        .or_else(|| name.and_then(|n| unit_in_name(n)).map(bare_unit))
+        .or_else(|| name.and_then(|n| length_or_voltage_word(n)))
+        .map(str::to_owned)
+}
+
+/// A length or voltage unit written as the last word of a column name
+/// (`displacement_um`, `Weg nm`), case as written: a lower-case `v` or `m`
+/// word is as often something else (`u_v`, `pos_m` are taken: `m` is only
+/// metres with a word before it).
+fn length_or_voltage_word(name: &str) -> Option<&str> {
+    let name = name.trim_end();
+    let separator = |c: char| c == '_' || c == ',' || c.is_whitespace();
+    let at = name.rfind(separator)?;
+    let word = name[at..].trim_start_matches(separator);
+    let known = matches!(
+        word,
+        "m" | "mm" | "um" | "µm" | "μm" | "nm" | "V" | "mV" | "kV"
+    );
+    (at > 0 && known).then_some(word)
+}
+
+/// What column `index` measures, as its header says: a length or voltage
+/// unit ([`written_unit`]), else a word of its name (`Displacement`,
+/// `Spannung`); None when the header says neither.
+fn column_quantity(
+    index: usize,
+    header: Option<&(usize, Vec<String>)>,
+    units: Option<&(usize, Vec<String>)>,
+) -> Option<Quantity> {
+    if let Some(unit) = written_unit(index, header, units) {
+        return match conversion_of(&unit) {
+            Some((_, "V")) => Some(Quantity::Voltage),
+            Some(_) => Some(Quantity::Length),
+            None => None,
+        };
+    }
+    let name = header.and_then(|(_, names)| names.get(index))?;
+    name.split(|c: char| !c.is_alphanumeric())
+        .map(str::to_lowercase)
+        .find_map(|word| match word.as_str() {
+            "voltage" | "volt" | "volts" | "spannung" | "tension" => Some(Quantity::Voltage),
+            "displacement" | "position" | "weg" | "auslenkung" | "distance" | "stroke"
+            | "deflection" | "elongation" => Some(Quantity::Length),
+            _ => None,
+        })
+}
+
+/// Whether a header name is a row number's: empty (the index pandas writes
+/// unnamed), or `Sample`, `Index`, `No.`, `#` and the like.
+fn names_a_row_number(name: &str) -> bool {
+    let name = name.trim().trim_end_matches('.').to_lowercase();
+    matches!(
+        name.as_str(),
+        "" | "#"
+            | "n"
+            | "no"
+            | "nr"
+            | "index"
+            | "idx"
+            | "sample"
+            | "samples"
+            | "sample number"
+            | "sample no"
+            | "sample #"
+            | "row"
+            | "point"
+            | "points"
+            | "punkt"
+            | "messpunkt"
+    )
+}
+
 /// Slowest sampling [s] a time column with no unit is read in seconds at:
 /// once a second, far below what a loop of a 0.1-10 Hz drive needs.
 const SLOWEST_ASSUMED_PERIOD: f64 = 1.0;
@@ -1044,7 +1161,7 @@ pub fn parse_record_with_columns(
                         },
                     ));
                 }
-                let columns = resolve_columns(options, header.as_ref(), x_is_time)
+                let columns = resolve_columns(options, header.as_ref(), units.as_ref(), x_is_time)
                     .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
                 if let Some(time) = columns.time {
                     time_unit = Some(
@@ -1195,7 +1312,7 @@ pub fn parse_record_with_columns(
     // Columns named in the options must exist even in a file without data.
     let columns = match resolved {
         Some(columns) => columns,
-        None => resolve_columns(options, header.as_ref(), x_is_time)
+        None => resolve_columns(options, header.as_ref(), units.as_ref(), x_is_time)
             .map_err(|(line, problem)| malformed(line.unwrap_or(last_line), problem))?,
     };
     if input.len() < MINIMUM_ROWS {
@@ -1237,11 +1354,7 @@ pub fn parse_record_with_columns(
             .map(|unit| bare_unit(unit))
             .filter(|unit| !unit.is_empty())
             .map(str::to_owned);
-        let written_in = unit.clone().or_else(|| {
-            name.as_deref()
-                .and_then(unit_in_name)
-                .map(|u| bare_unit(u).to_owned())
-        });
+        let written_in = written_unit(index, header.as_ref(), units.as_ref());
         let converted = written_in.and_then(|from| {
             let (factor, to) = conversion_of(&from)?;
             (factor != 1.0).then_some(Conversion { from, to, factor })
@@ -1405,6 +1518,7 @@ impl ResolvedColumns {
 fn resolve_columns(
     options: &ReadOptions,
     header: Option<&(usize, Vec<String>)>,
+    units: Option<&(usize, Vec<String>)>,
     x_is_time: bool,
 ) -> Result<ResolvedColumns, (Option<usize>, Problem)> {
     let time_named = |name: &String| names_a_time(name) || (x_is_time && name == LABVIEW_X_COLUMN);
@@ -1492,9 +1606,43 @@ fn resolve_columns(
     // output either: with --rate given, it would be fitted as a voltage.
     let names_time =
         |i: usize| header.is_some_and(|(_, names)| names.get(i).is_some_and(time_named));
-    let default = |role: &'static str, taken: &[Option<usize>]| {
+    // Nor is a row number (pandas' unnamed index, `Sample`, `Index`).
+    let numbers_rows = |i: usize| {
+        header.is_some_and(|(_, names)| names.get(i).is_some_and(|n| names_a_row_number(n)))
+    };
+    let measures = |i: usize| column_quantity(i, header, units);
+    let default = |role: &'static str, wanted: Option<Quantity>, taken: &[Option<usize>]| {
+        let free = |i: &usize| !taken.contains(&Some(*i)) && !names_time(*i) && !numbers_rows(*i);
+        // A role that measures one quantity takes the column whose header
+        // says so; with none, the first whose header does not say it
+        // measures the other role's quantity.
+        if let (Some(wanted), Some((line, names))) = (wanted, header) {
+            let of_kind: Vec<usize> = (0..names.len())
+                .filter(free)
+                .filter(|&i| measures(i) == Some(wanted))
+                .collect();
+            match of_kind.as_slice() {
+                [one] => return Ok(*one),
+                [] => {}
+                several => {
+                    return Err((
+                        Some(*line),
+                        Problem::AmbiguousDefault {
+                            role,
+                            quantity: wanted.name(),
+                            count: several.len(),
+                            names: several
+                                .iter()
+                                .map(|&i| format!("\"{}\"", names[i]))
+                                .collect::<Vec<_>>()
+                                .join(", "),
+                        },
+                    ));
+                }
+            }
+        }
         let free = (0..)
-            .find(|i| !taken.contains(&Some(*i)) && !names_time(*i))
+            .find(|i| free(i) && (wanted.is_none() || measures(*i).is_none()))
             .expect("a free column index");
         match width {
             Some(width) if free >= width => Err((line, Problem::NoDefaultColumn { role, width })),
@@ -1503,11 +1651,19 @@ fn resolve_columns(
     };
     let input = match given_input {
         Some(input) => input,
-        None => default(options.roles.input, &[time, given_output])?,
+        None => default(
+            options.roles.input,
+            options.roles.quantities.map(|q| q.0),
+            &[time, given_output],
+        )?,
     };
     let output = match given_output {
         Some(output) => output,
-        None => default(options.roles.output, &[time, Some(input)])?,
+        None => default(
+            options.roles.output,
+            options.roles.quantities.map(|q| q.1),
+            &[time, Some(input)],
+        )?,
     };
     let roles = [
         (options.roles.input, Some(input)),
@@ -2337,11 +2493,7 @@ mod tests {
             assert_eq!((used.input.index, used.output.index), (1, 2), "{name}");
         }
         // Not times: a temperature, a quantity with a unit-like suffix.
-        for header in [
-            "tension;Voltage [V];Displacement [um]",
-            "T [°C];u;y",
-            "u_s;y_min;y",
-        ] {
+        for header in ["tension;u;y", "T [°C];u;y", "u_s;y_min;y"] {
             let text = time_u_y_rows(header, 0.005, ";");
             let (_, used) =
                 parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults()).unwrap();
@@ -2352,6 +2504,61 @@ mod tests {
         let (record, _) =
             parse_record_with_columns(&text, Path::new("d.csv"), &timed_defaults()).unwrap();
         assert!((record.sample_period - 0.005).abs() < 1e-12);
+    }
+
+    /// A column left to the default goes by what the header says it
+    /// measures: a voltage is the input and a length the output wherever
+    /// they stand, a row number is neither, and two columns that could take
+    /// a role are refused rather than one fitted silently.
+    #[test]
+    fn default_columns_follow_the_units_and_names_of_the_header() {
+        for (header, columns) in [
+            ("Displacement [um];Voltage [V];t", (1, 0)),
+            ("Sample;Voltage [V];Displacement [um]", (1, 2)),
+            (";voltage_V;displacement_um", (1, 2)),
+            ("Index;Weg nm;Spannung mV", (2, 1)),
+            ("Displacement;Voltage;t", (1, 0)),
+            ("Position (mm);u;y", (1, 0)),
+            ("u;y;t", (0, 1)),
+            ("y;u [V];t", (1, 0)),
+        ] {
+            let text = time_u_y_rows(header, 0.005, ";");
+            let (_, used) =
+                parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults())
+                    .unwrap_or_else(|e| panic!("{header}: {e}"));
+            assert_eq!((used.input.index, used.output.index), columns, "{header}");
+        }
+        // A unit written as the name's last word converts as one in brackets.
+        let text = time_u_y_rows("Zeit [s];Spannung mV;Weg nm", 0.005, ";");
+        let (record, used) =
+            parse_record_with_columns(&text, Path::new("d.csv"), &timed_defaults()).unwrap();
+        assert_eq!(
+            used.output.to_string(),
+            "column 2 \"Weg nm\" (in nm, read as um: x0.001)"
+        );
+        assert!((record.input[10] - 0.1 * 10.0 * 1e-3).abs() < 1e-15);
+        let text: String = time_u_y_rows("Time [s];Setpoint [um];Displacement [um]", 0.005, ";")
+            .lines()
+            .enumerate()
+            .map(|(n, line)| match n {
+                0 => format!("{line};Voltage [V]\n"),
+                n => format!("{line};{}\n", 0.2 * n as f64),
+            })
+            .collect();
+        assert_eq!(
+            parse_record_with_columns(&text, Path::new("d.csv"), &timed_defaults())
+                .unwrap_err()
+                .to_string(),
+            "d.csv:1: the header names 2 columns of a length that could be the output \
+             (\"Setpoint [um]\", \"Displacement [um]\"): give --output"
+        );
+        // Given, a column is read whatever its header says.
+        let given = ReadOptions {
+            output: Some(Column::Name("Setpoint [um]".into())),
+            ..timed_defaults()
+        };
+        let (_, used) = parse_record_with_columns(&text, Path::new("d.csv"), &given).unwrap();
+        assert_eq!((used.input.index, used.output.index), (3, 1));
     }
 
     fn by_rate_defaults() -> ReadOptions {

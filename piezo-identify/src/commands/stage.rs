@@ -183,6 +183,8 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
         roles: Roles {
             input: "demand",
             output: "error",
+            // Both lengths: the columns are told apart by their place.
+            quantities: None,
         },
     };
     let (record, used) =
