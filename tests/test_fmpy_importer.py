@@ -57,6 +57,7 @@ from conftest import (
     OUTPUTS,
     FmuEnv,
     all_finite,
+    require_closed_loop_build,
     expect_error,
     hexes,
 )
@@ -441,6 +442,46 @@ def test_restoring_a_state_reproduces_the_run(env, noise):
     assert first == second, "replay after fmi2SetFMUstate differs: " + _first_difference(first, second)
     if noise:
         assert any(r[0] != r[4] for r in first), "with noise on, s1 should differ from y"
+
+
+@pytest.mark.parametrize("name", ["FlexureStage", "PiezoController"])
+def test_a_run_continues_from_a_finished_runs_state(name):
+    """fmpy's fmu_state continues a run from a state a finished run left:
+    the state is the FMU's, the stop time each run's own. A first run to
+    10 ms with its stopTime set, then one from 10 to 20 ms from its state
+    (fmpy calls no fmi2SetupExperiment then), ends where one run to 20 ms
+    ends; the state used to bring back the first run's stopTime, which
+    refused the second run's first step."""
+    require_closed_loop_build()
+    fmu_path = TESTS_DIR.parent / "dist" / f"{name}.fmu"
+    # Something moves: the stage held at 7 V on u1, the controller's demand.
+    start_values = ({"noise.enabled": False, "u1": 7.0} if name == "FlexureStage"
+                    else {"y_ref": 3.0})
+    kwargs = dict(step_size=STEP, output_interval=STEP)
+    whole = fmpy.simulate_fmu(str(fmu_path), stop_time=0.02, start_values=start_values, **kwargs)
+    md = fmpy.read_model_description(str(fmu_path))
+    unzipped = fmpy.extract(str(fmu_path))
+    try:
+        fmu = fmi2.FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName="first")
+        fmu.instantiate()
+        try:
+            fmpy.simulate_fmu(unzipped, model_description=md, fmu_instance=fmu, stop_time=0.01,
+                              start_values=start_values, terminate=False, **kwargs)
+            state = fmu.serializeFMUstate(fmu.getFMUstate())
+        finally:
+            fmu.freeInstance()
+        # The state holds the start values and the inputs set.
+        rest = fmpy.simulate_fmu(unzipped, start_time=0.01, stop_time=0.02, fmu_state=state,
+                                 **kwargs)
+    finally:
+        shutil.rmtree(unzipped, ignore_errors=True)
+    name = md.outputs[0].variable.name
+    assert rest["time"][-1] == pytest.approx(0.02)
+    # The second run's communication points are 0.01 + k h, not a sum of
+    # steps from 0: the last bits may differ.
+    assert rest[name][-1] == pytest.approx(whole[name][-1], rel=1e-12, abs=0.0), name
+    assert rest[name][-1] != rest[name][0], f"{name} should move over the second run"
 
 
 # --------------------------------------------------------------------------

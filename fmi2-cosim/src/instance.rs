@@ -1234,9 +1234,17 @@ impl<M: CoSimModel> Instance<M> {
         }
         self.forget_preview();
         self.model = data.model.clone();
-        self.time = data.time;
-        self.start_time = data.start_time;
-        self.stop_time = data.stop_time;
+        // The start and stop times stay this instance's: they are what the
+        // importer said of this experiment (fmi2SetupExperiment, FMI 2.0.4
+        // §2.1.6), not part of the state it continues from; a run continued
+        // from a finished one's state (fmpy's fmu_state, fmusim's
+        // --initial-fmu-state-file) would otherwise be refused at its first
+        // step, past the old run's stop. Before initialization the time is
+        // the start time, as fmi2SetupExperiment leaves it.
+        self.time = match data.state {
+            FmiState::Instantiated | FmiState::InitializationMode => self.start_time,
+            _ => data.time,
+        };
         self.state = data.state;
         self.terminate_requested = data.terminate_requested;
         self.event(

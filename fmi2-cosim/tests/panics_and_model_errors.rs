@@ -217,3 +217,61 @@ fn a_step_past_the_defined_stop_time_is_an_error() {
     setup(&inst, Some(0.05));
     assert_eq!(inst.step(0.0, 0.1), ERROR, "a first step past stopTime");
 }
+
+/// A state carries no stop time: a run continued from a finished run's
+/// state, in another instance or in the same one set up again, steps up to
+/// its own stopTime, or without one when it defined none.
+#[test]
+fn a_restored_state_keeps_the_receiving_instances_stop_time() {
+    let setup = |inst: &Slave<Faulty>, start: f64, stop: Option<f64>| {
+        // SAFETY: `inst.0` is a live instance of Faulty.
+        unsafe {
+            assert_eq!(
+                fmi2_cosim::abi::setup_experiment::<Faulty>(
+                    inst.0,
+                    0,
+                    0.0,
+                    start,
+                    stop.is_some() as i32,
+                    stop.unwrap_or(0.0),
+                ),
+                OK
+            );
+            assert_eq!(
+                fmi2_cosim::abi::enter_initialization_mode::<Faulty>(inst.0),
+                OK
+            );
+        }
+        assert_eq!(inst.exit_initialization(), OK);
+    };
+    let first = instance(0);
+    setup(&first, 0.0, Some(0.2));
+    assert_eq!(first.step(0.0, 0.1), OK);
+    assert_eq!(first.step(0.1, 0.1), OK);
+    let finished = first.get_state();
+    let bytes = first.serialize(finished);
+    for stop in [Some(0.4), None] {
+        let next = instance(0);
+        setup(&next, 0.2, stop);
+        let (status, state) = next.deserialize(&bytes);
+        assert_eq!(status, OK);
+        assert_eq!(next.set_state(state), OK);
+        assert_eq!(next.step(0.2, 0.1), OK, "stop {stop:?}");
+        assert_eq!(next.step(0.3, 0.1), OK, "stop {stop:?}");
+        let past = next.step(0.4, 0.1);
+        assert_eq!(
+            past,
+            if stop.is_some() { ERROR } else { OK },
+            "stop {stop:?}"
+        );
+    }
+    // Its own earlier state does not bring an instance's earlier stop back.
+    assert_eq!(first.reset(), OK);
+    setup(&first, 0.2, Some(0.4));
+    assert_eq!(first.set_state(finished), OK);
+    assert_eq!(
+        first.step(0.2, 0.1),
+        OK,
+        "within the stop set up after the state was taken"
+    );
+}

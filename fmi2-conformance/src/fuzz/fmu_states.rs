@@ -128,13 +128,30 @@ impl Fuzzer<'_> {
             let model = self.handles[own.expect("only own states restore")]
                 .model
                 .clone();
+            let model_machine = model.machine;
             let live = self.live_mut(slot);
             live.state = model.machine;
             // The interface is the instance's: a forged state may claim the
-            // other one and still be accepted.
-            let interface = live.model.interface;
+            // other one and still be accepted. So are the start and stop
+            // times, which the importer set up for this instance's experiment.
+            let own = (
+                live.model.interface,
+                live.model.start_time,
+                live.model.stop_time,
+            );
             live.model = model;
-            live.model.interface = interface;
+            (
+                live.model.interface,
+                live.model.start_time,
+                live.model.stop_time,
+            ) = own;
+            // Before initialization the time is the start time.
+            if matches!(
+                model_machine,
+                State::Instantiated | State::InitializationMode
+            ) {
+                live.model.time = live.model.start_time;
+            }
             if forged {
                 // The machine state a forged state put the instance in is
                 // unknown: a reset brings it back to a known one.
