@@ -303,7 +303,7 @@ pub enum Problem {
         steps: Short,
     },
     #[error(
-        "the time column steps by {step} per row and names no unit, so it would be read in seconds: slower than one sample a second, too slow for a hysteresis record; name its unit in the header (\"time [ms]\", \"time_ms\") or give --rate"
+        "the time column steps by {step} per row and names no unit, so it would be read in seconds: ten samples a second or fewer, too few for a hysteresis record; name its unit in the header (\"time [ms]\", \"time_ms\") or give --rate"
     )]
     SlowInSeconds { step: Short },
     #[error(
@@ -330,6 +330,16 @@ pub enum Problem {
         "a second LabVIEW segment starts here; this tool reads one continuous record: save each segment to its own file (or write the measurement without segment headers)"
     )]
     LabviewSegment,
+    #[error(
+        "--rate {rate} Hz is a step of {given} s, but the time column \"{name}\" steps by {stated} s on average ({stated_rate} Hz): leave --rate out to read the times, or give the rate they say"
+    )]
+    RateAgainstTimeColumn {
+        rate: Short,
+        given: Short,
+        name: String,
+        stated: Short,
+        stated_rate: Short,
+    },
     #[error(
         "--rate {rate} Hz is a step of {given} s, but the LabVIEW header's Delta_X is {stated} s (give --rate {stated_rate}, or --time X_Value)"
     )]
@@ -800,9 +810,17 @@ fn names_a_row_number(name: &str) -> bool {
     )
 }
 
+/// How far --rate may be from the mean step of a time column the file also
+/// holds: 2 %, more than any clock's drift or a rounded rate (199.99 Hz
+/// given as 200), far less than a wrong rate.
+const RATE_AGAINST_TIMES_TOLERANCE: f64 = 0.02;
+
 /// Slowest sampling [s] a time column with no unit is read in seconds at:
-/// once a second, far below what a loop of a 0.1-10 Hz drive needs.
-const SLOWEST_ASSUMED_PERIOD: f64 = 1.0;
+/// ten samples a second, below what the loops of a 0.1-10 Hz drive need. A
+/// record in milliseconds at the rates labs sample at, 1 to 10 kHz, steps
+/// by 1 to 0.1 and is caught; at once a second, the bound before, a 1 kHz
+/// record in ms was fitted as a 1 Hz one, its loops 1000 s long.
+const SLOWEST_ASSUMED_PERIOD: f64 = 0.1;
 
 /// Seconds per unit of a time column's unit (`ms`, `(ms)`, `[ms]`, ...);
 /// None when it is not one of h, min, s, ms, us (µs) and ns.
@@ -1029,6 +1047,11 @@ pub fn parse_record_with_columns(
     let mut separator: Option<Separator> = None;
     let mut header: Option<(usize, Vec<String>)> = None;
     let mut resolved: Option<ResolvedColumns> = None;
+    // With --rate, the one column whose header names a time, if any, its
+    // seconds per unit, and its first and last numbers with their count:
+    // a rate that disagrees with the times the file holds is refused.
+    let mut rate_against: Option<(usize, f64)> = None;
+    let mut rate_against_times: Option<(f64, f64, usize)> = None;
     let mut input = Vec::new();
     let mut output = Vec::new();
     let mut times: Vec<(usize, f64)> = Vec::new();
@@ -1169,6 +1192,21 @@ pub fn parse_record_with_columns(
                             .map_err(|(at, problem)| malformed(at, problem))?,
                     );
                 }
+                if let (Sampling::Rate(_), Some((_, names))) = (&options.sampling, &header) {
+                    let named: Vec<usize> = (0..names.len())
+                        .filter(|&i| columns.names_time(i))
+                        .collect();
+                    // A unit the time cannot be read in leaves the check out,
+                    // and so does none: a column "time" of 0, 1, 2, ... may
+                    // count samples, which --rate then times.
+                    if let [one] = named.as_slice()
+                        && let Ok(unit) =
+                            time_unit_of(*one, header.as_ref(), units.as_ref(), x_is_time)
+                        && !unit.source.starts_with("assumed")
+                    {
+                        rate_against = Some((*one, unit.seconds_per_unit));
+                    }
+                }
                 resolved = Some(columns);
                 columns
             }
@@ -1269,6 +1307,19 @@ pub fn parse_record_with_columns(
         }
         input.push(values[columns.input]);
         output.push(values[columns.output]);
+        if let Some((column, _)) = rate_against {
+            // A row without a number there (dates, an empty field) leaves
+            // the check out: the times cannot be compared by their numbers.
+            match (values.get(column).copied(), &mut rate_against_times) {
+                (Some(t), None) if t.is_finite() && input.len() == 1 => {
+                    rate_against_times = Some((t, t, 1));
+                }
+                (Some(t), Some((_, last, count))) if t.is_finite() => {
+                    (*last, *count) = (t, *count + 1);
+                }
+                _ => rate_against = None,
+            }
+        }
         if let Some(time) = columns.time {
             // One time column is all dates and times, or all numbers.
             let row_is_clock = clock_seconds.is_some();
@@ -1324,16 +1375,43 @@ pub fn parse_record_with_columns(
             },
         ));
     }
+    if let (&Sampling::Rate(rate), Some((column, seconds_per_unit)), Some((first, last, count))) =
+        (&options.sampling, rate_against, rate_against_times)
+        && count == input.len()
+        && count > 1
+    {
+        // The mean step, not each one: --rate is also the way past a time
+        // column whose steps jitter or have gaps.
+        let stated = (last - first) * seconds_per_unit / (count - 1) as f64;
+        if stated <= 0.0 || (stated * rate - 1.0).abs() > RATE_AGAINST_TIMES_TOLERANCE {
+            let name = header
+                .as_ref()
+                .and_then(|(_, names)| names.get(column))
+                .cloned()
+                .unwrap_or_default();
+            return Err(malformed(
+                header.as_ref().map_or(1, |(line, _)| *line),
+                Problem::RateAgainstTimeColumn {
+                    rate: Short(rate),
+                    given: Short(1.0 / rate),
+                    name,
+                    stated: Short(stated),
+                    stated_rate: Short(1.0 / stated),
+                },
+            ));
+        }
+    }
     let sample_period = match options.sampling {
         Sampling::Rate(rate) => 1.0 / rate,
         Sampling::TimeColumn(_) => uniform_period(&times).map_err(|(l, p)| malformed(l, p))?,
         Sampling::Unspaced { .. } => 1.0,
     };
     // Times with no unit named are read as seconds; a hysteresis record
-    // sampled more slowly than once a second is far likelier milliseconds.
+    // sampled more slowly than ten times a second is far likelier in
+    // milliseconds.
     if let (Sampling::TimeColumn(_), Some(unit)) = (&options.sampling, &time_unit)
         && unit.source.starts_with("assumed")
-        && sample_period > SLOWEST_ASSUMED_PERIOD
+        && sample_period >= SLOWEST_ASSUMED_PERIOD * (1.0 - 1e-9)
     {
         return Err(malformed(
             times[1].0,
@@ -1988,7 +2066,8 @@ mod tests {
         let by_names = options(
             Column::Name("Spannung, V".into()),
             Column::Name("Weg, um".into()),
-            Sampling::Rate(100.0),
+            // As the time column says: one sample a second.
+            Sampling::Rate(1.0),
         );
         let text = (0..40).fold(String::from("Zeit, s;Spannung, V;Weg, um\n"), |t, n| {
             t + &format!("{n};{n},5;-{n},25\n")
@@ -2470,16 +2549,24 @@ mod tests {
                 "{name}"
             );
         }
-        // No unit in the name and slower than 1 Hz in seconds: refused.
-        let text = time_u_y_rows("time_stamp;u;y", 5.0, ";");
-        assert_eq!(
-            message(&text, &timed_defaults()),
-            "data.txt:3: the time column steps by 5 per row and names no unit, so it would be \
-             read in seconds: slower than one sample a second, too slow for a hysteresis \
-             record; name its unit in the header (\"time [ms]\", \"time_ms\") or give --rate"
-        );
-        let text = time_u_y_rows("time_stamp;u;y", 0.005, ";");
-        assert!(parse_record(&text, Path::new("d.csv"), &timed_defaults()).is_ok());
+        // No unit in the name and ten samples a second or fewer in seconds:
+        // refused, as a record in ms at 200 Hz, 1 kHz and 10 kHz is.
+        for (step, shown) in [(5.0, "5"), (1.0, "1"), (0.1, "0.1")] {
+            let text = time_u_y_rows("time_stamp;u;y", step, ";");
+            assert_eq!(
+                message(&text, &timed_defaults()),
+                format!(
+                    "data.txt:3: the time column steps by {shown} per row and names no unit, so \
+                     it would be read in seconds: ten samples a second or fewer, too few for a \
+                     hysteresis record; name its unit in the header (\"time [ms]\", \
+                     \"time_ms\") or give --rate"
+                )
+            );
+        }
+        for step in [0.005, 0.099] {
+            let text = time_u_y_rows("time_stamp;u;y", step, ";");
+            assert!(parse_record(&text, Path::new("d.csv"), &timed_defaults()).is_ok());
+        }
     }
 
     /// With --rate, a column whose name says it is a time is not taken as
@@ -2487,7 +2574,9 @@ mod tests {
     #[test]
     fn a_time_named_column_is_no_default_input() {
         for name in ["Time [s]", "t", "time_ms", "Zeit, s", "timestamp"] {
-            let text = time_u_y_rows(&format!("{name};Voltage [V];Displacement [um]"), 0.005, ";");
+            // 200 Hz, as --rate says: a time column that says otherwise is refused.
+            let step = if name == "time_ms" { 5.0 } else { 0.005 };
+            let text = time_u_y_rows(&format!("{name};Voltage [V];Displacement [um]"), step, ";");
             let (_, used) =
                 parse_record_with_columns(&text, Path::new("d.csv"), &by_rate_defaults()).unwrap();
             assert_eq!((used.input.index, used.output.index), (1, 2), "{name}");
@@ -2513,14 +2602,14 @@ mod tests {
     #[test]
     fn default_columns_follow_the_units_and_names_of_the_header() {
         for (header, columns) in [
-            ("Displacement [um];Voltage [V];t", (1, 0)),
+            ("Displacement [um];Voltage [V];Temperature", (1, 0)),
             ("Sample;Voltage [V];Displacement [um]", (1, 2)),
             (";voltage_V;displacement_um", (1, 2)),
             ("Index;Weg nm;Spannung mV", (2, 1)),
-            ("Displacement;Voltage;t", (1, 0)),
+            ("Displacement;Voltage;Temperature", (1, 0)),
             ("Position (mm);u;y", (1, 0)),
-            ("u;y;t", (0, 1)),
-            ("y;u [V];t", (1, 0)),
+            ("u;y;Temperature", (0, 1)),
+            ("y;u [V];Temperature", (1, 0)),
         ] {
             let text = time_u_y_rows(header, 0.005, ";");
             let (_, used) =
@@ -2559,6 +2648,47 @@ mod tests {
         };
         let (_, used) = parse_record_with_columns(&text, Path::new("d.csv"), &given).unwrap();
         assert_eq!((used.input.index, used.output.index), (3, 1));
+    }
+
+    /// --rate against a time column the header names with its unit: a rate
+    /// within 2 % of the times' mean step is taken (the times then unread),
+    /// another is refused with both; two time columns, or one with no unit
+    /// (it may count samples), leave the check out.
+    #[test]
+    fn a_rate_that_disagrees_with_the_time_column_is_refused() {
+        let text = time_u_y_rows("time_s;Voltage [V];Displacement [um]", 0.001, ";");
+        let at = |rate: f64| ReadOptions {
+            sampling: Sampling::Rate(rate),
+            ..by_rate_defaults()
+        };
+        for rate in [1000.0, 990.0, 1010.0] {
+            let (record, _) = parse_record_with_columns(&text, Path::new("d.csv"), &at(rate))
+                .unwrap_or_else(|e| panic!("{rate}: {e}"));
+            assert_eq!(record.sample_period, 1.0 / rate);
+        }
+        assert_eq!(
+            message(&text, &at(500.0)),
+            "data.txt:1: --rate 500 Hz is a step of 0.002 s, but the time column \"time_s\" \
+             steps by 0.001 s on average (1000 Hz): leave --rate out to read the times, or give \
+             the rate they say"
+        );
+        // In ms by its name: 5 ms steps are 200 Hz.
+        let text = time_u_y_rows("Time [ms];Voltage [V];Displacement [um]", 5.0, ";");
+        assert!(parse_record(&text, Path::new("d.csv"), &at(200.0)).is_ok());
+        assert!(message(&text, &at(1000.0)).contains("steps by 0.005 s on average (200 Hz)"));
+        // Two columns named as times (a logger's clock beside the samples'
+        // times): which one the rate stands for is not known.
+        let text: String = time_u_y_rows("t;Voltage [V];Displacement [um]", 0.001, ";")
+            .lines()
+            .enumerate()
+            .map(|(n, line)| match n {
+                0 => format!("{line};time\n"),
+                n => format!("{line};{}\n", 3600 + n),
+            })
+            .collect();
+        assert!(parse_record(&text, Path::new("d.csv"), &at(500.0)).is_ok());
+        let text = time_u_y_rows("time;Voltage [V];Displacement [um]", 1.0, ";");
+        assert!(parse_record(&text, Path::new("d.csv"), &at(500.0)).is_ok());
     }
 
     fn by_rate_defaults() -> ReadOptions {
