@@ -179,7 +179,7 @@ pub enum ProtocolError {
     #[error("the fit part is empty (the split is at sample {0})")]
     EmptyFitPart(usize),
     #[error(
-        "no sample is left to fit: the warm-up ({warm_up} samples), rest segments and settling after steps cover the fit part"
+        "no sample is left to fit: the warm-up ({warm_up} samples; by default the settling and the first loading, up to the input's second turning point after the start and after each step), rest segments and settling after steps cover the fit part"
     )]
     NothingToFit { warm_up: usize },
     #[error(
@@ -247,8 +247,10 @@ impl Plan {
             for (i, &start) in starts.iter().enumerate() {
                 let next = starts.get(i + 1).copied().unwrap_or(u.len());
                 let settled = start + thresholds.settle_samples;
+                // An input that does not turn twice before the next step is
+                // a first loading all the way: none of it is fitted.
                 let end = first_loading_end(u, settled, next, thresholds.span)
-                    .unwrap_or(settled)
+                    .unwrap_or(next)
                     .max(settled);
                 // Only the fit part: a step in the scored part is scored once
                 // settled (its state is the one the model computed).
@@ -341,7 +343,7 @@ impl Plan {
             let settled = thresholds.settle_samples;
             let next = segments.steps.first().copied().unwrap_or(u.len());
             first_loading_end(u, settled, next, thresholds.span)
-                .unwrap_or(settled)
+                .unwrap_or(next)
                 .max(settled)
         });
         let mut excluded = segments.excluded(thresholds.settle_samples, u.len());
@@ -1239,5 +1241,36 @@ mod tests {
             Plan::new(&u, 0.005, 600, &options),
             Err(ProtocolError::NothingToFit { .. })
         ));
+    }
+
+    /// A record whose input turns once (rest, then one cycle 0 -> 10 -> 0 V)
+    /// is a first loading all the way: nothing is fitted, and the error says
+    /// why; a cycle and a half turns twice, and is fitted from its second
+    /// turning point on. The first loading used to be fitted, though the
+    /// summary said it was left out.
+    #[test]
+    fn an_input_that_never_turns_twice_is_no_record_to_fit() {
+        let record = |cycles: f64| -> Vec<f64> {
+            let moving = (cycles * 200.0) as usize;
+            (0..100 + moving)
+                .map(|n| match n.checked_sub(100) {
+                    None => 0.0,
+                    Some(k) => 5.0 * (1.0 - (std::f64::consts::TAU * k as f64 / 200.0).cos()),
+                })
+                .collect()
+        };
+        let one = record(1.0);
+        let e = Plan::new(&one, 0.005, one.len(), &PlanOptions::default()).unwrap_err();
+        assert!(matches!(e, ProtocolError::NothingToFit { .. }), "{e}");
+        assert!(
+            e.to_string()
+                .contains("the first loading, up to the input's second turning point")
+        );
+        let longer = record(1.5);
+        let plan = Plan::new(&longer, 0.005, longer.len(), &PlanOptions::default()).unwrap();
+        // The second turning point: the minimum after the first maximum, at
+        // 100 + 200 samples.
+        let first_fitted = plan.fitted().iter().position(|f| *f).unwrap();
+        assert!((299..=301).contains(&first_fitted), "{first_fitted}");
     }
 }
