@@ -208,11 +208,14 @@ pub enum Problem {
     #[error("field {field} (\"{text}\") is not a number")]
     NotANumber { field: usize, text: String },
     #[error(
-        "field {field} (\"{text}\"): the file writes decimals with a point (line {point_line}) and with a comma (line {comma_line}); a comma beside decimal points is a thousands separator, which is not read"
+        "field {field} (\"{text}\"): the file writes decimals with a point (line {point_line}) and with a comma (line {comma_line}); {} is a thousands separator, which is not read",
+        if *comma_last { "a comma beside decimal points" } else { "a point beside decimal commas" }
     )]
     TwoDecimalMarks {
         field: usize,
         text: String,
+        /// Whether this field's mark, the one after the other's, is a comma.
+        comma_last: bool,
         point_line: usize,
         comma_line: usize,
     },
@@ -1294,6 +1297,7 @@ pub fn parse_record_with_columns(
                     Problem::TwoDecimalMarks {
                         field,
                         text: (*text).to_owned(),
+                        comma_last: comma,
                         point_line,
                         comma_line,
                     },
@@ -2190,8 +2194,8 @@ mod tests {
     }
 
     /// A comma beside decimal points is a thousands separator (a US export
-    /// separated by tabs): refused, with both lines named, not read as a
-    /// decimal.
+    /// separated by tabs), as a point beside decimal commas is (a German
+    /// one): refused, with both lines named, not read as a decimal.
     #[test]
     fn refuses_decimal_commas_beside_decimal_points() {
         let mut text = String::from("time\tnm\tV\n");
@@ -2202,6 +2206,17 @@ mod tests {
         assert_eq!(
             message(&text, &by_index()),
             "data.txt:42: field 1 (\"4,089\"): the file writes decimals with a point (line 2) and with a comma (line 42); a comma beside decimal points is a thousands separator, which is not read"
+        );
+        // And the other way: a German export's point in a thousand, after
+        // decimal commas.
+        let mut text = String::from("Zeit;Weg;Spannung\n");
+        for n in 0..40 {
+            text.push_str(&format!("{n};{},5;1,5\n", 14 + n));
+        }
+        text.push_str("40;-42.697;1,5\n");
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:42: field 1 (\"-42.697\"): the file writes decimals with a point (line 42) and with a comma (line 2); a point beside decimal commas is a thousands separator, which is not read"
         );
     }
 
