@@ -171,32 +171,35 @@ fn a_healthy_model_integrates() {
     assert!((y - 2.0).abs() < 1e-12, "y = {y}");
 }
 
+/// Sets up an experiment from `start` (to `stop`, if given) and initializes.
+fn initialize_from(inst: &Slave<Faulty>, start: f64, stop: Option<f64>) {
+    // SAFETY: `inst.0` is a live instance of Faulty.
+    unsafe {
+        assert_eq!(
+            fmi2_cosim::abi::setup_experiment::<Faulty>(
+                inst.0,
+                0,
+                0.0,
+                start,
+                stop.is_some() as i32,
+                stop.unwrap_or(0.0),
+            ),
+            OK
+        );
+        assert_eq!(
+            fmi2_cosim::abi::enter_initialization_mode::<Faulty>(inst.0),
+            OK
+        );
+    }
+    assert_eq!(inst.exit_initialization(), OK);
+}
+
 /// A co-simulation step past the stopTime fmi2SetupExperiment defined is
 /// refused with fmi2Error (FMI 2.0.4 §2.1.6); communication points summed
 /// step by step, which round past it, reach it; fmi2Reset forgets it.
 #[test]
 fn a_step_past_the_defined_stop_time_is_an_error() {
-    let setup = |inst: &Slave<Faulty>, stop: Option<f64>| {
-        // SAFETY: `inst.0` is a live instance of Faulty.
-        unsafe {
-            assert_eq!(
-                fmi2_cosim::abi::setup_experiment::<Faulty>(
-                    inst.0,
-                    0,
-                    0.0,
-                    0.0,
-                    stop.is_some() as i32,
-                    stop.unwrap_or(0.0),
-                ),
-                OK
-            );
-            assert_eq!(
-                fmi2_cosim::abi::enter_initialization_mode::<Faulty>(inst.0),
-                OK
-            );
-        }
-        assert_eq!(inst.exit_initialization(), OK);
-    };
+    let setup = |inst: &Slave<Faulty>, stop: Option<f64>| initialize_from(inst, 0.0, stop);
     let inst = instance(0);
     setup(&inst, Some(0.3));
     // Three steps of 0.1 sum to 0.30000000000000004, past 0.3 by rounding
@@ -223,27 +226,7 @@ fn a_step_past_the_defined_stop_time_is_an_error() {
 /// its own stopTime, or without one when it defined none.
 #[test]
 fn a_restored_state_keeps_the_receiving_instances_stop_time() {
-    let setup = |inst: &Slave<Faulty>, start: f64, stop: Option<f64>| {
-        // SAFETY: `inst.0` is a live instance of Faulty.
-        unsafe {
-            assert_eq!(
-                fmi2_cosim::abi::setup_experiment::<Faulty>(
-                    inst.0,
-                    0,
-                    0.0,
-                    start,
-                    stop.is_some() as i32,
-                    stop.unwrap_or(0.0),
-                ),
-                OK
-            );
-            assert_eq!(
-                fmi2_cosim::abi::enter_initialization_mode::<Faulty>(inst.0),
-                OK
-            );
-        }
-        assert_eq!(inst.exit_initialization(), OK);
-    };
+    let setup = initialize_from;
     let first = instance(0);
     setup(&first, 0.0, Some(0.2));
     assert_eq!(first.step(0.0, 0.1), OK);
