@@ -208,6 +208,10 @@ pub enum Problem {
     #[error("field {field} (\"{text}\") is not a number")]
     NotANumber { field: usize, text: String },
     #[error(
+        "field {field} (\"{text}\") groups its digits with a thousands separator, which is not read: export the numbers without one"
+    )]
+    ThousandsSeparator { field: usize, text: String },
+    #[error(
         "field {field} (\"{text}\"): the file writes decimals with a point (line {point_line}) and with a comma (line {comma_line}); {} is a thousands separator, which is not read",
         if *comma_last { "a comma beside decimal points" } else { "a point beside decimal commas" }
     )]
@@ -494,8 +498,10 @@ impl Separator {
         if let Ok(value) = text.parse::<f64>() {
             return Some((value, false));
         }
-        let decimal_comma_possible =
-            self != Separator::Comma && text.matches(',').count() == 1 && !text.contains('.');
+        // In a comma-separated file a field holds a comma only in quotes, as
+        // a spreadsheet in a decimal-comma locale writes its numbers
+        // ("0,0010"): a decimal comma there too.
+        let decimal_comma_possible = text.matches(',').count() == 1 && !text.contains('.');
         if !decimal_comma_possible {
             return None;
         }
@@ -811,6 +817,30 @@ fn names_a_row_number(name: &str) -> bool {
             | "punkt"
             | "messpunkt"
     )
+}
+
+/// Whether a number is written with its digits grouped in thousands, by
+/// commas before a decimal point (`-42,696.5`, `1,234,567`) or by points
+/// before a decimal comma (`1.234,5`): groups of three digits after the
+/// first separator of the kind.
+fn grouped_by_thousands(text: &str) -> bool {
+    let digits = text.trim_start_matches(['-', '+']);
+    [(',', '.'), ('.', ',')]
+        .into_iter()
+        .any(|(group, decimal)| {
+            let whole = digits.split(decimal).next().unwrap_or("");
+            let mut groups = whole.split(group);
+            let first = groups.next().unwrap_or("");
+            let rest: Vec<&str> = groups.collect();
+            digits.matches(decimal).count() <= 1
+                && !rest.is_empty()
+                && (1..=3).contains(&first.len())
+                && first.chars().all(|c| c.is_ascii_digit())
+                && rest
+                    .iter()
+                    .all(|g| g.len() == 3 && g.chars().all(|c| c.is_ascii_digit()))
+                && (rest.len() > 1 || digits.contains(decimal))
+        })
 }
 
 /// How far --rate may be from the mean step of a time column the file also
@@ -1277,11 +1307,13 @@ pub fn parse_record_with_columns(
                 continue;
             }
             let (value, comma) = separator.number(text).ok_or_else(|| {
+                let text = (*text).to_owned();
                 malformed(
                     line,
-                    Problem::NotANumber {
-                        field,
-                        text: (*text).to_owned(),
+                    if grouped_by_thousands(&text) {
+                        Problem::ThousandsSeparator { field, text }
+                    } else {
+                        Problem::NotANumber { field, text }
                     },
                 )
             })?;
@@ -2033,7 +2065,7 @@ mod tests {
         assert_eq!((record.input[3], record.output[3]), (3.0, 5.0));
         assert!(!used.decimal_comma);
         // Neither a field with two commas nor one with a comma and a point is
-        // a decimal-comma number.
+        // a decimal-comma number; neither is a number.
         let odd = |field: &str| {
             let text = format!("u;y\n{field};1\n") + &"1;2\n".repeat(40);
             message(&text, &by_index())
@@ -2042,10 +2074,31 @@ mod tests {
             odd("1,2,3"),
             "data.txt:2: field 0 (\"1,2,3\") is not a number"
         );
+        // A comma and a point in thousands and decimals: named as such.
+        for grouped in ["1,234.5", "-42,696.5", "1.234,5", "1,234,567"] {
+            assert_eq!(
+                odd(grouped),
+                format!(
+                    "data.txt:2: field 0 (\"{grouped}\") groups its digits with a thousands \
+                     separator, which is not read: export the numbers without one"
+                )
+            );
+        }
         assert_eq!(
-            odd("1,234.5"),
-            "data.txt:2: field 0 (\"1,234.5\") is not a number"
+            odd("12,34.5"),
+            "data.txt:2: field 0 (\"12,34.5\") is not a number"
         );
+        // In quotes, a comma-separated file holds decimal commas (a
+        // spreadsheet's export in a decimal-comma locale).
+        let mut text = String::from("Spannung,Weg\n");
+        for n in 0..40 {
+            text.push_str(&format!("\"{n},5\",\"-{n},25\"\n"));
+        }
+        let (record, used) =
+            parse_record_with_columns(&text, Path::new("c.csv"), &by_index()).unwrap();
+        assert_eq!((record.input[3], record.output[3]), (3.5, -3.25));
+        assert!(used.decimal_comma);
+        assert_eq!(used.separator, Separator::Comma);
     }
 
     /// The separator is the one under which the first line is numbers, or
