@@ -99,7 +99,9 @@ RUNS_PER_TASK = 10
 TASK_RETRIES = 2
 # The reports a spec may name (demo/sweep_report.py), and the variables each
 # reads from every row: its tables are grouped by them, and the decoupling
-# variable's cases are named "off" and "on".
+# variable's cases are named "off" and "on". Any further variable of a spec
+# splits a report's tables and figures by its values (a row or a figure per
+# value), so that no two runs are summarised as one.
 REPORT_VARIABLES = {
     "none": set(),
     "envelope": {"stage", "method", "axis", "held", "amplitude", "frequency", "decoupling"},

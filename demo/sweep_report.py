@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -115,18 +116,93 @@ def run_summary(rows: list[dict]) -> str:
     return text
 
 
-# --------------------------------------------------------------------------
-# Envelope
+def spec_variables(meta: dict) -> list[str]:
+    """The names of the study's variables, in its spec's order (the table's
+    metadata keeps the spec's text)."""
+    import tomllib
 
-def envelope_points(rows: list[dict]) -> dict:
-    """Pairs each run without decoupling with the same run with it:
-    (stage, method, axis, held, amplitude, frequency) -> {off, on}."""
-    points = defaultdict(dict)
+    try:
+        entries = tomllib.loads(meta.get("spec", "")).get("variable", [])
+    except tomllib.TOMLDecodeError:
+        return []
+    return [entry["name"] for entry in entries
+            if isinstance(entry, dict) and isinstance(entry.get("name"), str)]
+
+
+def further_variables(meta: dict, read: set[str]) -> list[str]:
+    """The variables of the study a report does not read itself (`read`):
+    its tables and figures are split by their values, so that two runs
+    that differ only in one of them are never taken for one."""
+    return [name for name in spec_variables(meta) if name not in read]
+
+
+def varying(rows: list[dict], names: list[str]) -> list[str]:
+    """Those of `names` that take more than one value in `rows`: each gets a
+    column of the report's tables (one value is said once, in a sentence)."""
+    return [name for name in names if len({repr(r.get(name)) for r in rows}) > 1]
+
+
+def constant_values(rows: list[dict], names: list[str]) -> list[str]:
+    """The sentence that gives the variables of `names` that keep one value
+    in every run (none when there are none)."""
+    fixed = [name for name in names if name not in varying(rows, names) and rows]
+    if not fixed:
+        return []
+    return ["Every run has " + ", ".join(f"{name} = {show(rows[0].get(name))}"
+                                         for name in fixed) + ".", ""]
+
+
+def show(value) -> str:
+    """A variable's value in a table cell or a label: a number in full
+    (fmt's three digits could show 0.1011 and 0.1012 as one), a case by its
+    name."""
+    return str(value)
+
+
+def group_label(group: tuple, shown: list[str]) -> str:
+    """`name = value, ...` of the variables of `group` ((name, value)
+    pairs) that `shown` lists."""
+    return ", ".join(f"{name} = {show(value)}" for name, value in group if name in shown)
+
+
+def paired_runs(rows: list[dict], by: list[str]) -> dict[tuple, dict[str, dict]]:
+    """The runs that completed, paired without and with decoupling by their
+    values of `by`: {values: {"off": row, "on": row}}. `by` names every
+    variable but decoupling (and a Monte Carlo's sample), so a pair is one
+    point run twice. Two rows at one key and one decoupling would be one
+    summarised in place of the other: that is an error of the report's
+    grouping, raised rather than hidden."""
+    pairs: dict[tuple, dict[str, dict]] = defaultdict(dict)
     for r in rows:
         if r["status"] != "ok":
             continue
-        key = (r["stage"], r["method"], r["axis"], r["held"], r["amplitude"], r["frequency"])
-        points[key][r["decoupling"]] = r
+        key = tuple(r.get(name) for name in by)
+        if r["decoupling"] in pairs[key]:
+            where = ", ".join(f"{name} = {show(value)}" for name, value in zip(by, key))
+            raise ValueError(f"two runs of the table at {where}, decoupling "
+                             f"{r['decoupling']}: the report would show one of them")
+        pairs[key][r["decoupling"]] = r
+    return pairs
+
+
+# --------------------------------------------------------------------------
+# Envelope
+
+#: The variables the envelope report reads itself: the rest split its tables.
+ENVELOPE_VARIABLES = ("stage", "method", "axis", "held", "amplitude", "frequency", "decoupling")
+
+
+def envelope_points(rows: list[dict], further: list[str] = ()) -> dict:
+    """Pairs each run without decoupling with the same run with it:
+    (stage, method, axis, further, held, amplitude, frequency) -> {off,
+    on}, `further` the ((name, value), ...) of the spec's other
+    variables."""
+    further = list(further)
+    by = ["stage", "method", "axis", *further, "held", "amplitude", "frequency"]
+    points = {}
+    for key, pair in paired_runs(rows, by).items():
+        extra = tuple(zip(further, key[3:3 + len(further)]))
+        points[(*key[:3], extra, *key[3 + len(further):])] = pair
     return points
 
 
@@ -153,10 +229,12 @@ def envelope_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
     options = json.loads(meta.get("report_options", "{}"))
     tracking_limit = float(options.get("tracking_limit", REPORT_OPTIONS["tracking_limit"]))
     reduction_limit = float(options.get("reduction_limit", REPORT_OPTIONS["reduction_limit"]))
-    points = envelope_points(rows)
+    further = further_variables(meta, set(ENVELOPE_VARIABLES))
+    shown = varying(rows, further)
+    points = envelope_points(rows, further)
     lines = [f"## {meta.get('title', 'Operating envelope')}", "",
              spec_comment(meta.get("spec", "")), "", run_summary(rows), "",
-             *excluded_points(meta.get("spec", "")),
+             *excluded_points(meta.get("spec", "")), *constant_values(rows, further),
              f"A point **holds** when the tracking RMS (decoupling on) is at most "
              f"{100 * tracking_limit:g} % of the demanded amplitude and decoupling shrinks every "
              f"Table 3 coupling span at least {reduction_limit:g}x. Saturation: share of the "
@@ -164,34 +242,53 @@ def envelope_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
              f"over the master's wall time per run (both FMUs and the loop, on the machine and "
              f"under the load of this sweep); below 1x the loop could not keep its 10 kHz "
              f"sample in real time.", ""]
+    # (stage, method, axis, further) -> [((held, amplitude, frequency), pair)]
     groups = defaultdict(list)
     for key, pair in points.items():
         if "on" in pair and "off" in pair:
-            groups[key[:3]].append((key[3:], pair))
-    lines += ["| stage | method | axis | points holding | tracking RMS / amplitude (median, worst) "
+            groups[key[:4]].append((key[4:], pair))
+    lines += ["| stage | method | axis | " + "".join(f"{name} | " for name in shown)
+              + "points holding | tracking RMS / amplitude (median, worst) "
               "| coupling reduction (median, worst) | speed x real time (median, slowest) "
               "| where it breaks |",
-              "|---|---|---|---|---|---|---|---|"]
-    for (stage, method, axis), items in sorted(groups.items()):
+              "|---|---|---|" + "---|" * len(shown) + "---|---|---|---|---|"]
+    for (stage, method, axis, extra), items in sorted(groups.items(), key=_group_order):
         rel = [relative_tracking(pair["on"]) for _, pair in items]
         red = [min(reductions(axis, pair["off"], pair["on"]).values()) for _, pair in items]
         holds = [r <= tracking_limit and d >= reduction_limit for r, d in zip(rel, red)]
         breaks = [(k, pair, r, d) for (k, pair), r, d, h in zip(items, rel, red, holds) if not h]
         speed = [realtime(pair[d]) for _, pair in items for d in ("off", "on")]
-        lines.append(f"| {stage} | {method} | {axis} | {sum(holds)}/{len(holds)} | "
+        cells = "".join(f"{show(value)} | " for name, value in extra if name in shown)
+        lines.append(f"| {stage} | {method} | {axis} | {cells}{sum(holds)}/{len(holds)} | "
                      f"{fmt(100 * np.nanmedian(rel))} %, {fmt(100 * np.nanmax(rel))} % | "
                      f"{fmt(np.nanmedian(red))}x, {fmt(np.nanmin(red))}x | "
                      f"{fmt(np.nanmedian(speed))}x, {fmt(np.nanmin(speed))}x | "
                      f"{describe_breaks(items, holds, breaks, tracking_limit, reduction_limit)} |")
     lines.append("")
-    for stage, method in sorted({k[:2] for k in groups}):
+    for stage, method, extra in sorted({(k[0], k[1], k[3]) for k in groups},
+                                       key=lambda k: (k[0], k[1], _sortable(k[2]))):
+        # A figure per value of the further variables, named by them.
+        suffix = "".join(f"_{name}-{show(value)}" for name, value in extra if name in shown)
+        label = group_label(extra, shown)
         for kind in ("tracking", "coupling"):
-            name = f"envelope_{stage}_{method}_{kind}.png"
+            name = re.sub(r"[^\w.=-]", "_", f"envelope_{stage}_{method}{suffix}_{kind}") + ".png"
             limit = tracking_limit if kind == "tracking" else reduction_limit
-            envelope_figure(groups, stage, method, kind, limit, out / name)
-            lines.append(f"![{kind}, {stage}, {method}]({name})")
+            envelope_figure(groups, (stage, method, extra), label, kind, limit, out / name)
+            lines.append(f"![{kind}, {stage}, {method}{', ' + label if label else ''}]({name})")
         lines.append("")
     return lines
+
+
+def _sortable(group: tuple) -> tuple:
+    """A group's ((name, value), ...) in an order that mixes no types: a
+    variable's values are all numbers or all case names."""
+    return tuple((name, (0, value, "") if isinstance(value, (int, float)) else (1, 0, str(value)))
+                 for name, value in group)
+
+
+def _group_order(item) -> tuple:
+    (stage, method, axis, extra), _ = item
+    return stage, method, axis, _sortable(extra)
 
 
 def describe_breaks(items, holds, breaks, tracking_limit, reduction_limit) -> str:
@@ -218,10 +315,13 @@ def describe_breaks(items, holds, breaks, tracking_limit, reduction_limit) -> st
     return "failing " + "; ".join(parts) + f" (why: {why})"
 
 
-def envelope_figure(groups, stage, method, kind, limit, path: Path) -> None:
+def envelope_figure(groups, where: tuple, label: str, kind, limit, path: Path) -> None:
     """One heatmap (frequency x amplitude) per axis or coupling and held
-    demand, on one colour scale; the values of failing cells in red."""
-    axes_present = [a for a in ("x", "y", "theta") if (stage, method, a) in groups]
+    demand, on one colour scale; the values of failing cells in red.
+    `where` is (stage, method, further variables' values), `label` says the
+    latter."""
+    stage, method, extra = where
+    axes_present = [a for a in ("x", "y", "theta") if (stage, method, a, extra) in groups]
     panels = []
     for axis in axes_present:
         if kind == "tracking":
@@ -229,10 +329,11 @@ def envelope_figure(groups, stage, method, kind, limit, path: Path) -> None:
         else:
             for _, label in COUPLINGS[axis]:
                 panels.append((axis, label, f"{label}: span without / with decoupling"))
-    held_values = sorted({k[0] for a in axes_present for k, _ in groups[(stage, method, a)]})
+    held_values = sorted({k[0] for a in axes_present
+                          for k, _ in groups[(stage, method, a, extra)]})
     grids = []
     for axis, label, title in panels:
-        items = groups[(stage, method, axis)]
+        items = groups[(stage, method, axis, extra)]
         amplitudes = sorted({k[1] for k, _ in items})
         frequencies = sorted({k[2] for k, _ in items})
         for held in held_values:
@@ -271,7 +372,7 @@ def envelope_figure(groups, stage, method, kind, limit, path: Path) -> None:
         ax.set_title(f"{title}\nheld axes at {fmt(held)} of stroke", fontsize=8)
     what = (f"tracking RMS / amplitude [%] (red: above {fmt(100 * limit)} %)" if kind == "tracking"
             else f"coupling span without / with decoupling (red: below {fmt(limit)}x)")
-    fig.suptitle(f"{stage}, {method}: {what}", fontsize=10)
+    fig.suptitle(f"{stage}, {method}{', ' + label if label else ''}: {what}", fontsize=10)
     fig.tight_layout(rect=(0, 0, 0.92, 1))
     if image is not None:
         fig.colorbar(image, ax=grid.ravel().tolist(), shrink=0.6, pad=0.02)
@@ -282,30 +383,59 @@ def envelope_figure(groups, stage, method, kind, limit, path: Path) -> None:
 # --------------------------------------------------------------------------
 # Robustness
 
-def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
-    lines = [f"## {meta.get('title', 'Robustness')}", "", spec_comment(meta.get("spec", "")),
-             "", run_summary(rows), ""]
-    ok = [r for r in rows if r["status"] == "ok"]
-    factors = sorted({k for r in rows for k in r if k.startswith("factor.")})
-    by = defaultdict(dict)
-    for r in ok:
-        by[(r.get("method", "preset"), r["axis"], r["sample"])][r["decoupling"]] = r
-    metrics = defaultdict(dict)  # (method, name) -> sample -> value
-    for (method, axis, sample), pair in by.items():
+#: The variables the robustness report reads itself: the rest split its tables.
+ROBUSTNESS_VARIABLES = ("axis", "decoupling")
+
+
+def robustness_figures(rows: list[dict], further: list[str]) -> dict:
+    """The figures of each group of runs, by sample: {(group, axis, name):
+    {sample: value}}, `group` the ((name, value), ...) of the `further`
+    variables. A run is paired with its twin of the other decoupling by
+    every variable and its sample (paired_runs), so no two runs of the
+    table fall on one figure's sample."""
+    metrics = defaultdict(dict)
+    further = list(further)
+    for key, pair in paired_runs(rows, [*further, "axis", "sample"]).items():
+        group, (axis, sample) = tuple(zip(further, key)), key[len(further):]
         if "on" in pair:
-            metrics[(method, f"{axis} tracking RMS")][sample] = pair["on"]["tracking_rms"]
+            metrics[(group, axis, f"{axis} tracking RMS")][sample] = pair["on"]["tracking_rms"]
         if "on" in pair and "off" in pair:
             for label, value in reductions(axis, pair["off"], pair["on"]).items():
-                metrics[(method, f"{label} reduction")][sample] = value
+                metrics[(group, axis, f"{label} reduction")][sample] = value
+    return dict(metrics)
+
+
+def figure_label(figure: tuple, shown: list[str]) -> str:
+    """A figure as the report's tables and plots name it: the values of the
+    varying further variables, then the figure."""
+    group, _, name = figure
+    where = group_label(group, shown)
+    return f"{where}: {name}" if where else name
+
+
+def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
+    further = further_variables(meta, set(ROBUSTNESS_VARIABLES))
+    shown = varying(rows, further)
+    lines = [f"## {meta.get('title', 'Robustness')}", "", spec_comment(meta.get("spec", "")),
+             "", run_summary(rows), "", *constant_values(rows, further)]
+    ok = [r for r in rows if r["status"] == "ok"]
+    factors = sorted({k for r in rows for k in r if k.startswith("factor.")})
+    metrics = robustness_figures(rows, further)
+    order = sorted(metrics, key=lambda f: (_sortable(f[0]), f[2]))
     lines += ["Tracking RMS with decoupling on (µm; rad for theta) and coupling reduction "
-              "(span without / with decoupling) over the samples:", "",
-              "| method | figure | P5 | P50 | P95 | samples |", "|---|---|---|---|---|---|"]
-    for (method, name), values in sorted(metrics.items()):
+              "(span without / with decoupling) over the samples"
+              + (f", for each value of {', '.join(shown)}" if shown else "") + ":", "",
+              "| " + "".join(f"{name} | " for name in shown)
+              + "figure | P5 | P50 | P95 | samples |",
+              "|" + "---|" * len(shown) + "---|---|---|---|---|"]
+    for figure in order:
+        values = metrics[figure]
         p5, p50, p95 = percentiles(values.values())
-        lines.append(f"| {method} | {name} | {fmt(p5)} | {fmt(p50)} | {fmt(p95)} | "
+        cells = "".join(f"{show(value)} | " for name, value in figure[0] if name in shown)
+        lines.append(f"| {cells}{figure[2]} | {fmt(p5)} | {fmt(p50)} | {fmt(p95)} | "
                      f"{len(values)} |")
     lines.append("")
-    lines += [saturation_summary(ok), ""]
+    lines += [saturation_summary(ok, shown), ""]
     clipped = held_at_bounds(rows, factors)
     if clipped:
         lines += ["Factors held at a bound of the parameter's declared range (the model is "
@@ -321,8 +451,8 @@ def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
     names = sorted({k for _, per in sensitivity.items() for k in per["effects"]},
                    key=lambda n: -max(abs(per["effects"].get(n, 0.0))
                                       for per in sensitivity.values()))
-    columns = sorted(sensitivity)
-    lines.append("| parameter | " + " | ".join(f"{m}: {name}" for m, name in columns) + " |")
+    columns = order
+    lines.append("| parameter | " + " | ".join(figure_label(c, shown) for c in columns) + " |")
     lines.append("|---|" + "---|" * len(columns))
     for name in names[:12]:
         cells = [f"{100 * sensitivity[c]['effects'][name]:+.1f} %" for c in columns]
@@ -333,24 +463,25 @@ def robustness_section(rows: list[dict], meta: dict, out: Path) -> list[str]:
         effects = sensitivity[column]["effects"]
         if effects:
             worst = max(effects, key=lambda n: abs(effects[n]))
-            lines.append(f"- {column[0]}, {column[1]}: most sensitive to "
+            lines.append(f"- {figure_label(column, shown)}: most sensitive to "
                          f"`{worst.removeprefix('factor.')}` ({100 * effects[worst]:+.1f} % over "
                          f"its range)")
     lines.append("")
     name = "robustness.png"
-    robustness_figure(metrics, sensitivity, out / name)
+    robustness_figure(metrics, order, shown, sensitivity, out / name)
     lines.append(f"![robustness]({name})")
     lines.append("")
     return lines
 
 
-def saturation_summary(rows: list[dict]) -> str:
+def saturation_summary(rows: list[dict], shown: list[str] = ()) -> str:
     """Whether the figures measure the plant or the command limits: the runs
     whose commands sat at a limit on more than SATURATED_SHARE of their
-    samples, by axis and decoupling."""
+    samples, by the varying further variables (`shown`), axis and
+    decoupling."""
     saturated = defaultdict(lambda: [0, 0])
     for r in rows:
-        key = (r.get("method", "preset"), r["axis"], r["decoupling"])
+        key = (tuple(show(r.get(name)) for name in shown), r["axis"], r["decoupling"])
         saturated[key][1] += 1
         saturated[key][0] += (r.get("command_saturation") or 0) > SATURATED_SHARE
     hit = {k: v for k, v in saturated.items() if v[0]}
@@ -359,8 +490,9 @@ def saturation_summary(rows: list[dict]) -> str:
                 "its samples: the figures measure the plants, not the command range.")
     return (f"Commands at a limit on more than {100 * SATURATED_SHARE:g} % of the samples "
             "(those figures measure the command range as much as the plant): " + ", ".join(
-                f"{method} {axis}, decoupling {decoupling}: {n} of {total} runs"
-                for (method, axis, decoupling), (n, total) in sorted(hit.items())) + ".")
+                "".join(f"{name} = {value}, " for name, value in zip(shown, values))
+                + f"{axis}, decoupling {decoupling}: {n} of {total} runs"
+                for (values, axis, decoupling), (n, total) in sorted(hit.items())) + ".")
 
 
 def held_at_bounds(rows: list[dict], factors: list[str]) -> dict:
@@ -408,20 +540,22 @@ def sensitivities(metrics: dict, factors: list[str], rows: list[dict]) -> dict:
     return out
 
 
-def robustness_figure(metrics: dict, sensitivity: dict, path: Path) -> None:
-    keys = sorted(metrics)
+def robustness_figure(metrics: dict, order: list, shown: list[str], sensitivity: dict,
+                      path: Path) -> None:
+    """A histogram of each figure over the samples (its P5, P50, P95 as
+    lines), in `order`, and the parameters by their largest effect."""
     cols = 4
-    rows = math.ceil(len(keys) / cols) + 1
+    rows = math.ceil(len(order) / cols) + 1
     fig, grid = plt.subplots(rows, cols, figsize=(4 * cols, 2.6 * rows), squeeze=False)
-    for i, key in enumerate(keys):
+    for i, figure in enumerate(order):
         ax = grid[i // cols][i % cols]
-        values = [v for v in metrics[key].values() if v is not None and math.isfinite(v)]
+        values = [v for v in metrics[figure].values() if v is not None and math.isfinite(v)]
         ax.hist(values, bins=20, color="C0")
         for p, style in zip(percentiles(values), (":", "-", ":")):
             ax.axvline(p, color="k", ls=style, lw=0.8)
-        ax.set_title(f"{key[0]}: {key[1]}", fontsize=8)
+        ax.set_title(figure_label(figure, shown), fontsize=8)
         ax.tick_params(labelsize=7)
-    for j in range(len(keys), (rows - 1) * cols):
+    for j in range(len(order), (rows - 1) * cols):
         grid[j // cols][j % cols].axis("off")
     ax = plt.subplot2grid((rows, cols), (rows - 1, 0), colspan=cols, fig=fig)
     for c in range(cols):

@@ -887,8 +887,116 @@ def test_the_robustness_report_says_whether_commands_saturated():
     assert saturation_summary(clean).startswith("No run's commands sat at a limit")
     saturated = clean + [row("theta", "on", 0.6), row("theta", "on", 0.0)]
     summary = saturation_summary(saturated)
-    assert "preset theta, decoupling on: 1 of 2 runs" in summary, summary
-    assert "theta, decoupling off" not in summary and "preset x" not in summary, summary
+    assert "theta, decoupling on: 1 of 2 runs" in summary, summary
+    assert "theta, decoupling off" not in summary and "x, decoupling" not in summary, summary
+    # By the values of a further variable of the spec, when it takes several.
+    split = [dict(r, held=h) for r in saturated for h in (0.0, 3.0)]
+    split[-1]["command_saturation"] = 0.0  # theta, on, 0.0 runs; the 3.0 twin does not
+    summary = saturation_summary(split, ["held"])
+    assert "held = 0.0, theta, decoupling on: 1 of 2 runs" in summary, summary
+    assert "held = 3.0, theta, decoupling on: 1 of 2 runs" in summary, summary
+
+
+def _variables_spec(*names: str) -> str:
+    """A spec's text as a table's metadata keeps it, for the reports: they
+    read its variables' names from it."""
+    return "".join(f'[[variable]]\nname = "{name}"\nvalues = [0.0]\n' for name in names)
+
+
+def _report_table(lines: list[str], first: str) -> list[dict]:
+    """The Markdown table of a report's `lines` whose header starts with
+    `| first |`, as rows by column name."""
+    start = next(i for i, line in enumerate(lines) if line.startswith(f"| {first} |"))
+    header = [cell.strip() for cell in lines[start].strip("|").split("|")]
+    rows = []
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        rows.append(dict(zip(header, (cell.strip() for cell in line.strip("|").split("|")))))
+    return rows
+
+
+def test_the_robustness_report_keeps_a_further_variables_runs_apart(tmp_path):
+    """A Monte Carlo spec with a variable the report does not read (`held`,
+    two values) gave one row per figure, paired by (axis, sample) alone:
+    the held = 3 runs overwrote the held = 0 ones and P5/P50/P95 were theirs
+    alone, without a word. Each value now has its rows, and the samples
+    they count add up to the table's runs."""
+    from demo.sweep_report import COUPLINGS, fmt, percentiles, robustness_section
+
+    rows = []
+    for held in (0.0, 3.0):
+        for axis in ("y", "x"):
+            for sample in range(12):
+                for decoupling in ("off", "on"):
+                    gain = (1 + held) * (1 + 0.1 * sample) * (
+                        3 + sample if decoupling == "off" else 1)
+                    rows.append({"run": len(rows), "status": "ok", "held": held, "axis": axis,
+                                 "decoupling": decoupling, "sample": sample,
+                                 "factor.a": 0.9 + 0.015 * sample, "tracking_rms": 0.01 * gain,
+                                 "coupling_x2_span": gain, "coupling_x3_span": 2 * gain,
+                                 "coupling_y_span": gain, "command_saturation": 0.0,
+                                 "wall_s": 0.01, "worker": "w"})
+    meta = {"spec": _variables_spec("held", "axis", "decoupling"), "title": "t"}
+    lines = robustness_section(rows, meta, tmp_path)
+    table = _report_table(lines, "held")
+    assert {row["held"] for row in table} == {"0.0", "3.0"}, table
+    # Every run is counted once: the tracking figures count the runs with
+    # decoupling on, each coupling's reduction pairs one with its twin
+    # without.
+    on = [r for r in rows if r["decoupling"] == "on"]
+    assert sum(int(row["samples"]) for row in table
+               if row["figure"].endswith("tracking RMS")) == len(on)
+    assert sum(int(row["samples"]) for row in table if row["figure"].endswith("reduction")) \
+        == sum(len(COUPLINGS[r["axis"]]) for r in on)
+    for held in (0.0, 3.0):
+        row = next(row for row in table
+                   if row["held"] == str(held) and row["figure"] == "y tracking RMS")
+        values = [r["tracking_rms"] for r in on if r["held"] == held and r["axis"] == "y"]
+        assert row["P50"] == fmt(percentiles(values)[1]), (held, row)
+    assert (tmp_path / "robustness.png").is_file()
+
+
+def test_the_envelope_report_keeps_a_further_variables_runs_apart(tmp_path):
+    """The envelope paired runs by (stage, method, axis, held, amplitude,
+    frequency): a spec with a further variable (`kp`, two values) had each
+    kp = 0.05 run replaced by its kp = 0.5 twin. Each value now has its row
+    and its heatmaps, and the points they count add up to the table."""
+    from demo.sweep_report import envelope_section
+
+    rows = []
+    for kp in (0.05, 0.5):
+        for frequency in (1.0, 10.0):
+            for decoupling in ("off", "on"):
+                span = 2.0 if decoupling == "off" else (0.1 if kp == 0.05 else 1.5)
+                rows.append({"run": len(rows), "status": "ok", "stage": "flexure",
+                             "method": "m", "axis": "y", "held": 0.0, "amplitude": 0.1,
+                             "frequency": frequency, "kp": kp, "decoupling": decoupling,
+                             "tracking_rms": 0.01, "demand_span": 2.0,
+                             "coupling_x2_span": span, "coupling_x3_span": span,
+                             "simulated_s": 1.0, "wall_s": 0.01, "worker": "w"})
+    meta = {"spec": _variables_spec("stage", "method", "axis", "decoupling", "held",
+                                    "amplitude", "frequency", "kp"), "title": "t"}
+    lines = envelope_section(rows, meta, tmp_path)
+    table = _report_table(lines, "stage")
+    assert [(row["kp"], row["points holding"]) for row in table] == [("0.05", "2/2"),
+                                                                     ("0.5", "0/2")], table
+    assert 2 * sum(int(row["points holding"].split("/")[1]) for row in table) == len(rows)
+    for kp in ("0.05", "0.5"):
+        assert (tmp_path / f"envelope_flexure_m_kp-{kp}_coupling.png").is_file(), kp
+
+
+def test_a_report_refuses_to_show_one_run_in_place_of_another():
+    """The reports pair runs by every variable the spec has; two rows that
+    still meet there would be one shown for both, which is refused."""
+    from demo.sweep_report import paired_runs
+
+    row = {"status": "ok", "axis": "y", "sample": 0, "decoupling": "on"}
+    assert paired_runs([row, dict(row, decoupling="off")], ["axis", "sample"]) == {
+        ("y", 0): {"on": row, "off": dict(row, decoupling="off")}}
+    with pytest.raises(ValueError, match="axis = y, sample = 0, decoupling on: the report "
+                                         "would show one of them"):
+        paired_runs([row, dict(row)], ["axis", "sample"])
 
 
 def test_a_nominal_value_outside_its_range_is_refused_not_held_at_the_bound(spec_path,
