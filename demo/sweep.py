@@ -10,10 +10,13 @@ patch the template), optionally a Monte Carlo over the plant's parameters.
 The expanded runs go to dask in tasks of up to `runs_per_task` runs (default
 10, fewer when the workers would otherwise run out of tasks), each task one
 master process (`piezo-cosim batch`) that returns one row per run; the rows
-land in DIR/<study>.parquet, one per run: every swept value, the seed, the
-metrics, the wall time, each column's unit (where it has one) in its Arrow
-field's metadata (b"unit": the FMUs' units for variables, the master's for
-metrics, `piezo-cosim metrics`).
+land in DIR/<study>.parquet, one per run: every swept value, the seed (the
+plant's noise.seed in that run: a Monte Carlo sample's draw where the spec's
+`seed_parameter` gives it, else the scenario's own; empty where the scenario
+sets none and the FMU's start value holds), the metrics, the wall time,
+each column's unit (where it has one) in its Arrow field's metadata
+(b"unit": the FMUs' units for variables, the master's for metrics,
+`piezo-cosim metrics`).
 
 - Runs go to a LocalCluster of N worker processes (default: one per core), or
   to an existing cluster (`dask scheduler`, `dask worker`) with --scheduler.
@@ -930,13 +933,18 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                     # The factor applied, after the range (the swept value); a
                     # nominal 0 stays 0, unperturbed.
                     applied[name] = parameters[name] / nominal if nominal else 1.0
-                if mc.seed_parameter:
-                    parameters[mc.seed_parameter] = seed
                 values["sample"] = sample
                 values.update({f"factor.{n}": f for n, f in applied.items()})
+            # The seed column says the seed the run used, so that a row can
+            # be run again from it: the sample's draw where seed_parameter
+            # gives it to the plant, else the template's (or a case's)
+            # noise.seed. A drawn seed that no parameter receives is not the
+            # run's (it is still drawn: the later samples' factors stay).
+            if sample is not None and mc.seed_parameter:
+                parameters[mc.seed_parameter] = seed
+                values["seed"] = seed
             else:
-                seed = _noise_seed(scenario)
-            values["seed"] = seed
+                values["seed"] = _noise_seed(scenario)
             key = hashlib.sha256(canonical(scenario).encode()).hexdigest()[:32]
             runs.append(Run(len(runs), key, scenario, values))
     # Two grid points that make one scenario would be one row, which says
@@ -956,8 +964,9 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
 
 
 def _noise_seed(scenario: dict):
-    """The sensor-noise seed a grid run uses (reported in the table's seed
-    column), when its plant has one."""
+    """The sensor-noise seed a run's scenario sets (the table's seed column
+    for a grid run, and for a Monte Carlo run without seed_parameter); None
+    where it sets none (the FMU's start value then holds)."""
     for entry in scenario.get("fmu", {}).values():
         seed = entry.get("parameters", {}).get("noise.seed")
         if seed is not None:

@@ -1026,3 +1026,32 @@ def test_a_nominal_value_outside_its_range_is_refused_not_held_at_the_bound(spec
         sweep.expand(sweep.load_spec(bad))
     assert str(e.value).startswith(f"{parameter_set}:3: plant.amplifier.gain = -1 "), str(e.value)
 
+
+
+def test_the_seed_column_is_the_seed_the_run_used(spec_path, tmp_path):
+    """A Monte Carlo without seed_parameter wrote the seed it drew for each
+    sample into the seed column though no parameter received it: a row run
+    again with that seed gave another result (the run had used the
+    template's noise.seed). The column is the plant's noise.seed in every
+    run: drawn where seed_parameter gives it, the template's otherwise, and
+    empty where the scenario sets none (the FMU's start value)."""
+    def seeds(text: str) -> list[tuple]:
+        runs = sweep.expand(sweep.load_spec(_written(tmp_path / "s.toml", text)))[0]
+        return [(run.values["seed"], run.scenario["fmu"]["plant"]["parameters"].get("noise.seed"))
+                for run in runs]
+
+    drawn = seeds(SPEC)
+    assert all(column == used for column, used in drawn), drawn
+    assert len({column for column, _ in drawn}) == 2, "one seed per sample"
+    unseeded = SPEC.replace('seed_parameter = "noise.seed"\n', "")
+    assert unseeded != SPEC
+    assert {column for column, _ in seeds(unseeded)} == {None}
+    fixed = unseeded.replace('"noise.enabled" = true }', '"noise.enabled" = true, '
+                                                        '"noise.seed" = 5 }')
+    assert fixed != unseeded
+    assert set(seeds(fixed)) == {(5, 5)}
+    # The samples' factors do not depend on where the seed goes.
+    factors = [{k: v for k, v in run.values.items() if k.startswith("factor.")}
+               for text in (SPEC, unseeded)
+               for run in sweep.expand(sweep.load_spec(_written(tmp_path / "s.toml", text)))[0]]
+    assert factors[:RUNS] == factors[RUNS:]
