@@ -1246,17 +1246,48 @@ def _write_atomically(table, path: Path) -> None:
     os.replace(scratch, path)
 
 
-def consolidate(out: Path, spec: Spec, keys: dict[str, int],
+def table_variables(out: Path, study: str) -> set[str]:
+    """The names of the variables of the spec that wrote the study's table
+    (its schema's metadata keeps the spec's text); none without a table."""
+    import pyarrow.parquet as pq
+
+    path = table_path(out, study)
+    if not path.is_file():
+        return set()
+    text = (pq.read_schema(path).metadata or {}).get(b"spec", b"")
+    try:
+        entries = tomllib.loads(text.decode()).get("variable", [])
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return set()
+    return {entry.get("name") for entry in entries if isinstance(entry, dict)}
+
+
+def as_run_of(row: dict, run: Run, old_variables: set[str]) -> dict:
+    """A row of the table as `run`'s row (the same scenario: the same key)
+    in the spec as it is now: numbered, and its values named, as a fresh
+    run of that spec would write them. A spec extended since (a grid's new
+    value) numbers its runs anew, and the old numbers would repeat and
+    interleave with the new runs'; a variable renamed would leave its old
+    column. What the run computed (status, metrics, times) is kept."""
+    outcome = {name: value for name, value in row.items()
+               if name not in ("run", "key", "sample", "seed") and name not in run.values
+               and name not in old_variables and not name.startswith("factor.")}
+    return {"run": run.index, "key": run.key, **run.values, **outcome}
+
+
+def consolidate(out: Path, spec: Spec, runs: dict[str, Run],
                 units: dict[str, str] | None = None) -> int:
-    """Folds the journal into the table: each run once, in run order, the
-    columns' `units` in its schema. Returns the number of rows."""
+    """Folds the journal into the table: each of the spec's `runs` (by key)
+    once, as that run's row (as_run_of), in run order, the columns' `units`
+    in its schema. Returns the number of rows."""
+    old_variables = table_variables(out, spec.study)
     rows = read_rows(out, spec.study)
     unique = {}
     for row in rows:
         # The table's rows first, then the journal's: a run executed again
         # (after a timeout) replaces its earlier row.
-        if row["key"] in keys:
-            unique[row["key"]] = row
+        if row["key"] in runs:
+            unique[row["key"]] = as_run_of(row, runs[row["key"]], old_variables)
     ordered = sorted(unique.values(), key=lambda r: r["run"])
     if ordered:
         _write_atomically(_rows_to_table(ordered, spec, units), table_path(out, spec.study))
@@ -1407,7 +1438,7 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
 
     out.mkdir(parents=True, exist_ok=True)
     runs, fmus = expand(spec)
-    keys = {run.key: run.index for run in runs}
+    keys = {run.key: run for run in runs}
     units = column_units(spec, runs)
     if restart:
         # The spec is checked before anything is deleted: a typo keeps the table.

@@ -108,6 +108,16 @@ def local_sweep(spec_path, out, workers, **kwargs):
                                **kwargs)
 
 
+def local_sweeps(sweeps: list[tuple[Path, Path]], workers: int = 1, **kwargs) -> list[dict]:
+    """run_sweep of each (spec, out) in turn, on one LocalCluster."""
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        return [sweep.run_sweep(sweep.load_spec(spec), out, client, progress="none", **kwargs)
+                for spec, out in sweeps]
+
+
 @pytest.fixture(scope="module")
 def reference_out(spec_path, tmp_path_factory):
     """The folder of the spec's table from a LocalCluster of one worker."""
@@ -1055,3 +1065,27 @@ def test_the_seed_column_is_the_seed_the_run_used(spec_path, tmp_path):
                for text in (SPEC, unseeded)
                for run in sweep.expand(sweep.load_spec(_written(tmp_path / "s.toml", text)))[0]]
     assert factors[:RUNS] == factors[RUNS:]
+
+
+def test_a_grid_extended_into_its_table_numbers_its_runs_as_a_fresh_sweep(spec_path,
+                                                                          reference_out,
+                                                                          tmp_path):
+    """A frequency added to the grid and the sweep resumed into the same
+    folder kept the old rows' run numbers, which the new expansion gives to
+    other runs: 0, 1, 2, 3, 3, 4, 5, 7 in the grid of the issue. A kept row
+    is now the row a fresh sweep of the spec as it is writes, number
+    included; only wall_s, task_s and worker differ (EXECUTION_COLUMNS)."""
+    import shutil
+
+    extended = _written(tmp_path / "small.toml",
+                        spec_path.read_text().replace("values = [5.0, 10.0]",
+                                                      "values = [5.0, 7.0, 10.0]"))
+    resumed, fresh = tmp_path / "resumed", tmp_path / "fresh"
+    resumed.mkdir()
+    shutil.copy(sweep.table_path(reference_out, "small"), resumed)
+    first, second = local_sweeps([(extended, resumed), (extended, fresh)])
+    assert (first["executed"], first["skipped"]) == (RUNS // 2, RUNS), first
+    assert second["executed"] == RUNS + RUNS // 2, second
+    rows = rows_of(resumed)
+    assert [r["run"] for r in rows] == list(range(RUNS + RUNS // 2))
+    assert results(rows) == results(rows_of(fresh))
