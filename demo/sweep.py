@@ -39,7 +39,13 @@ each column's unit (where it has one) in its Arrow field's metadata
   same command skips every run already in it. Ctrl-C ends the command with
   one line, the runs kept and how to resume, and exit status 130.
 - A spec that does not fit is refused before any run, with its file, line and
-  problem (exit status 2).
+  problem (exit status 2): the master checks a scenario of every combination
+  of named cases and one per further value of each variable.
+- A table holds the runs of its spec as it is now: a kept row is numbered and
+  named as a fresh sweep of the spec would write it (a grid extended since
+  runs its new points only); the failed or timed-out rows of runs the spec no
+  longer makes (a value fixed after it failed) are dropped, and a row with a
+  result of such a run is refused (StaleTable: --restart, or another --out).
 """
 
 from __future__ import annotations
@@ -66,6 +72,7 @@ import threading
 import time
 import tomllib
 import zipfile
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -1319,49 +1326,130 @@ class StaleTable(SpecError):
     pass
 
 
-def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> None:
+def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> list[Run]:
     """Runs the master's check (load, wire, set every parameter, initialize;
-    no step) on one run of every combination of named cases, here, before
-    anything is sent: a spec that does not fit the FMUs fails once, with the
-    master's message, instead of in every task."""
-    seen = set()
+    no step) here, before anything is sent, on one run of every combination
+    of named cases, then on one run per further value of each variable, a
+    run that differs from a checked one in that value alone: a spec that
+    does not fit the FMUs fails once, with the master's message and the
+    value it is about, instead of in every task (a grid value out of its
+    parameter's range failed every run that had it, and the others' rows
+    were kept with theirs). The checks go a few at a time (one master
+    process each). Returns the runs checked."""
+    references, neighbours = _runs_to_check(runs, spec)
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        outcomes = list(pool.map(lambda run: _check_one(run, fmus),
+                                 [run for run, _ in references + neighbours]))
+    for (run, signature), error in zip(references, outcomes):
+        if error is not None:
+            raise _case_error(spec, signature, error)
+    for (run, value), error in zip(neighbours, outcomes[len(references):]):
+        if error is not None:
+            raise _value_error(spec, run, value, error)
+    return [run for run, _ in references + neighbours]
+
+
+def _runs_to_check(runs: list[Run], spec: Spec) -> tuple[list, list]:
+    """The runs check_scenarios checks: (run, its named cases) for the first
+    run of every combination of named cases, and (run, (variable, value))
+    for every value of a variable no such run has, the run being the
+    neighbour of one of them (its other values equal) where the grid has
+    one, else the first run with the value. Monte Carlo samples repeat the
+    grid's points with factors kept within their parameters' ranges: the
+    first sample's runs stand for all."""
+    names = [v.name for v in spec.variables]
+    first_of: dict[tuple, Run] = {}
     for run in runs:
+        first_of.setdefault(tuple(run.values[name] for name in names), run)
+    references, seen = [], set()
+    for run in first_of.values():
         signature = tuple(sorted((k, v) for k, v in run.values.items()
-                                 if isinstance(v, str)))
-        if signature in seen:
-            continue
-        seen.add(signature)
-        scenario = copy.deepcopy(run.scenario)
-        for entry in scenario.get("fmu", {}).values():
-            entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
-        try:
-            master.check(scenario)
-        except master.MasterError as e:
-            cases = ", ".join(f"{k} = {v}" for k, v in signature) or "the template"
-            # A value the master cannot read is named by its key in the
-            # scenario it was sent (`<stdin>:1:253: metrics.driven: ...`): the
-            # place in that JSON means nothing to the spec's reader; the key's
-            # line in the spec's template does.
-            unread = re.match(rf"^<stdin>:\d+:\d+: ((?:{_QUOTED_KEY}|[^:\s\"])+): (.*)$", str(e),
-                              re.DOTALL)
-            if unread:
-                key, problem = unread.groups()
-                lines = _SpecLines(spec.text)
-                # A named case's patch wins over the template: name it first.
-                patched = [(name, case) for name, case in signature
-                           if _patch_sets(_case_patch(spec, name, case), _key_parts(key))]
-                if patched:
-                    name, case = patched[-1]
-                    span = lines.table(f"variable.values.{case}")
-                    line = lines.key("patch", span) if span else None
-                    where = f"{spec.path}:{line}" if line else str(spec.path)
-                    raise SpecError(f"{where}: {name} = {case}: patch {key}: {problem}") from None
-                line = _template_line(lines, key)
-                where = f"{spec.path}:{line}" if line else str(spec.path)
-                source = "template" if line else "scenario"
-                raise SpecError(f"{where}: {source} {key}: {problem} (in the scenario of "
-                                f"{cases})") from None
-            raise SpecError(f"{spec.path}: the scenario of {cases} does not run: {e}") from None
+                                 if k in names and isinstance(v, str)))
+        if signature not in seen:
+            seen.add(signature)
+            references.append((run, signature))
+    covered = {(name, run.values[name]) for run, _ in references for name in names}
+    neighbours = []
+    for index, variable in enumerate(spec.variables):
+        for value in variable.values:
+            value = getattr(value, "name", value)
+            if (variable.name, value) in covered:
+                continue
+            candidates = [first_of.get((*point[:index], value, *point[index + 1:]))
+                          for point in (tuple(run.values[n] for n in names)
+                                        for run, _ in references)]
+            run = next((c for c in candidates if c is not None), None) or next(
+                (r for point, r in first_of.items() if point[index] == value), None)
+            if run is None:
+                continue  # every point with it is excluded
+            neighbours.append((run, (variable.name, value)))
+            covered.update((name, run.values[name]) for name in names)
+    return references, neighbours
+
+
+def _check_one(run: Run, fmus: dict[str, Path]) -> master.MasterError | None:
+    """The master's check of one run's scenario: its error, or None."""
+    scenario = copy.deepcopy(run.scenario)
+    for entry in scenario.get("fmu", {}).values():
+        entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
+    try:
+        master.check(scenario)
+    except master.MasterError as e:
+        return e
+    return None
+
+
+def _unread(error: master.MasterError) -> tuple[str, str] | None:
+    """(key, problem) of a value the master cannot read, which it names by
+    its key in the scenario it was sent (`<stdin>:1:253: metrics.driven:
+    ...`): the place in that JSON means nothing to the spec's reader."""
+    found = re.match(rf"^<stdin>:\d+:\d+: ((?:{_QUOTED_KEY}|[^:\s\"])+): (.*)$", str(error),
+                     re.DOTALL)
+    return found.groups() if found else None
+
+
+def _case_error(spec: Spec, signature: tuple, error: master.MasterError) -> SpecError:
+    """The error of a run of named cases `signature` that does not check: at
+    the line of the key the master names, in the template or in a case's
+    patch, or of the spec."""
+    cases = ", ".join(f"{k} = {v}" for k, v in signature) or "the template"
+    unread = _unread(error)
+    if unread:
+        key, problem = unread
+        lines = _SpecLines(spec.text)
+        # A named case's patch wins over the template: name it first.
+        patched = [(name, case) for name, case in signature
+                   if _patch_sets(_case_patch(spec, name, case), _key_parts(key))]
+        if patched:
+            name, case = patched[-1]
+            span = lines.table(f"variable.values.{case}")
+            line = lines.key("patch", span) if span else None
+            where = f"{spec.path}:{line}" if line else str(spec.path)
+            return SpecError(f"{where}: {name} = {case}: patch {key}: {problem}")
+        line = _template_line(lines, key)
+        where = f"{spec.path}:{line}" if line else str(spec.path)
+        source = "template" if line else "scenario"
+        return SpecError(f"{where}: {source} {key}: {problem} (in the scenario of {cases})")
+    return SpecError(f"{spec.path}: the scenario of {cases} does not run: {error}")
+
+
+def _value_error(spec: Spec, run: Run, value: tuple, error: master.MasterError) -> SpecError:
+    """The error of a variable's value whose run does not check, at the line
+    of the variable's values. The run differs in that value alone from one
+    that checked where the grid has such a run (then the value is the
+    cause); the run's other values are named."""
+    name, shown = value
+    index = next(i for i, v in enumerate(spec.variables) if v.name == name)
+    lines = _SpecLines(spec.text)
+    span = lines.table("variable", index)
+    line = lines.key("values", span) if span else _line_of(spec.text, _quoted(spec.text, name))
+    where = f"{spec.path}:{line}" if line else str(spec.path)
+    names = [v.name for v in spec.variables]
+    others = ", ".join(f"{n} = {run.values[n]!r}" for n in names if n != name)
+    unread = _unread(error)
+    problem = f"{unread[0]}: {unread[1]}" if unread else f"the scenario does not run: {error}"
+    return SpecError(f"{where}: {name} = {_shown(shown)}: {problem} (in the scenario of "
+                     f"{others or 'the template'})")
 
 
 def _case_patch(spec: Spec, variable: str, case: str) -> dict:
@@ -1425,6 +1513,32 @@ def _progress_lines(done: int, total: int, failed: int, started: float, study: s
           f"{failed} failed, {elapsed:.0f} s elapsed, {to_go}", flush=True)
 
 
+def stale_rows(out: Path, spec: Spec, rows: list[dict], runs: dict[str, Run]) -> int:
+    """The number of runs of the table's `rows` that the spec (`runs` by
+    key) no longer makes, and that consolidation drops: those that failed or
+    timed out, which hold no result (a grid value fixed after it failed, as
+    check_scenarios now refuses it). A run the spec no longer makes whose
+    row holds a result is not dropped without being asked: StaleTable."""
+    stale: dict[str, list[dict]] = {}
+    for row in rows:
+        if row.get("key") not in runs:
+            stale.setdefault(row.get("key"), []).append(row)
+    results = [rows_of_key[-1] for rows_of_key in stale.values()
+               if any(r.get("status") == "ok" for r in rows_of_key)]
+    if results:
+        named = table_variables(out, spec.study) | {v.name for v in spec.variables} | {"sample"}
+        first = ", ".join(f"{name} = {value!r}" for name, value in results[0].items()
+                          if name in named) or f"key {results[0].get('key')}"
+        total = len({row.get("key") for row in rows})
+        raise StaleTable(
+            f"{table_path(out, spec.study)}: {len(results)} of its {total} runs hold results "
+            f"of runs that {spec.path} no longer makes (the first: {first}; the spec, a "
+            f"parameter set or an FMU changed). A table holds the runs of one spec, and "
+            f"dropping these would lose their results: pass --restart to start the table "
+            f"over, or choose another --out")
+    return len(stale)
+
+
 def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: str = "auto",
               on_row=None, checked: bool = False, on_interrupt=None) -> dict:
     """Runs every run of `spec` not yet in DIR/<study>.parquet on `client`'s
@@ -1448,16 +1562,15 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
         table_path(out, spec.study).unlink(missing_ok=True)
         journal_path(out, spec.study).unlink(missing_ok=True)
     existing = read_rows(out, spec.study)
-    stale = [row for row in existing if row.get("key") not in keys]
-    if stale:
-        raise StaleTable(
-            f"{table_path(out, spec.study)}: {len(stale)} of its {len(existing)} rows are not "
-            f"runs of {spec.path} as it is now (the spec or the FMUs changed): pass --restart "
-            f"to start the table over, or choose another --out")
+    dropped = stale_rows(out, spec, existing, keys)
     done_keys = {row["key"] for row in existing if row.get("status") != "timeout"}
     todo = [run for run in runs if run.key not in done_keys]
     summary = {"study": spec.study, "runs": len(runs), "skipped": len(runs) - len(todo),
-               "executed": 0, "failed": 0, "timeouts": 0, "lost": 0, "interrupted": False}
+               "executed": 0, "failed": 0, "timeouts": 0, "lost": 0, "interrupted": False,
+               "dropped": dropped}
+    if dropped:
+        print(f"{spec.study}: {dropped} failed or timed-out rows of runs that {spec.path} no "
+              f"longer makes leave the table (they hold no result)", flush=True)
     if not todo:
         summary["rows"] = consolidate(out, spec, keys, units)
         return summary

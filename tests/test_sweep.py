@@ -1089,3 +1089,71 @@ def test_a_grid_extended_into_its_table_numbers_its_runs_as_a_fresh_sweep(spec_p
     rows = rows_of(resumed)
     assert [r["run"] for r in rows] == list(range(RUNS + RUNS // 2))
     assert results(rows) == results(rows_of(fresh))
+
+
+def _kp_spec(values: str) -> str:
+    """SPEC at one frequency, the controller's translation.kp swept over
+    `values` (4 runs a value)."""
+    text = SPEC.replace("values = [5.0, 10.0]", "values = [10.0]").replace(
+        f'path = "{CONTROLLER}"\n',
+        f'path = "{CONTROLLER}"\nparameters = {{ "translation.kp" = "= kp" }}\n')
+    return text + f'[[variable]]\nname = "kp"\nvalues = {values}\n'
+
+
+def test_every_value_of_every_variable_is_checked_before_any_run(tmp_path, monkeypatch):
+    """The check ran one scenario per combination of named cases, so a grid
+    value out of its parameter's range (kp = -5) went to the cluster and
+    failed every run that had it. It is refused before any run, at the
+    line of the variable's values, and the run checked for it differs from
+    a checked one in that value alone."""
+    text = _kp_spec("[0.05, -5.0]")
+    bad = _written(tmp_path / "bad.toml", text)
+    spec = sweep.load_spec(bad)
+    runs, fmus = sweep.expand(spec)
+    line = text.splitlines().index("values = [0.05, -5.0]") + 1
+    with pytest.raises(sweep.SpecError) as e:
+        sweep.check_scenarios(runs, fmus, spec)
+    assert str(e.value).startswith(
+        f"{bad}:{line}: kp = -5.0: the scenario does not run: controller: "), str(e.value)
+    assert "translation.kp = -5 is outside its allowed range" in str(e.value), str(e.value)
+    assert str(e.value).endswith("(in the scenario of frequency = 10.0, decoupling = 'off', "
+                                 "amplitude = 2.0)"), str(e.value)
+    # Every value of every variable is in a run checked, once or so each.
+    grid = _written(tmp_path / "grid.toml", _kp_spec("[0.05, 0.1, 0.2]").replace(
+        "values = [10.0]", "values = [5.0, 10.0, 20.0]").replace(
+        "values = [2.0]", "values = [1.0, 2.0]"))
+    spec = sweep.load_spec(grid)
+    runs, fmus = sweep.expand(spec)
+    checked = sweep.check_scenarios(runs, fmus, spec)
+    values = {(v.name, getattr(value, "name", value)) for v in spec.variables
+              for value in v.values}
+    assert {(name, run.values[name]) for run in checked for name, _ in values} == values
+    assert len(checked) == 2 + 2 + 2 + 1, "the cases' two runs, then one run a further value"
+
+
+def test_a_table_keeps_its_runs_when_a_failed_value_is_fixed(tmp_path):
+    """The rerun after fixing a value that failed refused the table ("4 of
+    its 8 rows are not runs of ...: pass --restart"), which threw the good
+    rows away too. The failed rows of the value no longer swept hold no
+    result and leave the table; the rows that are still runs of the spec
+    are kept, and only the new value runs. A run the spec no longer makes
+    whose row holds a result still needs --restart, and the message says
+    which and why."""
+    bad = _written(tmp_path / "bad.toml", _kp_spec("[0.05, -5.0]"))
+    fixed = _written(tmp_path / "fixed.toml", _kp_spec("[0.05, 5.0]"))
+    narrowed = _written(tmp_path / "narrowed.toml", _kp_spec("[5.0]"))
+    out = tmp_path / "out"
+    # As an earlier version sent it: unchecked.
+    first, second = local_sweeps([(bad, out), (fixed, out)], checked=True)
+    assert (first["executed"], first["failed"]) == (8, 4), first
+    assert (second["executed"], second["skipped"], second["dropped"]) == (4, 4, 4), second
+    rows = rows_of(out)
+    assert [(r["run"], r["status"]) for r in rows] == [(n, "ok") for n in range(8)]
+    assert {r["kp"] for r in rows} == {0.05, 5.0}
+    with pytest.raises(sweep.StaleTable) as e:
+        sweep.run_sweep(sweep.load_spec(narrowed), out, client=None)
+    assert str(e.value).startswith(
+        f"{out / 'small.parquet'}: 4 of its 8 runs hold results of runs that {narrowed} no "
+        f"longer makes (the first: frequency = 10.0, decoupling = 'off', amplitude = 2.0, "
+        f"kp = 0.05, sample = 0; "), str(e.value)
+    assert "pass --restart" in str(e.value)
