@@ -38,6 +38,12 @@ each column's unit (where it has one) in its Arrow field's metadata
   interrupted sweep (Ctrl-C, a lost client) is folded into the table, and the
   same command skips every run already in it. Ctrl-C ends the command with
   one line, the runs kept and how to resume, and exit status 130.
+- A cluster that cannot run the study is named in a message with what to do,
+  exit status 3 (ClusterError): a scheduler address refused or unknown, at
+  once; no worker within WORKER_WAIT_S; a scheduler or every worker that
+  cannot import this package or fmpy or find the master, before any task
+  (the workers that can run the tasks get them); runs lost with the workers.
+  Runs that failed or timed out end the command with status 1.
 - A spec that does not fit is refused before any run, with its file, line and
   problem (exit status 2): the master checks a scenario of every combination
   of named cases and one per further value of each variable.
@@ -65,6 +71,7 @@ import os
 import re
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -82,13 +89,46 @@ from . import master
 
 
 def lost_task_hint(error: BaseException) -> str:
-    """What to do about a task that could not run, where the error says."""
+    """What to do about a task that could not run, or a scheduler or worker
+    that cannot run one, where the error says."""
     text = str(error)
     if "deserializ" in text or "No module named 'demo'" in text:
         return ("\n  If the scheduler or a worker cannot import this repository's `demo` package "
                 "(the usual cause), start `dask scheduler` and `dask worker` from a checkout with "
                 "PYTHONPATH set to it (README, \"Sweeps on dask\").")
+    missing = re.search(r"No module named '?([\w.]+)", text)
+    if missing:
+        return (f"\n  The package {missing.group(1)!r} is missing there: start `dask scheduler` "
+                f"and `dask worker` with this checkout's venv (.venv/bin/dask, `make venv`) and "
+                f"PYTHONPATH set to the checkout (README, \"Sweeps on dask\").")
     return ""
+
+
+class ClusterError(RuntimeError):
+    """The cluster cannot run a study: its scheduler unreachable, no worker
+    joined, a scheduler or workers that cannot run the tasks, or runs lost
+    with their workers. The command ends with this one message and exit
+    status EXIT_CLUSTER; the same command resumes once the cluster is
+    fixed."""
+
+
+#: The exit status of a command whose cluster could not run its runs
+#: (ClusterError): neither runs that failed (1) nor a spec (2).
+EXIT_CLUSTER = 3
+#: Seconds a study waits for a first worker on a scheduler that has none
+#: (workers started with it may still be connecting).
+WORKER_WAIT_S = 10.0
+#: Seconds a scheduler has to answer once its port takes a connection.
+CONNECT_TIMEOUT_S = 10.0
+#: What every worker runs before a study's tasks go out: the imports and the
+#: master a task needs. A worker that cannot unpickle a task dies with the
+#: connection to its scheduler (its nanny does not restart it), and the
+#: study waited 30 s for a worker, then ended in a traceback; this names the
+#: cause in a line. Run as exec's source: exec, a builtin, unpickles
+#: anywhere.
+WORKER_PROBE = "import fmpy, demo.sweep, demo.master; demo.master.binary()"
+#: What the scheduler runs before a study: it unpickles the tasks.
+SCHEDULER_PROBE = "import demo.sweep"
 
 
 #: Columns that describe how a run was executed, not what it computed: they
@@ -1578,8 +1618,28 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
         check_scenarios(todo, fmus, spec)
 
     def scatter() -> dict:
+        # A cluster whose workers all left (a worker that cannot unpickle a
+        # task ends with it) is waited for a while, then named: dask's
+        # scatter waited 30 s and raised "No valid workers found".
+        if not client.scheduler_info().get("workers"):
+            try:
+                client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+            except TimeoutError:
+                raise ClusterError(
+                    f"every worker of the dask scheduler at {client.scheduler.address} left "
+                    f"while the study ran, and none joined within {WORKER_WAIT_S:g} s: the "
+                    f"workers' logs say why; the same command resumes") from None
         return {digest: client.scatter(path.read_bytes(), broadcast=True, hash=True)
                 for digest, path in fmus.items()}
+
+    def submit(task: list[Run], data: dict, key: str, pure: bool):
+        # Tasks prefer the workers that can run them (ready_workers): a
+        # worker without this package would die of the task. Loosely: a
+        # worker the nanny restarts has a new address, and tasks bound to the
+        # old ones would wait for ever.
+        return client.submit(execute_runs, task, data, spec.timeout, key=key, pure=pure,
+                             workers=ready if refused else None,
+                             allow_other_workers=bool(refused))
 
     mode = progress
     if mode == "auto":
@@ -1590,13 +1650,11 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     printed_at = None  # the `done` of the last progress line
     futures = []
     try:
+        ready, refused = ready_workers(client)
         data = scatter()
-        workers = len(client.scheduler_info().get("workers", {}))
-        tasks = batches(todo, workers, spec.runs_per_task)
-        futures += [client.submit(execute_runs, task, data, spec.timeout,
-                                  key="runs-" + hashlib.sha256(
-                                      "".join(run.key for run in task).encode()).hexdigest()[:32],
-                                  pure=True)
+        tasks = batches(todo, len(ready), spec.runs_per_task)
+        futures += [submit(task, data, "runs-" + hashlib.sha256(
+                        "".join(run.key for run in task).encode()).hexdigest()[:32], pure=True)
                     for task in tasks]
         task_of = {future.key: task for future, task in zip(futures, tasks)}
         tries = {future.key: 0 for future in futures}
@@ -1623,8 +1681,7 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                 lost_data = type(e).__name__ in ("FutureCancelledError", "CancelledError")
                 if lost_data and tries[future.key] < TASK_RETRIES:
                     data = scatter()
-                    again = client.submit(execute_runs, task, data, spec.timeout,
-                                          key=f"{future.key}-again", pure=False)
+                    again = submit(task, data, f"{future.key}-again", pure=False)
                     task_of[again.key], tries[again.key] = task, tries[future.key] + 1
                     pending.add(again)
                     futures.append(again)
@@ -1687,7 +1744,14 @@ def make_client(scheduler: str | None, workers: int | None):
     if scheduler:
         from distributed import Client
 
-        with Client(scheduler, timeout="30s") as client:
+        reach(scheduler)
+        try:
+            client = Client(scheduler, timeout=f"{CONNECT_TIMEOUT_S:g}s")
+        except (OSError, TimeoutError) as e:
+            raise ClusterError(f"no dask scheduler answered at {scheduler} within "
+                               f"{CONNECT_TIMEOUT_S:g} s ({e}): is it a dask scheduler's "
+                               f"address?") from None
+        with client:
             yield client
         return
     from multiprocessing import resource_tracker
@@ -1723,6 +1787,80 @@ def make_client(scheduler: str | None, workers: int | None):
                 raise
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+def reach(address: str) -> None:
+    """Raises ClusterError, in a line and at once, when nothing takes a TCP
+    connection at a scheduler's `address` (a host unknown, a connection
+    refused): dask's client retried for its whole timeout (30 s), then
+    ended in a traceback. Addresses of other protocols are left to it."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address, strict=False)
+        if scheme not in ("tcp", "tls"):
+            return
+        host, port = parse_host_port(location)
+    except ValueError as e:
+        raise ClusterError(f"--scheduler {address}: not a scheduler's address ({e}); "
+                           f"tcp://HOST:PORT") from None
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except socket.gaierror as e:
+        raise ClusterError(f"cannot reach the dask scheduler at {address}: host {host!r} not "
+                           f"found ({e.strerror})") from None
+    except ConnectionRefusedError:
+        raise ClusterError(f"cannot reach the dask scheduler at {address}: connection refused "
+                           f"(no scheduler listens on port {port} of {host}; start `dask "
+                           f"scheduler` there, README \"Sweeps on dask\")") from None
+    except OSError as e:
+        raise ClusterError(f"cannot reach the dask scheduler at {address}: "
+                           f"{e.strerror or e or type(e).__name__}") from None
+
+
+def ready_workers(client) -> tuple[list[str], list[str]]:
+    """The workers of `client`'s cluster that can run a study's tasks (they
+    import this package and fmpy and find the master) and those that
+    cannot, after the scheduler has shown it can unpickle the tasks; waits
+    WORKER_WAIT_S for a first worker. Raises ClusterError when the scheduler
+    or every worker cannot, naming the cause and what to do; names on
+    stderr the workers that cannot when others can (run_sweep sends them no
+    task while the others are there: a task would end such a worker)."""
+    import logging
+
+    address = client.scheduler.address
+    # A probe that fails is logged with its traceback by the scheduler of a
+    # LocalCluster, in this process: the ClusterError says it in a line.
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        try:
+            client.run_on_scheduler(exec, SCHEDULER_PROBE, {})
+        except Exception as e:  # noqa: BLE001 - the scheduler's own error, named
+            raise ClusterError(f"the dask scheduler at {address} cannot read the tasks: "
+                               f"{type(e).__name__}: {e}" + lost_task_hint(e)) from None
+        if not client.scheduler_info().get("workers"):
+            try:
+                client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+            except TimeoutError:
+                raise ClusterError(f"the dask scheduler at {address} has no worker (none joined "
+                                   f"within {WORKER_WAIT_S:g} s): start `dask worker {address}` "
+                                   f"(README, \"Sweeps on dask\")") from None
+        outcomes = client.run(exec, WORKER_PROBE, {}, on_error="return")
+    finally:
+        logger.setLevel(level)
+    bad = {worker: error for worker, error in outcomes.items()
+           if isinstance(error, BaseException)}
+    if bad:
+        worker, error = next(iter(bad.items()))
+        why = f"{worker}: {type(error).__name__}: {error}"
+        if len(bad) == len(outcomes):
+            raise ClusterError(f"no worker of the dask scheduler at {address} can run the tasks "
+                               f"({len(bad)} of {len(outcomes)}; {why})" + lost_task_hint(error))
+        print(f"{len(bad)} of {len(outcomes)} workers cannot run the tasks and get none "
+              f"({', '.join(bad)}; {why})" + lost_task_hint(error), file=sys.stderr, flush=True)
+    return [worker for worker in outcomes if worker not in bad], list(bad)
 
 
 def silence_cluster_logs(client) -> None:
@@ -1813,6 +1951,16 @@ def _run_studies(args, run_keys: dict) -> int:
     except (SpecError, FileNotFoundError) as e:
         print(e, file=sys.stderr)
         return 2
+    try:
+        return _run_on_cluster(args, specs)
+    except ClusterError as e:
+        print(e, file=sys.stderr)
+        return EXIT_CLUSTER
+
+
+def _run_on_cluster(args, specs: list[Spec]) -> int:
+    """_run_studies' part on the cluster: each spec's runs, then the report;
+    the exit status. A ClusterError is left to _run_studies."""
     timed_out = failed = 0
     with make_client(args.scheduler, args.workers) as client:
         print(f"dask: {len(client.scheduler_info()['workers'])} workers "
@@ -1839,9 +1987,10 @@ def _run_studies(args, run_keys: dict) -> int:
                 print(f"{summary['timeouts']} runs gave no result within {spec.timeout} s: run "
                       f"the same command again to retry them", file=sys.stderr)
             if summary["lost"]:
+                # The cluster's failure, not the runs': no row says why.
                 print(f"{summary['lost']} runs could not be executed (see above): run the "
                       f"same command again to retry them", file=sys.stderr)
-                return 1
+                return EXIT_CLUSTER
     if not args.no_report:
         from .sweep_report import write_report
 

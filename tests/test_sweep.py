@@ -289,9 +289,11 @@ def test_an_interrupted_sweep_continues_where_it_stopped(tmp_path):
 
 
 @contextlib.contextmanager
-def cluster(folder: Path, workers: int, scheduler_env: dict, worker_env: dict, cwd: Path):
+def cluster(folder: Path, workers: int, scheduler_env: dict, worker_env: dict | list[dict],
+            cwd: Path):
     """`dask scheduler` and `workers` `dask worker` processes on 127.0.0.1,
-    each started in `cwd` with its environment. They stop themselves if left
+    each started in `cwd` with its environment (`worker_env`: one for all,
+    or one per worker). They stop themselves if left
     behind: the scheduler after 60 s without work, the workers 30 s after
     losing it; leaving the block stops them anyway. Yields the address."""
     scheduler_file = folder / "scheduler.json"
@@ -316,14 +318,15 @@ def cluster(folder: Path, workers: int, scheduler_env: dict, worker_env: dict, c
                             + (folder / "0.log").read_text())
             time.sleep(0.1)
         address = json.loads(scheduler_file.read_text())["address"]
-        for _ in range(workers):
-            start(worker_env, "worker", address, "--nthreads", "1", "--nworkers", "1",
-                  "--no-dashboard", "--host", "127.0.0.1", "--death-timeout", "30s",
-                  "--lifetime", "600s")
+        for n in range(workers):
+            start(worker_env[n] if isinstance(worker_env, list) else worker_env, "worker",
+                  address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard", "--host",
+                  "127.0.0.1", "--death-timeout", "30s", "--lifetime", "600s")
         from distributed import Client
 
-        with Client(address, timeout="30s") as client:
-            client.wait_for_workers(workers, timeout=60)
+        if workers:
+            with Client(address, timeout="30s") as client:
+                client.wait_for_workers(workers, timeout=60)
         yield address
     finally:
         for process in reversed(processes):
@@ -361,10 +364,114 @@ def test_a_scheduler_that_cannot_import_the_package_is_named_with_the_fix(spec_p
             [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(tmp_path / "out"),
              "--scheduler", address, "--progress", "none", "--no-report"],
             cwd=REPO_ROOT, env=with_package, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 1, done.stdout + done.stderr
+    # Before any task is sent, in a few lines and with the status of a
+    # cluster that cannot run the study (not 1: no run failed).
+    assert done.returncode == sweep.EXIT_CLUSTER == 3, done.stdout + done.stderr
+    assert done.stderr.startswith(f"the dask scheduler at {address} cannot read the tasks: "
+                                  f"ModuleNotFoundError: No module named 'demo'"), done.stderr
     assert "start `dask scheduler` and `dask worker` from a checkout with PYTHONPATH" \
         in done.stderr, done.stderr
-    assert f"{RUNS} runs could not be executed" in done.stderr, done.stderr
+    assert len(done.stderr.splitlines()) == 2 and "Traceback" not in done.stderr, done.stderr
+    assert not (tmp_path / "out" / "small.parquet").exists()
+
+
+def test_a_worker_that_cannot_import_the_package_is_named_at_once(spec_path, tmp_path):
+    """A worker started without PYTHONPATH died of the first task it could
+    not unpickle; the study waited 30 s for a worker to scatter the FMUs to,
+    then ended in a 60-line traceback (`No valid workers found`), exit 1,
+    the hint never printed. Every worker now runs the tasks' imports first:
+    none can, and the command says so in a few lines, at once, exit 3."""
+    bare = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    with_package = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    (tmp_path / "cluster").mkdir()
+    with cluster(tmp_path / "cluster", 1, with_package, bare, tmp_path) as address:
+        started = time.monotonic()
+        done = subprocess.run(
+            [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(tmp_path / "out"),
+             "--scheduler", address, "--progress", "none", "--no-report"],
+            cwd=REPO_ROOT, env=with_package, capture_output=True, text=True, timeout=300)
+        elapsed = time.monotonic() - started
+    assert done.returncode == 3, done.stdout + done.stderr
+    assert done.stderr.startswith(f"no worker of the dask scheduler at {address} can run the "
+                                  f"tasks (1 of 1; tcp://"), done.stderr
+    assert "ModuleNotFoundError: No module named 'demo'" in done.stderr, done.stderr
+    assert "from a checkout with PYTHONPATH set to it" in done.stderr, done.stderr
+    assert len(done.stderr.splitlines()) == 2 and "Traceback" not in done.stderr, done.stderr
+    assert elapsed < 20, elapsed
+
+
+def test_a_worker_that_cannot_run_the_tasks_gets_none(spec_path, reference_table, tmp_path):
+    """With a worker that cannot import the package beside one that can,
+    the study runs on the latter, and says which worker gets no task."""
+    bare = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    with_package = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    (tmp_path / "cluster").mkdir()
+    with cluster(tmp_path / "cluster", 2, with_package, [bare, with_package],
+                 tmp_path) as address:
+        done = subprocess.run(
+            [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(tmp_path / "out"),
+             "--scheduler", address, "--progress", "none", "--no-report"],
+            cwd=REPO_ROOT, env=with_package, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stderr.startswith("1 of 2 workers cannot run the tasks and get none (tcp://"), \
+        done.stderr
+    rows = rows_of(tmp_path / "out")
+    assert len({r["worker"] for r in rows}) == 1
+    assert results(rows) == results(reference_table)
+
+
+def test_a_scheduler_without_workers_is_named_after_a_short_wait(spec_path, tmp_path,
+                                                                 monkeypatch):
+    """A scheduler with no worker: the study waited 30 s in dask's scatter,
+    then ended in a traceback. It waits WORKER_WAIT_S for a worker to join,
+    then says what to start."""
+    from distributed import Client
+
+    monkeypatch.setattr(sweep, "WORKER_WAIT_S", 1.0)
+    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    (tmp_path / "cluster").mkdir()
+    with cluster(tmp_path / "cluster", 0, env, env, REPO_ROOT) as address, \
+            Client(address, timeout="30s") as client:
+        with pytest.raises(sweep.ClusterError) as e:
+            sweep.run_sweep(sweep.load_spec(spec_path), tmp_path / "out", client,
+                            progress="none")
+    assert str(e.value) == (f"the dask scheduler at {address} has no worker (none joined "
+                            f"within 1 s): start `dask worker {address}` (README, \"Sweeps on "
+                            f"dask\")")
+
+
+def test_a_missing_package_on_the_cluster_is_named_with_the_fix():
+    assert "this checkout's venv" in sweep.lost_task_hint(
+        ModuleNotFoundError("No module named 'fmpy'"))
+    assert "PYTHONPATH set to it" in sweep.lost_task_hint(
+        ModuleNotFoundError("No module named 'demo'"))
+    assert sweep.lost_task_hint(RuntimeError("a task failed")) == ""
+
+
+def test_a_scheduler_that_cannot_be_reached_is_named_in_a_line(spec_path, tmp_path):
+    """A wrong or unreachable --scheduler took dask's 30 s and a 56-line
+    traceback, exit 1 (as for failed runs). A refused connection or an
+    unknown host is now one line at once, naming the address and the
+    cause, exit 3."""
+    for address, cause in (("tcp://127.0.0.1:1", "connection refused (no scheduler listens "
+                                                 "on port 1 of 127.0.0.1"),
+                           ("tcp://nosuchhost.invalid:8786", "host 'nosuchhost.invalid' not "
+                                                             "found")):
+        with pytest.raises(sweep.ClusterError) as e, sweep.make_client(address, None):
+            pass
+        assert str(e.value).startswith(f"cannot reach the dask scheduler at {address}: {cause}"), \
+            str(e.value)
+    started = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "demo.sweep", str(spec_path), "--out", str(tmp_path / "out"),
+         "--scheduler", "tcp://127.0.0.1:1", "--progress", "none", "--no-report"],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=300,
+        env={**os.environ, "PYTHONPATH": str(REPO_ROOT)})
+    assert done.returncode == 3, done.stderr
+    assert done.stderr.startswith("cannot reach the dask scheduler at tcp://127.0.0.1:1: "
+                                  "connection refused") and done.stderr.count("\n") == 1, \
+        done.stderr
+    assert time.monotonic() - started < 20
 
 
 def test_a_sweep_on_a_scheduler_with_two_workers(spec_path, reference_table, dask_cluster,
