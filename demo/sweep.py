@@ -794,12 +794,16 @@ def _fmu_file(spec: Spec, instance: str, entry: dict) -> Path:
     return path
 
 
-def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict) -> dict:
+def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict, files: dict) -> dict:
     """Replaces FMU paths by their content digests (collected in `fmus`) and
-    folds parameter sets into the parameter values."""
-    scenario = copy.deepcopy(scenario)
+    folds parameter sets into the parameter values, in `scenario` itself
+    (the caller's own, fresh from _fill). `files` keeps each path's file
+    once found: resolving and testing it took half of a 100,000-run grid's
+    expansion."""
     for instance, entry in scenario.get("fmu", {}).items():
-        path = _fmu_file(spec, instance, entry)
+        if entry.get("path") not in files:
+            files[entry.get("path")] = _fmu_file(spec, instance, entry)
+        path = files[entry["path"]]
         if path not in fmus:
             fmus[path] = _digest(path)
         entry["path"] = f"fmu:{fmus[path]}"
@@ -888,6 +892,7 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
     """Every run of the spec, in a fixed order, and the FMUs by digest."""
     fmus: dict[Path, str] = {}
     sets: dict[Path, dict] = {}
+    files: dict[str, Path] = {}
     points = []
     for combination in itertools.product(*[v.values for v in spec.variables]):
         point, env, patch = {}, {}, {}
@@ -944,12 +949,14 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
         # one of them is refused: the spec's own parameters, else its sets.
         own = scenario.get("fmu", {}).get(mc.instance, {}) if mc else {}
         origin = (dict(own.get("parameters", {})), list(own.get("parameter_sets", [])))
-        filled_points.append((point, _resolve_fmus(scenario, spec, fmus, sets), origin))
+        filled_points.append((point, _resolve_fmus(scenario, spec, fmus, sets, files), origin))
     for sample in samples:
         factors, seed = (sample_factors(spec, sample, vary_names) if sample is not None
                          else ({}, None))
         for point, resolved, origin in filled_points:
-            scenario = copy.deepcopy(resolved)
+            # A Monte Carlo sample changes its own copy; a grid point's
+            # scenario is its run's alone, as it is.
+            scenario = copy.deepcopy(resolved) if sample is not None else resolved
             values = dict(point)
             if sample is not None:
                 parameters = scenario["fmu"][mc.instance]["parameters"]
@@ -1580,18 +1587,22 @@ def stale_rows(out: Path, spec: Spec, rows: list[dict], runs: dict[str, Run]) ->
 
 
 def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: str = "auto",
-              on_row=None, checked: bool = False, on_interrupt=None) -> dict:
+              on_row=None, checked: bool = False, on_interrupt=None,
+              expanded: tuple[list[Run], dict[str, Path]] | None = None) -> dict:
     """Runs every run of `spec` not yet in DIR/<study>.parquet on `client`'s
     cluster. `on_row(row, done)` is called after each row (tests use it to
     kill a worker mid-sweep); `checked` says `check_scenarios` passed on all
     of its runs already; `on_interrupt()` is called on Ctrl-C before the
-    tasks still out are cancelled (main silences a LocalCluster's logs).
-    Returns a summary (`interrupted`: Ctrl-C ended it, the rows received
-    are in the table)."""
+    tasks still out are cancelled (main silences a LocalCluster's logs);
+    `expanded` is expand(spec) where the caller has it (main expands every
+    spec to check it: 100,000 runs took seconds to expand, twice). Prints
+    how many runs the spec has and how many of them the table holds before
+    any is sent. Returns a summary (`interrupted`: Ctrl-C ended it, the rows
+    received are in the table)."""
     from distributed import as_completed
 
     out.mkdir(parents=True, exist_ok=True)
-    runs, fmus = expand(spec)
+    runs, fmus = expanded or expand(spec)
     keys = {run.key: run for run in runs}
     units = column_units(spec, runs)
     if restart:
@@ -1611,6 +1622,8 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
     if dropped:
         print(f"{spec.study}: {dropped} failed or timed-out rows of runs that {spec.path} no "
               f"longer makes leave the table (they hold no result)", flush=True)
+    print(f"{spec.study}: {len(runs)} runs ({summary['skipped']} already in the table)",
+          flush=True)
     if not todo:
         summary["rows"] = consolidate(out, spec, keys, units)
         return summary
@@ -1935,6 +1948,7 @@ def interrupted_message(run_keys: dict, out: Path | None, restart: bool) -> str:
 def _run_studies(args, run_keys: dict) -> int:
     """main's work: the specs checked, their runs sent, the report written;
     the exit status. A KeyboardInterrupt is left to main."""
+    expanded = {}
     try:
         specs = [load_spec(path) for path in args.specs]
         master.binary()
@@ -1944,23 +1958,25 @@ def _run_studies(args, run_keys: dict) -> int:
                 raise SpecError(f"{spec.path}: study {spec.study!r} is the study of another "
                                 f"spec given; each study has its own table")
             # Every spec's runs are checked before any runs: a typo in the
-            # last spec fails now, not after the first ones have run.
-            runs, fmus = expand(spec)
+            # last spec fails now, not after the first ones have run. Each is
+            # expanded once, here: run_sweep takes the runs.
+            runs, fmus = expanded[spec.study] = expand(spec)
             check_scenarios(runs, fmus, spec)
             run_keys[spec.study] = {run.key for run in runs}
     except (SpecError, FileNotFoundError) as e:
         print(e, file=sys.stderr)
         return 2
     try:
-        return _run_on_cluster(args, specs)
+        return _run_on_cluster(args, specs, expanded)
     except ClusterError as e:
         print(e, file=sys.stderr)
         return EXIT_CLUSTER
 
 
-def _run_on_cluster(args, specs: list[Spec]) -> int:
-    """_run_studies' part on the cluster: each spec's runs, then the report;
-    the exit status. A ClusterError is left to _run_studies."""
+def _run_on_cluster(args, specs: list[Spec], expanded: dict) -> int:
+    """_run_studies' part on the cluster: each spec's runs (`expanded`:
+    expand(spec) by study), then the report; the exit status. A
+    ClusterError is left to _run_studies."""
     timed_out = failed = 0
     with make_client(args.scheduler, args.workers) as client:
         print(f"dask: {len(client.scheduler_info()['workers'])} workers "
@@ -1969,7 +1985,8 @@ def _run_on_cluster(args, specs: list[Spec]) -> int:
             try:
                 summary = run_sweep(spec, args.out, client, args.restart, args.progress,
                                     checked=True, on_interrupt=None if args.scheduler else
-                                    lambda: silence_cluster_logs(client))
+                                    lambda: silence_cluster_logs(client),
+                                    expanded=expanded[spec.study])
             except SpecError as e:
                 print(e, file=sys.stderr)
                 return 2

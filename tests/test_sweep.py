@@ -1264,3 +1264,30 @@ def test_a_table_keeps_its_runs_when_a_failed_value_is_fixed(tmp_path):
         f"longer makes (the first: frequency = 10.0, decoupling = 'off', amplitude = 2.0, "
         f"kp = 0.05, sample = 0; "), str(e.value)
     assert "pass --restart" in str(e.value)
+
+
+def test_a_sweep_says_how_many_runs_before_sending_them_and_expands_once(
+        spec_path, reference_out, tmp_path, monkeypatch, capsys):
+    """A 500 x 200 grid never said how many runs it had before starting (in
+    bar mode, not at all), and its spec was expanded twice, to check it and
+    to run it (22 s each at 100,000 runs). The command says "N runs (M
+    already in the table)" before sending any, and expands each spec once."""
+    import shutil
+
+    expanded = []
+    expand = sweep.expand
+    monkeypatch.setattr(sweep, "expand", lambda spec: expanded.append(spec.study) or expand(spec))
+    extended = _written(tmp_path / "small.toml",
+                        spec_path.read_text().replace("values = [5.0, 10.0]",
+                                                      "values = [5.0, 7.0, 10.0]"))
+    out = tmp_path / "out"
+    out.mkdir()
+    shutil.copy(sweep.table_path(reference_out, "small"), out)
+    status = sweep.main([str(extended), "--out", str(out), "--workers", "1", "--progress", "bar",
+                         "--no-report"])
+    lines = capsys.readouterr().out.splitlines()
+    assert status == 0, lines
+    assert expanded == ["small"]
+    count = lines.index(f"small: {RUNS + RUNS // 2} runs ({RUNS} already in the table)")
+    done = next(n for n, line in enumerate(lines) if f"small: {RUNS // 2} runs executed" in line)
+    assert count < done, lines
