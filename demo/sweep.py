@@ -69,6 +69,7 @@ import json
 import math
 import os
 import re
+import shlex
 import shutil
 import signal
 import socket
@@ -137,6 +138,8 @@ EXECUTION_COLUMNS = ("wall_s", "task_s", "worker")
 
 #: Seconds between two progress lines.
 PROGRESS_SECONDS = 10.0
+#: Seconds the end of a study waits for dask's progress bar to end its line.
+BAR_END_SECONDS = 2.0
 
 #: Most runs of one task by default: a task is one master process that opens
 #: the FMUs once (about 3 ms of process and 1.4 ms of loading saved per run
@@ -1273,7 +1276,7 @@ def column_units(spec: Spec, runs: list[Run]) -> dict[str, str]:
 
 def _rows_to_table(rows: list[dict], spec: Spec | None = None,
                    units: dict[str, str] | None = None):
-    """The rows as an Arrow table: the spec in the schema's metadata, and
+    """The rows as an Arrow table: the spec (its text and path) in the schema's metadata, and
     each column's unit, where it has one, in its field's (b"unit")."""
     import pyarrow as pa
 
@@ -1287,7 +1290,8 @@ def _rows_to_table(rows: list[dict], spec: Spec | None = None,
     meta = None
     if spec is not None:
         meta = {b"study": spec.study.encode(), b"spec": spec.text.encode(),
-                b"title": spec.title.encode(), b"report": spec.report.encode(),
+                b"spec_path": str(spec.path).encode(), b"title": spec.title.encode(),
+                b"report": spec.report.encode(),
                 b"report_options": json.dumps(spec.report_options).encode()}
     return pa.Table.from_arrays(table.columns, schema=pa.schema(fields, metadata=meta))
 
@@ -1345,6 +1349,10 @@ def consolidate(out: Path, spec: Spec, runs: dict[str, Run],
     ordered = sorted(unique.values(), key=lambda r: r["run"])
     if ordered:
         _write_atomically(_rows_to_table(ordered, spec, units), table_path(out, spec.study))
+    else:
+        # Its rows were all dropped (stale_rows): no table, rather than one
+        # of rows that are not the spec's.
+        table_path(out, spec.study).unlink(missing_ok=True)
     journal_path(out, spec.study).unlink(missing_ok=True)
     return len(ordered)
 
@@ -1671,11 +1679,13 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                     for task in tasks]
         task_of = {future.key: task for future, task in zip(futures, tasks)}
         tries = {future.key: 0 for future in futures}
+        bar = None
         if mode == "bar":
             from distributed.diagnostics.progressbar import progress as dask_progress
 
-            threading.Thread(target=dask_progress, args=(futures,), kwargs={"multi": False},
-                             daemon=True).start()
+            bar = threading.Thread(target=dask_progress, args=(futures,),
+                                   kwargs={"multi": False}, daemon=True)
+            bar.start()
         pending = as_completed(futures)
         for future in pending:
             try:
@@ -1716,6 +1726,14 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                 last_line = time.monotonic()
                 _progress_lines(done, len(todo), summary["failed"], started, spec.study)
                 printed_at = done
+        if bar is not None:
+            # dask's bar draws in place, its line unended, until it learns
+            # (every 100 ms) that its tasks are done and clears it: what is
+            # printed next waits for that, or starts a line of its own (a
+            # bar whose task was sent again may not end).
+            bar.join(timeout=BAR_END_SECONDS)
+            if bar.is_alive():
+                print(flush=True)
     except KeyboardInterrupt:
         # Ctrl-C, wherever it lands once the runs are being sent: the rows
         # received so far are in the journal and go into the table below;
@@ -1901,6 +1919,9 @@ def main(argv=None) -> int:
     args = None
     try:
         args = _arguments(argv)
+        # The command as given, for the report to say what made it.
+        args.command = shlex.join(["python", "-m", "demo.sweep",
+                                   *(sys.argv[1:] if argv is None else argv)])
         return _run_studies(args, run_keys)
     except KeyboardInterrupt:
         print(interrupted_message(run_keys, args.out if args else None,
@@ -1973,6 +1994,18 @@ def _run_studies(args, run_keys: dict) -> int:
         return EXIT_CLUSTER
 
 
+def summary_line(summary: dict, table: Path) -> str:
+    """The line that ends a study: its runs executed, failed, timed out and
+    skipped, and its table, or that there is none (every run lost: the
+    table named before was a file that did not exist)."""
+    rows = (f"{summary['rows']} rows in {table}" if summary["rows"]
+            else f"no table written ({table}): no run has finished")
+    return (f"{summary['study']}: {summary['executed']} runs executed "
+            f"({summary['failed']} failed, {summary['timeouts']} timed out), "
+            f"{summary['skipped']} already in the table; {rows}"
+            + (f"; {summary['wall_s']:.1f} s" if "wall_s" in summary else ""))
+
+
 def _run_on_cluster(args, specs: list[Spec], expanded: dict) -> int:
     """_run_studies' part on the cluster: each spec's runs (`expanded`:
     expand(spec) by study), then the report; the exit status. A
@@ -1993,11 +2026,7 @@ def _run_on_cluster(args, specs: list[Spec], expanded: dict) -> int:
             if summary["interrupted"]:
                 # The rows received are in the table; main says how many.
                 raise KeyboardInterrupt
-            print(f"{spec.study}: {summary['executed']} runs executed "
-                  f"({summary['failed']} failed, {summary['timeouts']} timed out), "
-                  f"{summary['skipped']} already in the table; "
-                  f"{summary['rows']} rows in {table_path(args.out, spec.study)}"
-                  + (f"; {summary['wall_s']:.1f} s" if "wall_s" in summary else ""), flush=True)
+            print(summary_line(summary, table_path(args.out, spec.study)), flush=True)
             failed += summary["failed"]
             if summary["timeouts"]:
                 timed_out += summary["timeouts"]
@@ -2011,7 +2040,7 @@ def _run_on_cluster(args, specs: list[Spec], expanded: dict) -> int:
     if not args.no_report:
         from .sweep_report import write_report
 
-        report = write_report(args.out)
+        report = write_report(args.out, args.command)
         print(f"report: {report}")
     # The report shows what is in the tables; a table with timed-out or
     # failed runs is not complete, and the exit status says so.
