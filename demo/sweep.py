@@ -1276,8 +1276,9 @@ def column_units(spec: Spec, runs: list[Run]) -> dict[str, str]:
 
 def _rows_to_table(rows: list[dict], spec: Spec | None = None,
                    units: dict[str, str] | None = None):
-    """The rows as an Arrow table: the spec (its text and path) in the schema's metadata, and
-    each column's unit, where it has one, in its field's (b"unit")."""
+    """The rows as an Arrow table: the spec (its text and path) in the
+    schema's metadata, and each column's unit, where it has one, in its
+    field's (b"unit")."""
     import pyarrow as pa
 
     # Rows differ in their metrics (a y run has no coupling_y_span, a failed
