@@ -37,10 +37,10 @@ pub struct SnapshotData<M> {
     pub time: f64,
     /// The `startTime` of `fmi2SetupExperiment` (0 until it is called).
     pub start_time: f64,
-    /// Its `stopTime`, infinite when it defined none. Both times are kept
-    /// for the format's sake and checked as the bytes are read, but a restore
-    /// keeps the receiving instance's own: they are its importer's statement
-    /// about its experiment (FMI 2.0.4 §2.1.6), not part of the state.
+    /// Its `stopTime`, infinite when it defined none. A state taken before
+    /// initialization brings both times back; after it, a restore keeps the
+    /// receiving instance's own: they are its importer's statement about its
+    /// run (FMI 2.0.4 §2.1.6), which continues from the state.
     pub stop_time: f64,
     /// The interface of the instance it was taken from.
     pub interface: Interface,

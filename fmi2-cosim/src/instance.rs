@@ -1202,8 +1202,9 @@ impl<M: CoSimModel> Instance<M> {
             .map_err(|e| refuse(format_args!("{e}")))
     }
 
-    /// Restores everything a snapshot holds: the model, the time, the start
-    /// time and the state machine. The instance continues as the one the
+    /// Restores what a snapshot holds: the model, the time and the state
+    /// machine, and before initialization the experiment's start and stop
+    /// times (after it, the instance keeps its own). The instance continues as the one the
     /// snapshot was taken from, from the state it was in then, whatever its
     /// own state now (FMI 2.0.4 §2.1.8 allows `fmi2SetFMUstate` in every state
     /// but the fatal one; after `fmi2Error` this is how an importer recovers,
@@ -1234,17 +1235,23 @@ impl<M: CoSimModel> Instance<M> {
         }
         self.forget_preview();
         self.model = data.model.clone();
-        // The start and stop times stay this instance's: they are what the
-        // importer said of this experiment (fmi2SetupExperiment, FMI 2.0.4
-        // §2.1.6), not part of the state it continues from; a run continued
-        // from a finished one's state (fmpy's fmu_state, fmusim's
-        // --initial-fmu-state-file) would otherwise be refused at its first
-        // step, past the old run's stop. Before initialization the time is
-        // the start time, as fmi2SetupExperiment leaves it.
-        self.time = match data.state {
-            FmiState::Instantiated | FmiState::InitializationMode => self.start_time,
-            _ => data.time,
-        };
+        // A state taken after initialization continues in this instance's
+        // experiment: its start and stop times stay this instance's, what the
+        // importer said of this run (fmi2SetupExperiment, FMI 2.0.4 §2.1.6);
+        // a run continued from a finished one's state (fmpy's fmu_state,
+        // fmusim's --initial-fmu-state-file) would otherwise be refused at
+        // its first step, past the old run's stop. A state taken before
+        // initialization holds an experiment still being set up, which an
+        // importer cannot set again once in Initialization Mode: it brings
+        // its own.
+        self.time = data.time;
+        if matches!(
+            data.state,
+            FmiState::Instantiated | FmiState::InitializationMode
+        ) {
+            self.start_time = data.start_time;
+            self.stop_time = data.stop_time;
+        }
         self.state = data.state;
         self.terminate_requested = data.terminate_requested;
         self.event(

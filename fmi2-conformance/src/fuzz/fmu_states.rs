@@ -132,25 +132,18 @@ impl Fuzzer<'_> {
             let live = self.live_mut(slot);
             live.state = model.machine;
             // The interface is the instance's: a forged state may claim the
-            // other one and still be accepted. So are the start and stop
-            // times, which the importer set up for this instance's experiment.
-            let own = (
-                live.model.interface,
-                live.model.start_time,
-                live.model.stop_time,
-            );
+            // other one and still be accepted. After initialization, so are
+            // the start and stop times, which the importer set up for this
+            // instance's experiment; a state from before it brings its own.
+            let own = (live.model.start_time, live.model.stop_time);
+            let interface = live.model.interface;
             live.model = model;
-            (
-                live.model.interface,
-                live.model.start_time,
-                live.model.stop_time,
-            ) = own;
-            // Before initialization the time is the start time.
-            if matches!(
+            live.model.interface = interface;
+            if !matches!(
                 model_machine,
                 State::Instantiated | State::InitializationMode
             ) {
-                live.model.time = live.model.start_time;
+                (live.model.start_time, live.model.stop_time) = own;
             }
             if forged {
                 // The machine state a forged state put the instance in is
