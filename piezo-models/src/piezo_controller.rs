@@ -257,6 +257,23 @@ impl ControllerParams {
                 Range::FINITE.check(&format!("decoupling_params.{field}[{i}]"), *v)?;
             }
         }
+        // Eq. (11) clips D_i between the lower cutoff q_i and the upper p_i:
+        // a q above p makes D_i the constant p_i whatever the demand (Table
+        // 2's misprinted q_1 = 10 beside p_1 = 2.05 does), which is no
+        // compensation, so it is refused rather than run.
+        for (i, (p, q)) in d.p.iter().zip(d.q).enumerate() {
+            if q > *p {
+                return Err(ParamError {
+                    parameter: format!("decoupling_params.q[{i}]"),
+                    value: q,
+                    allowed: format!(
+                        "at most the upper cutoff p of the same compensation, {p} (eq. 11 \
+                         clips D{} between q and p; ±10 marks an unused cutoff)",
+                        i + 1
+                    ),
+                });
+            }
+        }
         Ok(())
     }
 }
@@ -378,6 +395,15 @@ impl ControllerOutput {
     }
 }
 
+/// The inverse models' inputs at a sample and the time to the next one.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+struct PreviousSample {
+    references: [f64; 3],
+    /// The sample's dt: the time from it to the next sample, over which
+    /// that sample's rate of eq. (4) is taken.
+    period: f64,
+}
+
 /// The sampled controller.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PiezoController {
@@ -389,8 +415,9 @@ pub struct PiezoController {
     bouc_wen: BoucWenFeedforward,
     /// Seed 001's coupling models (run only with the model-based law).
     coupling: CouplingEstimator,
-    /// Previous inputs of the three models, for the rates of eq. (4).
-    previous_references: Option<[f64; 3]>,
+    /// Previous inputs of the three models and the period they were held
+    /// for (that sample's dt), for the rates of eq. (4).
+    previous_references: Option<PreviousSample>,
     pi_x: PiController,
     pi_y: PiController,
     pi_theta: PiController,
@@ -530,9 +557,12 @@ impl PiezoController {
             .flat_map(|(model, [input, state])| {
                 [(input, model.input()), (state, model.hysteretic_state())]
             });
-        let references = self
-            .previous_references
-            .unwrap_or_default()
+        let previous = self.previous_references.unwrap_or(PreviousSample {
+            references: [0.0; 3],
+            period: 1.0,
+        });
+        let references = previous
+            .references
             .map(|reference| ("previous reference", reference));
         let integrals = [
             ("integral of the x PI controller", self.pi_x.integral),
@@ -551,6 +581,18 @@ impl PiezoController {
             .chain(integrals)
             .chain(output)
             .find_map(|(variable, value)| UnreachableState::unless_finite(variable, value))
+            .or_else(|| {
+                // A period is a step's dt: finite and positive.
+                if previous.period.is_finite() && previous.period > 0.0 {
+                    None
+                } else {
+                    Some(UnreachableState {
+                        variable: "period of the previous sample",
+                        value: previous.period,
+                        allowed: "a positive finite step size",
+                    })
+                }
+            })
             .or_else(|| {
                 let flag = self
                     .limited
@@ -652,8 +694,18 @@ impl PiezoController {
                 (d, [y_ref, x_d2, x_d3])
             }
         };
-        let previous = self.previous_references.unwrap_or(references);
-        self.previous_references = Some(references);
+        // Eq. (4)'s rate is the backward difference over the time since
+        // the previous sample, that sample's dt: with steps of changing size
+        // (a master that aligns to events or output points), this step's dt
+        // would scale the rate by the ratio of the two.
+        let previous = self.previous_references.unwrap_or(PreviousSample {
+            references,
+            period: dt,
+        });
+        self.previous_references = Some(PreviousSample {
+            references,
+            period: dt,
+        });
         // The selected models always advance (the P-I memories here, the
         // Bouc-Wen states after limiting below), so switching the
         // feedforward on later starts from memories that followed the demand.
@@ -661,7 +713,8 @@ impl PiezoController {
         match p.hysteresis_model {
             HysteresisModel::ModifiedPi => {
                 for (channel, model) in self.models.iter_mut().enumerate() {
-                    let rate = (references[channel] - previous[channel]) / dt;
+                    let rate =
+                        (references[channel] - previous.references[channel]) / previous.period;
                     let u = model.evaluate(references[channel], rate);
                     if p.feedforward {
                         feedforward[channel] = u;

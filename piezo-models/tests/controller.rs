@@ -27,23 +27,29 @@ fn feedforward_alone_is_the_inverse_model_of_each_channel() {
     let mut y_model = ModifiedInversePi::new(p.y_model);
     let mut pzt2 = ModifiedInversePi::new(p.x_model);
     let mut pzt3 = ModifiedInversePi::new(p.x_model);
-    let mut previous: Option<[f64; 3]> = None;
+    // Steps of changing size, as a master that aligns to events or output
+    // points makes: eq. (4)'s rate is the backward difference over the time
+    // since the previous sample, that sample's dt, not this one's.
+    let steps = [DT, 3.0 * DT, DT, 1e-6, DT - 1e-6, 2.0 * DT];
+    let mut previous: Option<([f64; 3], f64)> = None;
+    let mut t: f64 = 0.0;
     for n in 0..2000 {
-        let t = n as f64 * DT;
+        let dt = steps[n % steps.len()];
         let (x_ref, y_ref) = (6.0 + 2.0 * (7.0 * t).sin(), 6.0 + 5.0 * (3.0 * t).sin());
         let theta_ref = 4e-5 * (5.0 * t).cos();
-        let out = controller.step(x_ref, y_ref, theta_ref, [0.0; 3], DT);
+        let out = controller.step(x_ref, y_ref, theta_ref, [0.0; 3], dt);
+        t += dt;
         let inputs = [
             y_ref,
             x_ref + theta_ref * half_l_um,
             x_ref - theta_ref * half_l_um,
         ];
-        let prev = previous.unwrap_or(inputs);
-        previous = Some(inputs);
+        let (prev, since) = previous.unwrap_or((inputs, dt));
+        previous = Some((inputs, dt));
         let expected = [
-            y_model.evaluate(inputs[0], (inputs[0] - prev[0]) / DT),
-            pzt2.evaluate(inputs[1], (inputs[1] - prev[1]) / DT),
-            pzt3.evaluate(inputs[2], (inputs[2] - prev[2]) / DT),
+            y_model.evaluate(inputs[0], (inputs[0] - prev[0]) / since),
+            pzt2.evaluate(inputs[1], (inputs[1] - prev[1]) / since),
+            pzt3.evaluate(inputs[2], (inputs[2] - prev[2]) / since),
         ];
         for (c, expected) in expected.into_iter().enumerate() {
             assert_eq!(out.feedforward[c], expected, "channel {c}, sample {n}");
@@ -173,6 +179,25 @@ fn the_state_round_trips_through_serde() {
 
 #[test]
 fn invalid_parameters_are_named() {
+    // A lower cutoff above the upper one (Table 2's misprinted q_1 = 10
+    // beside p_1 = 2.05) would make D1 a constant.
+    let mut p = params();
+    p.decoupling_params.q[0] = 10.0;
+    let e = PiezoController::new(p).unwrap_err();
+    assert_eq!(
+        (e.parameter.as_str(), e.value),
+        ("decoupling_params.q[0]", 10.0)
+    );
+    assert!(
+        e.allowed
+            .starts_with("at most the upper cutoff p of the same compensation, 2.05")
+    );
+    let mut p = params();
+    p.decoupling_params.q[0] = p.decoupling_params.p[0];
+    assert!(
+        PiezoController::new(p).is_ok(),
+        "q = p is a constant D by choice"
+    );
     let mut p = params();
     p.rotation_gains.ki = -1.0;
     let e = PiezoController::new(p).unwrap_err();
