@@ -179,7 +179,7 @@ pub enum ProtocolError {
     #[error("the fit part is empty (the split is at sample {0})")]
     EmptyFitPart(usize),
     #[error(
-        "no sample is left to fit: the warm-up ({warm_up} samples; by default the settling and the first loading, up to the input's second turning point after the start and after each step), rest segments and settling after steps cover the fit part"
+        "no sample is left to fit: the warm-up ({warm_up} samples; by default the settling and the first loading, up to the input's second turning point), rest segments and settling after steps cover the fit part (--keep-rest-and-steps fits rests and steps too)"
     )]
     NothingToFit { warm_up: usize },
     #[error(
@@ -247,10 +247,15 @@ impl Plan {
             for (i, &start) in starts.iter().enumerate() {
                 let next = starts.get(i + 1).copied().unwrap_or(u.len());
                 let settled = start + thresholds.settle_samples;
-                // An input that does not turn twice before the next step is
-                // a first loading all the way: none of it is fitted.
+                // At the record's start, an input that does not turn twice
+                // before the first step is a first loading all the way, from
+                // a state the record does not show: none of it is fitted.
+                // After a step the model ran through what came before, and a
+                // stair that never turns (a quasi-static staircase) is
+                // fitted once settled.
+                let never_turns = if start == 0 { next } else { settled };
                 let end = first_loading_end(u, settled, next, thresholds.span)
-                    .unwrap_or(next)
+                    .unwrap_or(never_turns)
                     .max(settled);
                 // Only the fit part: a step in the scored part is scored once
                 // settled (its state is the one the model computed).
@@ -1247,7 +1252,8 @@ mod tests {
     /// is a first loading all the way: nothing is fitted, and the error says
     /// why; a cycle and a half turns twice, and is fitted from its second
     /// turning point on. The first loading used to be fitted, though the
-    /// summary said it was left out.
+    /// summary said it was left out. A staircase's stairs, after its first
+    /// step, are fitted once settled.
     #[test]
     fn an_input_that_never_turns_twice_is_no_record_to_fit() {
         let record = |cycles: f64| -> Vec<f64> {
@@ -1272,5 +1278,15 @@ mod tests {
         // 100 + 200 samples.
         let first_fitted = plan.fitted().iter().position(|f| *f).unwrap();
         assert!((299..=301).contains(&first_fitted), "{first_fitted}");
+        // Three triangles of 1 V stairs held 0.3 s each (60 samples).
+        let stairs: Vec<f64> = (0..3 * 20 * 60)
+            .map(|n| {
+                let stair = (n / 60) % 20;
+                (if stair < 10 { stair } else { 20 - stair }) as f64
+            })
+            .collect();
+        let plan = Plan::new(&stairs, 0.005, stairs.len(), &PlanOptions::default()).unwrap();
+        let fitted = plan.fitted().iter().filter(|f| **f).count();
+        assert!(fitted > stairs.len() / 2, "{fitted} of {}", stairs.len());
     }
 }

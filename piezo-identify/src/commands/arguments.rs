@@ -101,12 +101,13 @@ pub(crate) fn auto_or<T>(
 
 #[derive(Args)]
 pub(crate) struct ColumnArgs {
-    /// Input (command voltage) column: 0-based index or header name [default: the first column
-    /// that is neither the time column nor a given --output]
+    /// Input (command voltage) column: 0-based index or header name [default: the one column in a
+    /// voltage unit where the header marks the output by a length unit, else the first column
+    /// that is neither a time, a row number, a length nor a given --output]
     #[arg(long)]
     pub(crate) input: Option<String>,
-    /// Output (displacement) column: 0-based index or header name [default: the first column
-    /// that is neither the time column nor the input]
+    /// Output (displacement) column: 0-based index or header name [default: the one column in a
+    /// length unit, else the first column that is neither a time, a row number nor the input]
     #[arg(long)]
     pub(crate) output: Option<String>,
     /// Sample rate [Hz] (or give --time).

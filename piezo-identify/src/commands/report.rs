@@ -44,6 +44,15 @@ pub(crate) fn describe_columns(columns: &ColumnsUsed) -> String {
     if let Some(last) = columns.labview_header {
         text.push_str(&format!(", LabVIEW measurement headers on lines 1-{last}"));
     }
+    if let Some(off) = &columns.rate_disagreement {
+        text.push_str(&format!(
+            "; note: the time column \"{}\" steps by {} s (its median step, {} Hz), not what \
+             --rate says: --rate is used",
+            off.column,
+            piezo_identify::data::Short(off.step),
+            piezo_identify::data::Short(1.0 / off.step)
+        ));
+    }
     text
 }
 
