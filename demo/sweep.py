@@ -685,6 +685,13 @@ def load_spec(path: str | Path) -> Spec:
     if report == "robustness" and "monte_carlo" not in data:
         raise fail_at("report", "report 'robustness' summarizes a [monte_carlo]; the spec has "
                                 "none")
+    if report == "envelope" and "monte_carlo" in data:
+        # Its heatmaps hold one run per grid point and decoupling case; the
+        # samples of a Monte Carlo would be several (found after every run).
+        raise fail_at("report", "report 'envelope' shows one run per grid point; a "
+                                "[monte_carlo] gives each point several samples (report = "
+                                "\"robustness\" summarizes them, \"none\" keeps the table "
+                                "alone)")
     runs_per_task = data.get("runs_per_task", RUNS_PER_TASK)
     if not _is_whole(runs_per_task) or runs_per_task < 1:
         raise fail_at("runs_per_task", f"runs_per_task {_shown(runs_per_task)}: a whole "
@@ -1629,8 +1636,8 @@ def run_sweep(spec: Spec, out: Path, client, restart: bool = False, progress: st
                "executed": 0, "failed": 0, "timeouts": 0, "lost": 0, "interrupted": False,
                "dropped": dropped}
     if dropped:
-        print(f"{spec.study}: {dropped} failed or timed-out rows of runs that {spec.path} no "
-              f"longer makes leave the table (they hold no result)", flush=True)
+        print(f"{spec.study}: the failed or timed-out rows of {dropped} runs that {spec.path} "
+              f"no longer makes leave the table (they hold no result)", flush=True)
     print(f"{spec.study}: {len(runs)} runs ({summary['skipped']} already in the table)",
           flush=True)
     if not todo:
@@ -1856,8 +1863,9 @@ def ready_workers(client) -> tuple[list[str], list[str]]:
     cannot, after the scheduler has shown it can unpickle the tasks; waits
     WORKER_WAIT_S for a first worker. Raises ClusterError when the scheduler
     or every worker cannot, naming the cause and what to do; names on
-    stderr the workers that cannot when others can (run_sweep sends them no
-    task while the others are there: a task would end such a worker)."""
+    stderr the workers that cannot when others can (run_sweep's tasks prefer
+    the others: dask may still give such a worker a task once none of them
+    is left, and the task then ends it, as a lost run)."""
     import logging
 
     address = client.scheduler.address

@@ -1392,3 +1392,24 @@ def test_a_study_whose_runs_were_all_lost_names_no_table_file(tmp_path):
     runs = {run.key: run for run in sweep.expand(spec)[0]}
     assert sweep.consolidate(tmp_path, spec, runs) == 0
     assert not table.exists()
+
+
+def test_an_envelope_report_of_a_monte_carlo_is_refused_before_any_run(tmp_path):
+    """The envelope report holds one run per grid point and decoupling case:
+    a [monte_carlo] gives each point several samples, and the report used to
+    fail on them after every run had been made."""
+    envelope = (REPO_ROOT / "demo" / "sweeps" / "envelope.toml").read_text()
+    assert 'report = "envelope"' in envelope and "[monte_carlo]" not in envelope
+    dist = REPO_ROOT / "dist"
+    text = envelope.replace('"../../dist/', f'"{dist}/') + (
+        "\n[monte_carlo]\nsamples = 2\ninstance = \"plant\"\n"
+        "[[monte_carlo.vary]]\nmatch = '^amplifier\\\\.gain$'\nrelative = 0.03\n")
+    spec = _written(tmp_path / "env_mc.toml", text)
+    line = next(n for n, row in enumerate(text.splitlines(), 1) if row.startswith("report"))
+    done = subprocess.run([sys.executable, "-m", "demo.sweep", str(spec), "--out",
+                           str(tmp_path / "out")], capture_output=True, text=True,
+                          cwd=REPO_ROOT, timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().startswith(f"{spec}:{line}: report 'envelope' shows one run per "
+                                          "grid point"), done.stderr
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").glob("*.parquet"))
