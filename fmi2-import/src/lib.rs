@@ -125,6 +125,8 @@ pub struct VariableInfo {
     /// The declared range (`min`, `max` of the Real or Integer element).
     pub min: Option<f64>,
     pub max: Option<f64>,
+    /// The `unit` of the Real element (`um`, `rad`), if it gives one.
+    pub unit: Option<String>,
 }
 
 /// A loaded FMU binary and its modelDescription.
@@ -187,6 +189,7 @@ impl Fmu {
                     start_string: extra.string_start,
                     min: extra.min,
                     max: extra.max,
+                    unit: extra.unit,
                 }
             })
             .collect();
@@ -291,6 +294,8 @@ struct TypeAttributes {
     max: Option<f64>,
     /// The `start` of a String.
     string_start: Option<String>,
+    /// The `unit` of a Real.
+    unit: Option<String>,
 }
 
 /// The start value of every ScalarVariable's `<String>` element (`None` for
@@ -335,6 +340,10 @@ fn type_attributes(model_description: &str) -> Result<Vec<TypeAttributes>, Strin
                     let slot = match attribute.key.as_ref() {
                         "start" if is_string => {
                             attributes.string_start = Some(value.into_owned());
+                            continue;
+                        }
+                        "unit" => {
+                            attributes.unit = Some(value.into_owned());
                             continue;
                         }
                         "min" => &mut attributes.min,

@@ -316,9 +316,13 @@ pub fn run_with(
     let mut signal_names = Vec::new();
     let mut signal_samples = Vec::new();
     for (port, trajectory) in &scenario.signal {
-        resolve(port)?;
+        let (_, info) = resolve(port)?;
         let fail = |e: String| RunError::Scenario(format!("signal {port}: {e}"));
-        signal_samples.push(trajectory.sample(&grid).map_err(fail)?);
+        signal_samples.push(
+            trajectory
+                .sample(&grid, info.unit.as_deref())
+                .map_err(fail)?,
+        );
         signal_names.push(port.clone());
     }
     // The communication points t_0 .. t_steps: the grid without its preview.

@@ -51,7 +51,8 @@ pub struct Sine {
 #[serde(deny_unknown_fields)]
 pub struct TableSource {
     pub file: PathBuf,
-    /// The column's header, with or without a `[unit]` suffix.
+    /// The column's header, with or without a `[unit]` suffix, which is
+    /// converted to the input's declared unit (or refused).
     pub column: String,
     /// The time column's header (default `t`).
     #[serde(default = "default_time_column")]
@@ -102,11 +103,12 @@ impl Trajectory {
         Ok(())
     }
 
-    /// Evaluates the trajectory at `times` (ascending); reads the table file
-    /// if there is one.
-    pub fn sample(&self, times: &[f64]) -> Result<Vec<f64>, String> {
+    /// Evaluates the trajectory at `times` (ascending) for an input in
+    /// `unit` (its declared unit, if any); reads the table file if there is
+    /// one, converting a column whose header names another unit.
+    pub fn sample(&self, times: &[f64], unit: Option<&str>) -> Result<Vec<f64>, String> {
         let table = match &self.table {
-            Some(source) => Some(Table::read(source)?),
+            Some(source) => Some(Table::read(source, unit)?),
             None => None,
         };
         let path = |tau: f64| match &table {
@@ -158,8 +160,61 @@ fn header_matches(header: &str, wanted: &str) -> bool {
             .is_some_and(|rest| rest.starts_with('[') && rest.ends_with(']'))
 }
 
+/// The unit in a header's brackets: `y[nm]` is in nm.
+fn header_unit(header: &str) -> Option<&str> {
+    let header = header.trim();
+    let open = header.rfind('[')?;
+    header
+        .strip_suffix(']')
+        .map(|h| h[open + 1..].trim())
+        .filter(|u| !u.is_empty())
+}
+
+/// Seconds per unit of a time column.
+fn seconds_per(unit: &str) -> Option<f64> {
+    Some(match unit {
+        "s" => 1.0,
+        "ms" => 1e-3,
+        "us" | "µs" | "μs" => 1e-6,
+        "ns" => 1e-9,
+        "min" => 60.0,
+        _ => return None,
+    })
+}
+
+/// A unit's quantity and its size in that quantity's base unit (µm, rad,
+/// V): what a column in one unit is multiplied by to read in another.
+fn unit_size(unit: &str) -> Option<(&'static str, f64)> {
+    Some(match unit {
+        "m" => ("length", 1e6),
+        "mm" => ("length", 1e3),
+        "um" | "µm" | "μm" => ("length", 1.0),
+        "nm" => ("length", 1e-3),
+        "rad" => ("angle", 1.0),
+        "mrad" => ("angle", 1e-3),
+        "urad" | "µrad" | "μrad" => ("angle", 1e-6),
+        "deg" | "°" => ("angle", std::f64::consts::PI / 180.0),
+        "mdeg" => ("angle", std::f64::consts::PI / 180.0e3),
+        "V" => ("voltage", 1.0),
+        "mV" => ("voltage", 1e-3),
+        "kV" => ("voltage", 1e3),
+        _ => return None,
+    })
+}
+
+/// What a column written in `from` is multiplied by to be in `to`; None
+/// when the two are not units of one quantity this reads.
+fn conversion(from: &str, to: &str) -> Option<f64> {
+    if from == to {
+        return Some(1.0);
+    }
+    let (from_quantity, from_size) = unit_size(from)?;
+    let (to_quantity, to_size) = unit_size(to)?;
+    (from_quantity == to_quantity).then_some(from_size / to_size)
+}
+
 impl Table {
-    fn read(source: &TableSource) -> Result<Table, String> {
+    fn read(source: &TableSource, unit: Option<&str>) -> Result<Table, String> {
         let name = |path: &Path| path.display().to_string();
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
@@ -182,6 +237,38 @@ impl Table {
                 })
         };
         let (time_column, value_column) = (find(&source.time)?, find(&source.column)?);
+        // A unit the header names is read, never dropped: a column in nm
+        // or a time in ms taken as µm or s would run with exit 0.
+        let time_factor = match header_unit(&headers[time_column]) {
+            None => 1.0,
+            Some(given) => seconds_per(given).ok_or_else(|| {
+                format!(
+                    "{}: time column {:?} is in {given:?}, not a time unit (s, ms, us, ns, min)",
+                    name(&source.file),
+                    &headers[time_column]
+                )
+            })?,
+        };
+        let value_factor = match (header_unit(&headers[value_column]), unit) {
+            (None, _) => 1.0,
+            (Some(given), Some(wanted)) => conversion(given, wanted).ok_or_else(|| {
+                format!(
+                    "{}: column {:?} is in {given:?}, which is not read as {wanted:?}, the \
+                     input's unit (lengths m, mm, um, nm; angles rad, mrad, urad, deg, mdeg; \
+                     voltages V, mV, kV)",
+                    name(&source.file),
+                    &headers[value_column]
+                )
+            })?,
+            (Some(given), None) => {
+                return Err(format!(
+                    "{}: column {:?} is in {given:?}, and the input declares no unit to read \
+                     it in: write the column's header without one",
+                    name(&source.file),
+                    &headers[value_column]
+                ));
+            }
+        };
         let mut table = Table {
             tau: Vec::new(),
             value: Vec::new(),
@@ -199,7 +286,10 @@ impl Table {
                     )
                 })
             };
-            let (t, v) = (number(time_column)?, number(value_column)?);
+            let (t, v) = (
+                number(time_column)? * time_factor,
+                number(value_column)? * value_factor,
+            );
             if table.tau.last().is_some_and(|&last| t <= last) {
                 return Err(format!(
                     "{}:{line}: times must increase ({t} after {})",
@@ -249,7 +339,7 @@ mod tests {
             }],
             ..Trajectory::default()
         };
-        let v = y.sample(&[0.0, 0.25, 0.5]).unwrap();
+        let v = y.sample(&[0.0, 0.25, 0.5], None).unwrap();
         assert!((v[0] - 2.0).abs() < 1e-12 && (v[1] - 7.0).abs() < 1e-12);
         assert!((v[2] - 12.0).abs() < 1e-12);
     }
@@ -267,7 +357,7 @@ mod tests {
             }],
             ..Trajectory::default()
         };
-        let v = x.sample(&[0.0, 0.25, 0.5, 0.75, 1.0, 1.25]).unwrap();
+        let v = x.sample(&[0.0, 0.25, 0.5, 0.75, 1.0, 1.25], None).unwrap();
         assert_eq!(v[0], 0.0);
         assert!((v[1] - 4.0).abs() < 1e-12, "{}", v[1]);
         assert_eq!(v[2], 8.0);
@@ -289,8 +379,46 @@ mod tests {
             }),
             ..Trajectory::default()
         };
-        let v = y.sample(&[0.0, 0.5, 1.0, 1.5, 3.0]).unwrap();
+        let v = y.sample(&[0.0, 0.5, 1.0, 1.5, 3.0], Some("um")).unwrap();
         assert_eq!(v, vec![0.0, 5.0, 10.0, 20.0, 30.0]);
+    }
+
+    /// A unit in a header's brackets is read: times in ms, a length in nm,
+    /// an angle in degrees come in the input's units; a unit that is no
+    /// such is refused, never dropped (it used to be, with exit 0).
+    #[test]
+    fn a_tables_units_are_converted_to_the_inputs() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("r.csv");
+        std::fs::write(
+            &file,
+            "t[ms],y[nm],theta[deg],v[furlong]\n0,0,0,0\n1000,5000,90,1\n",
+        )
+        .unwrap();
+        let column = |column: &str| Trajectory {
+            table: Some(TableSource {
+                file: file.clone(),
+                column: column.into(),
+                time: "t".into(),
+            }),
+            ..Trajectory::default()
+        };
+        let y = column("y").sample(&[0.0, 0.5, 1.0], Some("um")).unwrap();
+        assert_eq!(y, vec![0.0, 2.5, 5.0]);
+        let theta = column("theta").sample(&[1.0], Some("rad")).unwrap();
+        assert!((theta[0] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        let e = column("y").sample(&[0.0], Some("rad")).unwrap_err();
+        assert!(e.ends_with("column \"y[nm]\" is in \"nm\", which is not read as \"rad\", the input's unit (lengths m, mm, um, nm; angles rad, mrad, urad, deg, mdeg; voltages V, mV, kV)"), "{e}");
+        let e = column("v").sample(&[0.0], Some("um")).unwrap_err();
+        assert!(e.contains("is in \"furlong\""), "{e}");
+        let e = column("y").sample(&[0.0], None).unwrap_err();
+        assert!(e.contains("the input declares no unit"), "{e}");
+        std::fs::write(&file, "t[h],y\n0,0\n1,1\n").unwrap();
+        let e = column("y").sample(&[0.0], Some("um")).unwrap_err();
+        assert!(
+            e.contains("time column \"t[h]\" is in \"h\", not a time unit"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -306,7 +434,7 @@ mod tests {
             }),
             ..Trajectory::default()
         };
-        let e = y.sample(&[0.0]).unwrap_err();
+        let e = y.sample(&[0.0], None).unwrap_err();
         assert!(
             e.ends_with("r.csv:3: column \"y\": \"ten\" is not a number"),
             "{e}"
