@@ -8,8 +8,9 @@ the controller produced at its previous step), then both step from t_k to
 t_k+1. The controller samples its inputs at the start of its step and its
 outputs hold from the end of the step, so the command the plant applies over
 [t_k, t_k+1] was computed from s(t_k-1): one sample of compute delay, as on a
-DSP that writes its outputs at the next sample. Because neither FMU has direct
-feedthrough, Gauss-Seidel ordering would give the same result.
+DSP that writes its outputs at the next sample. Gauss-Seidel ordering (one FMU
+stepped first, its new outputs fed to the other) would remove that sample and
+give another loop.
 
 The references are known in advance (the trajectory is a function of time, as
 it was on the DS1103), so the controller receives them with a preview of

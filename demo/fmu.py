@@ -30,6 +30,24 @@ STATUS_NAMES = {
 }
 
 
+#: What a value of each type is, for set_values' refusals.
+_KINDS_TAKE = {"Real": "a number", "Integer": "a whole number", "Boolean": "True or False"}
+
+
+def _is_of_kind(value, kind: str) -> bool:
+    """Whether `value` is a value of an FMI variable of type `kind` as it is,
+    without a conversion that changes what it means."""
+    import numbers
+
+    if kind == "Boolean":
+        return isinstance(value, (bool, np.bool_))
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        return False
+    if kind == "Integer":
+        return float(value).is_integer()
+    return True
+
+
 @dataclass
 class LogRecord:
     instance_name: str
@@ -221,7 +239,9 @@ class Instance:
                          lambda v: int(bool(v)))
 
     def set_values(self, values: dict) -> None:
-        """Sets values by their declared type (Real, Integer or Boolean)."""
+        """Sets values by their declared type (Real, Integer or Boolean). A
+        value of another kind is refused, not converted: "false" is true to
+        Python's bool(), and int() takes 1.9 for 1."""
         setters = {"Real": self.set_real, "Integer": self.set_integer,
                    "Boolean": self.set_boolean}
         for name, value in values.items():
@@ -229,6 +249,9 @@ class Instance:
             if kind not in setters:
                 raise KeyError(f"{Path(self.owner.path).name}: {name!r} is not a Real, "
                                f"Integer or Boolean variable ({kind})")
+            if not _is_of_kind(value, kind):
+                raise TypeError(f"{Path(self.owner.path).name}: {name!r} is a {kind} variable, "
+                                f"which takes {_KINDS_TAKE[kind]}; {value!r} was given")
             setters[kind]({name: value})
 
     def real_port(self, names) -> "RealPort":

@@ -484,6 +484,31 @@ def test_a_run_continues_from_a_finished_runs_state(name):
     assert rest[name][-1] != rest[name][0], f"{name} should move over the second run"
 
 
+def test_values_of_another_kind_are_refused_not_converted():
+    """demo.cosim sets parameters through demo.fmu's set_values: "false"
+    would be true to bool() and 1.9 an int() 1, each run with exit 0."""
+    from demo.cosim import Fmu
+
+    with Fmu(TESTS_DIR.parent / "dist" / "PiezoController.fmu") as controller:
+        s = controller.instance("kinds")
+        try:
+            for values, message in [
+                ({"feedback_y": "false"}, "'feedback_y' is a Boolean variable, which takes "
+                                          "True or False; 'false' was given"),
+                ({"hysteresis_model": 1.9}, "'hysteresis_model' is a Integer variable, which "
+                                            "takes a whole number; 1.9 was given"),
+                ({"y_ref": "5"}, "'y_ref' is a Real variable, which takes a number; '5' was "
+                                 "given"),
+            ]:
+                with pytest.raises(TypeError) as refused:
+                    s.set_values(values)
+                assert str(refused.value).endswith(message)
+            s.set_values({"feedback_y": False, "hysteresis_model": 1.0, "y_ref": 5,
+                          "decoupling": np.bool_(True)})
+        finally:
+            s.free()
+
+
 # --------------------------------------------------------------------------
 # 10. '%' in log messages
 # --------------------------------------------------------------------------
