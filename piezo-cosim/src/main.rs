@@ -105,17 +105,37 @@ fn load(path: &Path) -> Result<Scenario, String> {
 fn line_of_port<'a>(
     text: &str,
     message: &str,
-    mut instances: impl Iterator<Item = &'a str>,
+    instances: impl Iterator<Item = &'a str>,
 ) -> Option<usize> {
-    let port = message.split(": ").next()?;
-    let (instance, variable) = port.split_once('.')?;
-    if !instances.any(|name| name == instance) {
+    let instances: Vec<&str> = instances.collect();
+    // `controller.decoupling is a Boolean variable ...`, `plant.x: ...`
+    let port = message
+        .split(|c: char| c == ':' || c.is_whitespace())
+        .next()?;
+    if let Some((instance, variable)) = port.split_once('.')
+        && instances.contains(&instance)
+    {
+        if let Some(line) = piezo_cosim::scenario::line_of_quoted(text, port) {
+            return Some(line);
+        }
+        return line_in_instance_table(text, instance, variable);
+    }
+    // What an FMU refused, in its log: `controller: fmi2SetReal ...: value
+    // reference 6 (u1) cannot be set`, `... parameter translation.kp = -0.1
+    // is outside ...`.
+    let (instance, log) = message.split_once(": ")?;
+    if !instances.contains(&instance) {
         return None;
     }
-    if let Some(line) = piezo_cosim::scenario::line_of_quoted(text, port) {
-        return Some(line);
-    }
-    line_in_instance_table(text, instance, variable)
+    let named = log
+        .split_once("parameter ")
+        .and_then(|(_, rest)| rest.split_whitespace().next())
+        .or_else(|| {
+            log.split_once("value reference ")
+                .and_then(|(_, rest)| rest.split_once('(')?.1.split_once(')'))
+                .map(|(name, _)| name)
+        })?;
+    line_in_instance_table(text, instance, named)
 }
 
 /// The 1-based line of `text` that writes `key` (a whole name) inside the
@@ -320,6 +340,20 @@ fn main() -> ExitCode {
         );
         return ExitCode::from(2);
     }
+    // A folder the series or the results cannot be written in is found
+    // before the run, not after it.
+    for path in [&series_path, &out].into_iter().flatten() {
+        if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty())
+            && !folder.is_dir()
+        {
+            eprintln!(
+                "{}: no folder {} to write it in",
+                path.display(),
+                folder.display()
+            );
+            return ExitCode::from(2);
+        }
+    }
     let scenario_path = scenario;
     let scenario = match load(&scenario_path) {
         Ok(s) => s,
@@ -422,6 +456,27 @@ offset = 0.0
         assert_eq!(line("controller.gain: c.fmu has no variable"), None);
         assert_eq!(line("stage.feedbak_y: no FMU instance"), None);
         assert_eq!(line("/tmp/c.fmu: cannot be opened"), None);
+        // A value of the wrong type, and what an FMU refused in its log.
+        assert_eq!(
+            line("controller.feedforward is a Boolean variable, which takes true or false"),
+            Some(9)
+        );
+        assert_eq!(
+            line(
+                "controller: fmi2ExitInitializationMode returned status 3 at t = 0 s: \
+                 [logStatusError] fmi2ExitInitializationMode: parameter feedbak_y = -1 is \
+                 outside its allowed range"
+            ),
+            Some(10)
+        );
+        assert_eq!(
+            line(
+                "plant: fmi2SetReal returned status 3 at t = 0 s: [logStatusError] \
+                 fmi2SetReal: value reference 6 (feedbak_y) cannot be set"
+            ),
+            Some(5)
+        );
+        assert_eq!(line("controller: fmi2DoStep returned status 3"), None);
     }
 
     #[test]

@@ -435,16 +435,28 @@ pub fn run_with(
         )?;
         for &(vr, value) in typed {
             let (call, status) = slot.instance.set_typed(vr, value);
-            check(slot, call, status, 0.0, &mut warnings)?;
+            // A value the FMU refuses (out of its range, an output) is the
+            // scenario's to fix, as an unknown name is.
+            check(slot, call, status, 0.0, &mut warnings).map_err(|e| match e {
+                RunError::Fmu(message) => RunError::Scenario(message),
+                e => e,
+            })?;
         }
         let status = slot.instance.exit_init();
+        // The FMUs check their parameters together when initialization ends
+        // (a range, command_max above command_min): a refusal that names a
+        // parameter is the scenario's to fix.
         check(
             slot,
             "fmi2ExitInitializationMode",
             status,
             0.0,
             &mut warnings,
-        )?;
+        )
+        .map_err(|e| match e {
+            RunError::Fmu(message) if message.contains("parameter ") => RunError::Scenario(message),
+            e => e,
+        })?;
     }
 
     if options.check_only {
