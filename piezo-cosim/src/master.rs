@@ -422,6 +422,19 @@ pub fn run_with(
         });
     }
     let mut warnings = Vec::new();
+    // The run takes whole steps: a duration between two is rounded to the
+    // nearer, which the result's simulated_s shows and this says.
+    let simulated = scenario.steps() as f64 * scenario.step;
+    if (simulated - scenario.duration).abs() > 1e-9 * scenario.duration.max(scenario.step) {
+        // Twelve significant digits: 3 × 0.003 prints as 0.009.
+        let shown: f64 = format!("{simulated:.12e}").parse().unwrap_or(simulated);
+        warnings.push(format!(
+            "duration {} s is not a whole number of steps of {} s: the run takes {} steps, {shown} s",
+            scenario.duration,
+            scenario.step,
+            scenario.steps()
+        ));
+    }
     for (slot, typed) in slots.iter_mut().zip(&parameters) {
         let status = slot.instance.setup(0.0);
         check(slot, "fmi2SetupExperiment", status, 0.0, &mut warnings)?;

@@ -134,7 +134,7 @@ fn runs_that_share_their_fmus_equal_runs_that_open_their_own() {
     let mut shared = |scenario: &Scenario| run_with(scenario, RunOptions::default(), &mut open);
     let a = shared(&first).unwrap().metrics;
     let b = shared(&other_seed).unwrap().metrics;
-    assert!(matches!(shared(&refused), Err(RunError::Fmu(_))));
+    assert!(matches!(shared(&refused), Err(RunError::Scenario(_))));
     let a_again = shared(&first).unwrap().metrics;
     assert_eq!(open.len(), 2, "each FMU opened once");
     assert_eq!(a, alone(&first));
@@ -219,6 +219,17 @@ fn a_check_initializes_without_a_step() {
     let output = run(&y_sine(&fmus, 3.0, ""), options).unwrap();
     assert_eq!(output.steps, 0);
     assert!(output.metrics.is_none());
+    assert!(output.warnings.is_empty(), "{:?}", output.warnings);
+    // A duration between two whole steps is said, with the steps taken.
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario.step = 3e-3;
+    let output = run(&scenario, options).unwrap();
+    assert_eq!(
+        output.warnings,
+        [
+            "duration 0.01 s is not a whole number of steps of 0.003 s: the run takes 3 steps, 0.009 s"
+        ]
+    );
 }
 
 #[test]
@@ -283,8 +294,10 @@ fn a_scenario_that_does_not_fit_is_refused_by_name() {
     );
 }
 
+/// A parameter value the FMU refuses ends the run with the FMU's log, as
+/// the scenario's problem (exit 2), not an FMU's failure while running.
 #[test]
-fn a_failing_fmu_ends_the_run_with_its_log() {
+fn a_refused_value_ends_the_run_with_the_fmus_log() {
     let fmus = fmus();
     let mut scenario = y_sine(&fmus, 0.01, "");
     scenario.fmu.get_mut("plant").unwrap().parameters.insert(
@@ -292,8 +305,8 @@ fn a_failing_fmu_ends_the_run_with_its_log() {
         piezo_cosim::scenario::ParameterValue::Number(-1.0),
     );
     let error = run(&scenario, RunOptions::default()).unwrap_err();
-    let RunError::Fmu(message) = error else {
-        panic!("an FMU error expected, got {error}");
+    let RunError::Scenario(message) = error else {
+        panic!("a scenario error expected, got {error}");
     };
     assert!(message.starts_with("plant: fmi2"), "{message}");
     assert!(message.contains("mode.theta.frequency"), "{message}");
