@@ -1425,9 +1425,7 @@ pub fn parse_record_with_columns(
         && rate_against_times.len() == input.len()
         && rate_against_times.len() > 1
     {
-        let mut steps: Vec<f64> = rate_against_times.windows(2).map(|w| w[1] - w[0]).collect();
-        let middle = steps.len() / 2;
-        let stated = *steps.select_nth_unstable_by(middle, f64::total_cmp).1 * seconds_per_unit;
+        let stated = median_step(rate_against_times.iter().copied()) * seconds_per_unit;
         if stated <= 0.0 || (stated * rate - 1.0).abs() > RATE_AGAINST_TIMES_TOLERANCE {
             let name = header
                 .as_ref()
@@ -1846,13 +1844,20 @@ fn resolve_columns(
 /// The mean period of a strictly increasing time column, refusing a step that
 /// deviates from the usual (median) step by more than
 /// [`UNIFORM_SAMPLING_TOLERANCE`]: a gap is named at the row after it (the
+/// The median step between consecutive `times` (at least two): the usual
+/// step, which a gap or jitter does not move as it moves the mean.
+fn median_step(times: impl Iterator<Item = f64>) -> f64 {
+    let times: Vec<f64> = times.collect();
+    let mut steps: Vec<f64> = times.windows(2).map(|pair| pair[1] - pair[0]).collect();
+    let middle = steps.len() / 2;
+    *steps.select_nth_unstable_by(middle, f64::total_cmp).1
+}
+
 /// median, unlike the mean, is not moved by the gap itself).
 fn uniform_period(times: &[(usize, f64)]) -> Result<f64, (usize, Problem)> {
     let (first, last) = (times[0].1, times[times.len() - 1].1);
     let mean = (last - first) / (times.len() - 1) as f64;
-    let mut steps: Vec<f64> = times.windows(2).map(|pair| pair[1].1 - pair[0].1).collect();
-    let middle = steps.len() / 2;
-    let usual = *steps.select_nth_unstable_by(middle, f64::total_cmp).1;
+    let usual = median_step(times.iter().map(|&(_, t)| t));
     for pair in times.windows(2) {
         let step = pair[1].1 - pair[0].1;
         if step > GAP_STEPS * usual {
