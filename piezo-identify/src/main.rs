@@ -20,7 +20,8 @@ use commands::stage::{DecouplingArgs, StageArgs, decoupling, stage};
 #[command(
     name = "piezo-identify",
     version,
-    about = "Identify piezo hysteresis models (seed 000's modified inverse Prandtl-Ishlinskii, seed 001's asymmetric Bouc-Wen) from voltage/displacement records"
+    about = "Identify piezo hysteresis models (seed 000's modified inverse Prandtl-Ishlinskii, seed 001's asymmetric Bouc-Wen) from voltage/displacement records",
+    after_help = "Exit status: 0 done; 2 what was given does not fit (arguments, a record's file, line and problem, an FMU or parameter set, an output path), refused before any fit; 1 the work failed on sound input (an FMU call while running, a closed loop that does not track, an optimizer, writing a result)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -76,9 +77,9 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(message) => {
-            eprintln!("{message}");
-            ExitCode::FAILURE
+        Err(failure) => {
+            eprintln!("{}", failure.message());
+            ExitCode::from(failure.exit_status())
         }
     }
 }

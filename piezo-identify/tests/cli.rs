@@ -19,6 +19,12 @@ fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
+/// A call refused for what it was given exits 2, as the argument parser's
+/// own refusals do (a run that failed exits 1).
+fn refused_as_input(output: &Output) {
+    assert_eq!(output.status.code(), Some(2), "{}", stderr(output));
+}
+
 fn stdout(output: &Output) -> String {
     String::from_utf8_lossy(&output.stdout).into_owned()
 }
@@ -88,21 +94,21 @@ fn malformed_file_exits_non_zero_with_file_line_problem() {
     std::fs::write(&path, text).unwrap();
     let path = path.to_str().unwrap();
     let output = run(&["inverse-pi", path, "--rate", "100"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         format!("{path}:41: field 1 (\"abc\") is not a number\n")
     );
 
     let output = run(&["compare", path, "--rate", "100", "--output", "position"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         format!("{path}:1: column \"position\" is named but the file has no header row\n")
     );
 
     let output = run(&["inverse-pi", path]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         format!(
@@ -340,7 +346,7 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
     let falling = falling.to_str().unwrap();
     for command in [&["bouc-wen", "--monotone"][..], &["inverse-pi"][..]] {
         let output = run(&[command, &[falling, "--time", "time"][..]].concat());
-        assert!(!output.status.success(), "{command:?}");
+        refused_as_input(&output);
         let message = stderr(&output);
         assert!(
             message.starts_with(&format!(
@@ -362,13 +368,13 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
 
     let output = run(&["bouc-wen", data, "--time", "time", "--bounds", "n=3:1"]);
     // (refused before any fit)
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         "--bounds n=3:1: lower must be below upper\n"
     );
     let output = run(&["bouc-wen", data, "--time", "time", "--bounds", "alpha=0:1"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         "--bounds alpha=0:1: the parameters are beta, gamma, n, delta\n"
@@ -378,7 +384,7 @@ fn bouc_wen_fits_a_file_and_refuses_bad_input() {
     std::fs::write(&bad, "0 1\n0.5 2\n1.0 x\n").unwrap();
     let bad = bad.to_str().unwrap();
     let output = run(&["bouc-wen", bad, "--rate", "100"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         format!("{bad}:3: field 1 (\"x\") is not a number\n")
@@ -414,7 +420,7 @@ fn tab_separated_names_with_spaces_are_whole_names() {
         "--output",
         "Moment",
     ]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         format!(
@@ -589,7 +595,7 @@ fn pandas_exports_and_empty_files() {
     let empty = dir.path().join("empty.dat");
     std::fs::write(&empty, "").unwrap();
     let output = run(&["inverse-pi", empty.to_str().unwrap(), "--rate", "100"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert_eq!(
         stderr(&output),
         format!(
@@ -638,7 +644,7 @@ fn numbers_are_parsed_and_checked() {
         ("--settle", "-0.1"),
     ] {
         let output = with(&[option, value]);
-        assert!(!output.status.success(), "{option} {value}");
+        refused_as_input(&output);
         let message = stderr(&output);
         assert!(
             message.contains(&format!("invalid value '{value}' for '{option}"))
@@ -647,7 +653,7 @@ fn numbers_are_parsed_and_checked() {
         );
     }
     let output = with(&["--split", "1.5"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert!(
         stderr(&output).contains("give a fraction between 0 and 1"),
         "{}",
@@ -683,7 +689,7 @@ fn the_validation_file_is_checked_before_the_fit() {
     };
     let started = std::time::Instant::now();
     let output = args(missing.to_str().unwrap(), &[]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert!(
         stderr(&output).starts_with(missing.to_str().unwrap()),
         "{}",
@@ -697,7 +703,7 @@ fn the_validation_file_is_checked_before_the_fit() {
     assert!(started.elapsed().as_secs_f64() < 5.0);
 
     let output = args(data, &["--validate-warm-up", "10"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert!(
         stderr(&output).contains("no sample is left to score after its warm-up"),
         "{}",
@@ -781,7 +787,7 @@ fn a_monotone_fit_searches_every_sample_when_the_decimated_optimum_falls() {
     assert!(rising, "the written model falls somewhere on the record");
 
     let output = monotone_split(&["--decimation", "2"]);
-    assert!(!output.status.success());
+    refused_as_input(&output);
     assert!(
         stderr(&output).contains(
             "the GA-PSO optimum, searched on one sample in 2, is unusable on the whole record \
@@ -929,7 +935,7 @@ fn columns_left_to_the_defaults_are_not_the_time_column() {
         )
     );
     let twice = run(&["inverse-pi", file, "--time", "time", "--input", "0"]);
-    assert!(!twice.status.success());
+    refused_as_input(&twice);
     assert_eq!(
         stderr(&twice).trim_end(),
         format!("{file}:2: field 0 is both the input and the time column")
@@ -975,7 +981,7 @@ fn decoupling_names_its_columns() {
         "--error",
         "1",
     ]);
-    assert!(!same.status.success());
+    refused_as_input(&same);
     assert_eq!(
         stderr(&same).trim_end(),
         "--demand and --error both name column 1: give the coupling error's own column"
@@ -1011,13 +1017,13 @@ fn decoupling_skips_a_named_time_column() {
     assert!(untimed.status.success(), "{}", stderr(&untimed));
     assert_eq!(stdout(&untimed), out);
     let clash = run(&["decoupling", file, "--time", "time", "--demand", "0"]);
-    assert!(!clash.status.success());
+    refused_as_input(&clash);
     assert_eq!(
         stderr(&clash).trim_end(),
         format!("{file}:1: field 0 is both the demand and the time column")
     );
     let past_the_end = run(&["decoupling", file, "--time", "0", "--error", "3"]);
-    assert!(!past_the_end.status.success());
+    refused_as_input(&past_the_end);
     assert_eq!(
         stderr(&past_the_end).trim_end(),
         format!("{file}:2: row has 3 columns, column 3 (0-based) is needed")
@@ -1025,7 +1031,7 @@ fn decoupling_skips_a_named_time_column() {
     let only_two = dir.path().join("two.csv");
     std::fs::write(&only_two, "time,demand\n0,1\n1,2\n2,3\n").unwrap();
     let short = run(&["decoupling", only_two.to_str().unwrap(), "--time", "time"]);
-    assert!(!short.status.success());
+    refused_as_input(&short);
     assert!(
         stderr(&short).contains("no column is left for the error")
             && stderr(&short).contains("give --error"),
@@ -1058,7 +1064,7 @@ fn a_validation_file_at_another_rate_is_refused() {
     let (fit, faster) = (fitted.to_str().unwrap(), faster.to_str().unwrap());
     for model in ["inverse-pi", "bouc-wen"] {
         let refused = run(&[model, fit, "--time", "time", "--validate", faster]);
-        assert!(!refused.status.success(), "{model}");
+        refused_as_input(&refused);
         assert_eq!(
             stderr(&refused).trim_end(),
             format!(
@@ -1124,4 +1130,103 @@ fn scored_loops_smaller_than_the_fitted_ones_get_a_note() {
     write_two_amplitude_record(&path, 4.0);
     let summary = quick_split_fit(&path, "time", "volts", "microns");
     assert!(!summary.contains(note), "{summary}");
+}
+
+/// Every output path is checked before any work: one in a folder that does
+/// not exist, a folder, an input file (which writing would destroy), or one
+/// file named twice is refused at once (exit 2, nothing fitted, the input
+/// untouched). A result that cannot be written after the work (a full disk)
+/// is the run's failure: exit 1, naming the file.
+#[test]
+fn outputs_are_checked_before_the_work_and_never_overwrite_an_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("record.csv");
+    write_good_record(&record);
+    let before = std::fs::read(&record).unwrap();
+    let record = record.to_str().unwrap();
+    let missing = dir.path().join("no such folder").join("model.json");
+    let missing = missing.to_str().unwrap();
+    let folder = dir.path().to_str().unwrap();
+    let fit = |extra: &[&str]| {
+        let mut args = vec!["inverse-pi", record, "--time", "time", "--split", "0.5"];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+
+    let output = fit(&["--out", missing]);
+    refused_as_input(&output);
+    assert_eq!(stdout(&output), "", "refused before the record is read");
+    assert_eq!(
+        stderr(&output),
+        format!(
+            "--out {missing}: there is no folder {} to write it in\n",
+            Path::new(missing).parent().unwrap().display()
+        )
+    );
+    let output = fit(&["--predictions", folder]);
+    refused_as_input(&output);
+    assert_eq!(
+        stderr(&output),
+        format!("--predictions {folder}: is a folder; give the name of the file to write\n")
+    );
+    // The record itself, named another way: refused, and left as it was.
+    let same = format!("{folder}/./record.csv");
+    let output = fit(&["--report", &same]);
+    refused_as_input(&output);
+    assert!(
+        stderr(&output).contains("which this command reads; writing there would overwrite it"),
+        "{}",
+        stderr(&output)
+    );
+    assert_eq!(std::fs::read(record).unwrap(), before);
+    let twice = format!("{folder}/fit.json");
+    let output = fit(&["--out", &twice, "--report", &format!("{folder}/./fit.json")]);
+    refused_as_input(&output);
+    assert!(
+        stderr(&output).starts_with("--out and --report both name "),
+        "{}",
+        stderr(&output)
+    );
+    assert!(!Path::new(&twice).exists());
+
+    // The other subcommands that write check theirs too, before their work.
+    for args in [
+        &["bouc-wen", record, "--time", "time", "--out", missing][..],
+        &["lab-record", "--out", missing][..],
+        &["xy200s-preset", "--out", missing][..],
+        &["stage", "--out", missing][..],
+        &["stage", "--out", folder][..],
+    ] {
+        let output = run(args);
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).starts_with("--out "),
+            "{args:?}: {}",
+            stderr(&output)
+        );
+    }
+
+    // Written after the fit and refused by the device: the run's failure.
+    if Path::new("/dev/full").exists() {
+        let output = fit(&[
+            "--starts",
+            "2",
+            "--max-iterations",
+            "40",
+            "--out",
+            "/dev/full",
+        ]);
+        assert_eq!(output.status.code(), Some(1), "{}", stderr(&output));
+        assert!(stdout(&output).contains("time: "), "{}", stdout(&output));
+        // (after the progress lines, which go to the error stream too)
+        assert!(
+            stderr(&output)
+                .lines()
+                .last()
+                .unwrap()
+                .starts_with("/dev/full: "),
+            "{}",
+            stderr(&output)
+        );
+    }
 }

@@ -433,3 +433,75 @@ fn pearson(a: &[f64], b: &[f64]) -> f64 {
         0.0
     }
 }
+
+/// Refuses, before any work is done, an output that could not be written or
+/// would destroy something: `outputs` are (option, path) pairs, `inputs` the
+/// files the command reads. A path with no folder to write in, or that is a
+/// folder, would otherwise fail only after the fit (minutes, for `stage`);
+/// one that is an input file (`--out record.csv`) would overwrite the
+/// user's measurement; two options naming one file would keep only the
+/// last written.
+pub(crate) fn check_destinations(
+    outputs: &[(&str, Option<&Path>)],
+    inputs: &[&Path],
+) -> Result<(), String> {
+    let named: Vec<(&str, &Path)> = outputs
+        .iter()
+        .filter_map(|(option, path)| path.map(|p| (*option, p)))
+        .collect();
+    for (k, (option, path)) in named.iter().enumerate() {
+        if path.is_dir() {
+            return Err(format!(
+                "{option} {}: is a folder; give the name of the file to write",
+                path.display()
+            ));
+        }
+        if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty())
+            && !folder.is_dir()
+        {
+            return Err(format!(
+                "{option} {}: there is no folder {} to write it in",
+                path.display(),
+                folder.display()
+            ));
+        }
+        for input in inputs {
+            if same_file(path, input) {
+                return Err(format!(
+                    "{option} {}: is {}, which this command reads; writing there would \
+                     overwrite it, so give another name",
+                    path.display(),
+                    input.display()
+                ));
+            }
+        }
+        for (other_option, other) in &named[..k] {
+            if same_file(path, other) {
+                return Err(format!(
+                    "{other_option} and {option} both name {}: give each its own file",
+                    path.display()
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether two paths name one file, written yet or not (so `./a.csv` and
+/// `a.csv`, or a link and its target, count as one).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (resolved(a), resolved(b)) {
+        (Some(a), Some(b)) => a == b,
+        _ => a == b,
+    }
+}
+
+/// The absolute path a file has or would have: its own where it exists,
+/// else its folder's with its name.
+fn resolved(path: &Path) -> Option<PathBuf> {
+    path.canonicalize().ok().or_else(|| {
+        let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
+        let folder = folder.unwrap_or(Path::new(".")).canonicalize().ok()?;
+        Some(folder.join(path.file_name()?))
+    })
+}

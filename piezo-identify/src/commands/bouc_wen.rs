@@ -1,7 +1,7 @@
 //! `piezo-identify bouc-wen`: the asymmetric Bouc-Wen model (seed 001 eq. 3-4)
 //! by GA-PSO and Levenberg-Marquardt.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 
@@ -12,12 +12,15 @@ use piezo_identify::protocol::{
     BoucWenProtocolFit, BoucWenSettings, ForwardErrors, identify_bouc_wen_protocol,
 };
 
-use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, load_validation, open_plant};
+use super::arguments::{
+    ColumnArgs, Loaded, ProtocolArgs, check_destinations, load, load_validation, open_plant,
+};
 use super::progress::Reporter;
 use super::report::{
     describe, describe_columns, pad, print_extrapolation, print_figure, print_plan,
     print_smaller_loops, range_excess, write_json, write_predictions,
 };
+use super::{Failure, plant_failure, protocol_failure};
 
 #[derive(Args)]
 pub(crate) struct BoucWenArgs {
@@ -138,7 +141,7 @@ pub(crate) fn parse_shape_bounds(text: &str, bounds: &mut Bounds) -> Result<(), 
 /// defaults that differ between them (decimation, warm-up seconds).
 pub(crate) fn bouc_wen_record(
     args: &BoucWenArgs,
-) -> Result<(Loaded, Option<usize>, Option<f64>), String> {
+) -> Result<(Loaded, Option<usize>, Option<f64>), Failure> {
     if let Some(path) = &args.plant {
         // The run starts from a stage never cycled (FlexureStage's
         // `rest_cycle_voltage` = 0): every hysteretic state at h = 0, the
@@ -147,7 +150,7 @@ pub(crate) fn bouc_wen_record(
         // only after several periods (Bouc-Wen minor loops do not close).
         let plant = open_plant(path, args.plant_parameters.as_deref())?
             .with_parameters(&[("rest_cycle_voltage".to_owned(), ParameterValue::Number(0.0))])
-            .map_err(|e| e.to_string())?;
+            .map_err(plant_failure)?;
         let axis = if args.drive == "x" {
             RecordAxis::X
         } else {
@@ -160,7 +163,9 @@ pub(crate) fn bouc_wen_record(
             ("--plant-rate", args.plant_rate),
         ] {
             if !(value.is_finite() && value > 0.0) {
-                return Err(format!("{name} must be positive (got {value})"));
+                return Err(Failure::Input(format!(
+                    "{name} must be positive (got {value})"
+                )));
             }
         }
         let (driven, coupled) = sine_records(
@@ -171,7 +176,7 @@ pub(crate) fn bouc_wen_record(
             args.periods,
             args.plant_rate,
         )
-        .map_err(|e| e.to_string())?;
+        .map_err(plant_failure)?;
         let record = if args.read == "coupled" {
             coupled
         } else {
@@ -222,7 +227,19 @@ pub(crate) fn print_forward_errors(
     }
 }
 
-pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
+pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
+    let mut inputs: Vec<&Path> = args.file.iter().map(|p| p.as_path()).collect();
+    inputs.extend(args.protocol.validate.as_deref());
+    inputs.extend(args.plant.as_deref());
+    inputs.extend(args.plant_parameters.as_deref());
+    check_destinations(
+        &[
+            ("--out", args.out.as_deref()),
+            ("--report", args.protocol.report.as_deref()),
+            ("--predictions", args.protocol.predictions.as_deref()),
+        ],
+        &inputs,
+    )?;
     let (loaded, default_decimation, default_warm_up) = bouc_wen_record(args)?;
     // The validation file is read before the fit: a typo costs nothing.
     let validation = match &args.protocol.validate {
@@ -260,7 +277,9 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
         refine: !args.no_refine,
     };
     if settings.decimation == Some(0) {
-        return Err("--decimation: give a whole number of samples, 1 or more".to_owned());
+        return Err(Failure::Input(
+            "--decimation: give a whole number of samples, 1 or more".to_owned(),
+        ));
     }
     let record = &loaded.record;
     let dt = record.sample_period;
@@ -272,7 +291,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), String> {
 
     let reporter = Reporter::new();
     let fit = identify_bouc_wen_protocol(record, &plan, &settings, &|e| reporter.event(e))
-        .map_err(|e| format!("{}: {e}", loaded.name))?;
+        .map_err(|e| protocol_failure(&loaded.name, e))?;
     reporter.finish();
     print_bouc_wen_fit(&fit, &settings);
 

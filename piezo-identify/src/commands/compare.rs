@@ -5,12 +5,13 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use piezo_identify::StartResult;
 use piezo_identify::compare::{
     IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE, compare_inverse_models, synthetic_plant_record,
 };
 use piezo_identify::validation::{centred_moving_average, shifted};
+use piezo_identify::{FitError, StartResult};
 
+use super::Failure;
 use super::arguments::{ColumnArgs, SearchArgs, read, resolve_offset};
 use super::progress::progress_bar;
 use super::report::{describe, print_starts};
@@ -45,10 +46,10 @@ pub(crate) struct CompareArgs {
 /// samples per period of eq. (6)'s fastest (1 Hz) component.
 pub(crate) const SYNTHETIC_DECIMATION: usize = 20;
 
-pub(crate) fn compare(args: &CompareArgs) -> Result<(), String> {
+pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
     let (record, name, offset, default_decimation) = if args.synthetic {
         let record = synthetic_plant_record(IDENTIFICATION_DURATION, PLANT_SAMPLE_RATE)
-            .map_err(|e| format!("stage preset: {e}"))?;
+            .map_err(|e| Failure::Run(format!("stage preset: {e}")))?;
         (
             record,
             "synthetic: seed 000 eq. (6) on FlexureStage y, 10 s at 10 kHz".to_owned(),
@@ -88,7 +89,13 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), String> {
         args.repetitions,
         &tick,
     )
-    .map_err(|e| format!("{name}: {e}"))?;
+    .map_err(|e| {
+        let message = format!("{name}: {e}");
+        match e {
+            FitError::Optimizer(_) => Failure::Run(message),
+            _ => Failure::Input(message),
+        }
+    })?;
     bar.finish_and_clear();
 
     println!(

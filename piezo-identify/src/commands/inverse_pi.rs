@@ -10,12 +10,15 @@ use piezo_identify::protocol::{
 };
 use piezo_identify::validation::centred_moving_average;
 
-use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load, load_validation};
+use super::arguments::{
+    ColumnArgs, ProtocolArgs, auto_or, check_destinations, load, load_validation,
+};
 use super::progress::Reporter;
 use super::report::{
     describe, describe_columns, pad, print_extrapolation, print_figure, print_plan,
     print_smaller_loops, range_excess, write_json, write_predictions,
 };
+use super::{Failure, protocol_failure};
 
 #[derive(Args)]
 pub(crate) struct InversePiArgs {
@@ -61,7 +64,17 @@ pub(crate) struct InversePiArgs {
     pub(crate) out: Option<PathBuf>,
 }
 
-pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
+pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
+    let mut inputs = vec![args.file.as_path()];
+    inputs.extend(args.protocol.validate.as_deref());
+    check_destinations(
+        &[
+            ("--out", args.out.as_deref()),
+            ("--report", args.protocol.report.as_deref()),
+            ("--predictions", args.protocol.predictions.as_deref()),
+        ],
+        &inputs,
+    )?;
     let loaded = load(&args.file, &args.columns)?;
     // The validation file is read before the fit: a typo costs nothing.
     let validation = match &args.protocol.validate {
@@ -75,7 +88,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
         None => None,
     };
     if args.starts == 0 {
-        return Err("--starts: give at least 1".to_owned());
+        return Err(Failure::Input("--starts: give at least 1".to_owned()));
     }
     let settings = InversePiSettings {
         starts: args.starts,
@@ -120,7 +133,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), String> {
 
     let reporter = Reporter::new();
     let fit = identify_inverse_pi(record, &plan, &settings, &|e| reporter.event(e))
-        .map_err(|e| format!("{}: {e}", loaded.name))?;
+        .map_err(|e| protocol_failure(&loaded.name, e))?;
     reporter.finish();
 
     print_inverse_pi_choices(&fit, &plan, &settings, dt);

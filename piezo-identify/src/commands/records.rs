@@ -5,7 +5,8 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use super::arguments::seconds;
+use super::Failure;
+use super::arguments::{check_destinations, seconds};
 use super::report::write_json;
 
 #[derive(Args)]
@@ -53,7 +54,8 @@ pub(crate) struct Xy200sPresetArgs {
     pub(crate) report: Option<PathBuf>,
 }
 
-pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), String> {
+pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
+    check_destinations(&[("--out", Some(&args.out))], &[])?;
     use piezo_identify::lab_records::{Drive, Excitation, LabRecordSpec, lab_record};
     let spec = LabRecordSpec {
         sample_rate: args.rate,
@@ -83,7 +85,8 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), String> {
     for (n, (u, y)) in record.input.iter().zip(&record.output).enumerate() {
         text.push_str(&format!("{},{u},{y}\n", n as f64 * record.sample_period));
     }
-    std::fs::write(&args.out, text).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    std::fs::write(&args.out, text)
+        .map_err(|e| Failure::Run(format!("{}: {e}", args.out.display())))?;
     println!(
         "{}: {} samples at {} Hz (columns time_s, command_V, displacement_um)",
         args.out.display(),
@@ -93,8 +96,17 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), String> {
     Ok(())
 }
 
-pub(crate) fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), String> {
-    let preset = piezo_identify::xy200s::xy200s_preset().map_err(|e| e.to_string())?;
+pub(crate) fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), Failure> {
+    check_destinations(
+        &[
+            ("--out", Some(&args.out)),
+            ("--report", args.report.as_deref()),
+        ],
+        &[],
+    )?;
+    // The printed tables are built in: a failure here is the conversion's.
+    let preset =
+        piezo_identify::xy200s::xy200s_preset().map_err(|e| Failure::Run(e.to_string()))?;
     for model in &preset.models {
         let p = &model.identified;
         println!(

@@ -8,6 +8,8 @@ use piezo_identify::protocol::{ErrorFigures, Plan};
 use piezo_identify::segments::smaller_loops;
 use piezo_identify::{Record, StartResult};
 
+use super::Failure;
+
 pub(crate) fn describe(record: &Record, path: &str) -> String {
     format!(
         "{path}: {} samples, {:.2} s at {:.6} Hz",
@@ -210,7 +212,7 @@ pub(crate) fn write_predictions(
     sample_period: f64,
     columns: &[(&str, &[f64])],
     plan: &Plan,
-) -> Result<(), String> {
+) -> Result<(), Failure> {
     let fitted = pad(&plan.fitted(), plan.samples);
     let scored = plan.scored();
     let mut text = String::from("time_s");
@@ -235,11 +237,13 @@ pub(crate) fn write_predictions(
         text.push_str(part);
         text.push('\n');
     }
-    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
+    std::fs::write(path, text).map_err(|e| Failure::Run(format!("{}: {e}", path.display())))
 }
 
-pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), String> {
+/// Writes `value` as JSON; a failure here comes after the work was done
+/// (the paths were checked before it), so it is the run's.
+pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), Failure> {
     let json = serde_json::to_string_pretty(value)
-        .map_err(|e| format!("cannot serialise {}: {e}", path.display()))?;
-    std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))
+        .map_err(|e| Failure::Run(format!("cannot serialise {}: {e}", path.display())))?;
+    std::fs::write(path, json + "\n").map_err(|e| Failure::Run(format!("{}: {e}", path.display())))
 }

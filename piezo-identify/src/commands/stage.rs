@@ -6,12 +6,13 @@ use std::path::PathBuf;
 use clap::Args;
 
 use piezo_identify::data::read_record_with_columns;
-use piezo_identify::decoupling::fit_compensation;
+use piezo_identify::decoupling::{DecouplingError, fit_compensation};
 use piezo_identify::stage::{StageConditions, identify_stage};
 use piezo_identify::{Column, ReadOptions, Roles, Sampling};
 
-use super::arguments::{SearchArgs, open_plant};
+use super::arguments::{SearchArgs, check_destinations, open_plant};
 use super::progress::progress_bar;
+use super::{Failure, stage_failure};
 
 #[derive(Args)]
 pub(crate) struct StageArgs {
@@ -80,7 +81,16 @@ pub(crate) struct DecouplingArgs {
 /// Decimation of the plant's 10 kHz eq. (6) records for the search (500 Hz).
 pub(crate) const STAGE_DECIMATION: usize = 20;
 
-pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
+pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
+    let mut inputs = vec![args.plant.as_path()];
+    inputs.extend(args.plant_parameters.as_deref());
+    check_destinations(
+        &[
+            ("--out", Some(&args.out)),
+            ("--report", args.report.as_deref()),
+        ],
+        &inputs,
+    )?;
     let plant = open_plant(&args.plant, args.plant_parameters.as_deref())?;
     let options = args
         .search
@@ -115,7 +125,9 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
         .ok_or_else(|| format!("--held {}: give X,Y in um, e.g. 0,0", args.held))?;
     for (name, value) in [("--gain-scale", args.gain_scale), ("--scale", args.scale)] {
         if !(value.is_finite() && value > 0.0) {
-            return Err(format!("{name} {value}: give a positive factor"));
+            return Err(Failure::Input(format!(
+                "{name} {value}: give a positive factor"
+            )));
         }
     }
     let conditions = StageConditions {
@@ -125,7 +137,7 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
         ..StageConditions::scaled(args.scale, !args.no_rotation)
     };
     let identified = identify_stage(&plant, &options, args.rounds, &conditions, &step, &tick)
-        .map_err(|e| format!("{}: {e}", args.plant.display()))?;
+        .map_err(|e| stage_failure(&args.plant, e))?;
     bar.finish_and_clear();
     for (name, fit) in [("x", &identified.x_fit), ("y", &identified.y_fit)] {
         println!(
@@ -153,26 +165,28 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), String> {
         }
     }
     let json = serde_json::to_string_pretty(&identified.controller)
-        .map_err(|e| format!("cannot serialise the preset: {e}"))?;
-    std::fs::write(&args.out, json + "\n").map_err(|e| format!("{}: {e}", args.out.display()))?;
+        .map_err(|e| Failure::Run(format!("cannot serialise the preset: {e}")))?;
+    std::fs::write(&args.out, json + "\n")
+        .map_err(|e| Failure::Run(format!("{}: {e}", args.out.display())))?;
     println!("controller preset written to {}", args.out.display());
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&identified)
-            .map_err(|e| format!("cannot serialise the report: {e}"))?;
-        std::fs::write(path, json + "\n").map_err(|e| format!("{}: {e}", path.display()))?;
+            .map_err(|e| Failure::Run(format!("cannot serialise the report: {e}")))?;
+        std::fs::write(path, json + "\n")
+            .map_err(|e| Failure::Run(format!("{}: {e}", path.display())))?;
         println!("identification report written to {}", path.display());
     }
     Ok(())
 }
 
-pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
+pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), Failure> {
     if let (Some(demand), Some(error)) = (&args.demand, &args.error)
         && demand.trim() == error.trim()
     {
-        return Err(format!(
+        return Err(Failure::Input(format!(
             "--demand and --error both name column {}: give the coupling error's own column",
             demand.trim()
-        ));
+        )));
     }
     let options = ReadOptions {
         input: args.demand.as_deref().map(Column::parse),
@@ -193,8 +207,13 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), String> {
         "columns: demand {}, coupling error {}",
         used.input, used.output
     );
-    let c = fit_compensation(&record.input, &record.output)
-        .map_err(|e| format!("{}: {e}", args.file.display()))?;
+    let c = fit_compensation(&record.input, &record.output).map_err(|e| {
+        let message = format!("{}: {e}", args.file.display());
+        match e {
+            DecouplingError::Optimizer(_) => Failure::Run(message),
+            _ => Failure::Input(message),
+        }
+    })?;
     println!(
         "{}: {} pairs; D(f) = clamp({:.6}*f {:+.6}, q = {:.6}, p = {:.6})",
         args.file.display(),
