@@ -3,9 +3,11 @@
 //! `piezo-cosim batch RUNS.jsonl`: runs one scenario per line, each FMU
 //! opened once, and prints one result per line as it completes.
 //!
-//! Exit status: 0 the run completed (batch: every line was answered); 1 an
-//! FMU refused a call or failed a step; 2 the scenario is malformed or does
-//! not fit the FMUs.
+//! Exit status: 0 the run completed (batch: every line's run completed); 1
+//! an FMU refused a call or failed a step; 2 the scenario is malformed or
+//! does not fit the FMUs. A batch answers every line and then exits with
+//! the highest status of its lines, so `piezo-cosim batch runs.jsonl && ...`
+//! goes on only when every run completed.
 
 use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
@@ -49,6 +51,8 @@ enum Command {
     /// its run completes: `run`'s result with the line number, or
     /// {status: "error", exit, error, line} for a run that failed (the
     /// others still run). Each FMU is opened once and instantiated per run.
+    /// Exits with the highest `exit` of its lines: 0 only when every run
+    /// completed.
     Batch {
         /// JSON Lines file of scenarios (paths relative to its folder), or
         /// `-` for stdin (paths relative to the working directory).
@@ -264,6 +268,8 @@ fn batch(source: &Path, results: &mut dyn Write) -> ExitCode {
             }
         };
     let mut open = OpenFmus::default();
+    // The highest exit status of the lines answered so far.
+    let mut worst = 0u8;
     for (index, line) in reader.lines().enumerate() {
         let number = index + 1;
         let line = match line {
@@ -285,16 +291,17 @@ fn batch(source: &Path, results: &mut dyn Write) -> ExitCode {
                 run_with(&scenario, RunOptions::default(), &mut open)
                     .map(|output| result_json(&scenario, &output))
             });
-        let mut result = outcome.unwrap_or_else(
-            |e| json!({"status": "error", "exit": exit_code(&e), "error": e.to_string()}),
-        );
+        let mut result = outcome.unwrap_or_else(|e| {
+            worst = worst.max(exit_code(&e));
+            json!({"status": "error", "exit": exit_code(&e), "error": e.to_string()})
+        });
         result["line"] = json!(number);
         if emit(results, &result.to_string()).is_err() {
             // The reader has gone: nobody wants the remaining runs.
             return ExitCode::from(1);
         }
     }
-    ExitCode::SUCCESS
+    ExitCode::from(worst)
 }
 
 fn main() -> ExitCode {
