@@ -21,15 +21,21 @@ fn displacement() -> Vec<f64> {
         .collect()
 }
 
-/// Seed 000's identified y model (Table 1, c = 0.716, G of eq. 9), with
-/// u1max taken over this trajectory's range as the fit takes it (the paper's
-/// is over the 12.22 µm stroke). A first truth with mild dead zones
+/// Seed 000's identified y model (Table 1, c = 0.716, G of eq. 9) with its
+/// dead-zone weights 100 times the paper's (Table 1's y w_s as printed,
+/// which MODEL.md §7 reads × 10⁻²): a backlash part 100 times the paper's,
+/// about as large as the cubic, so that F tells c apart sharply; u1max
+/// taken over this trajectory's range as the fit takes it (the paper's is
+/// over the 12.22 µm stroke). A first truth with mild dead zones
 /// (w_s ∝ [1, 0.45, −0.3, 0.2, −0.25, 0.1], c = 0.8) was recovered by 1 start
 /// of 30: F is strongly multimodal in c when the dead zones barely bend z;
 /// the paper's model bends z by a factor 1.9 at c and is found by 2 of 30
 /// (printed).
 fn true_model(y: &[f64]) -> InversePiParams {
     let mut truth = InversePiModels::paper().y;
+    for w in &mut truth.ws {
+        *w *= 100.0;
+    }
     let y_max = y.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     truth.u1max = u1max_over_range(&truth.ws, truth.c, y_max);
     truth

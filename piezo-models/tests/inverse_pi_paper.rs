@@ -80,3 +80,60 @@ fn paper_models_validate_and_reset_restores_the_start() {
     model.reset();
     assert_eq!(model.evaluate(2.0, 0.0), first);
 }
+
+/// The command a model gives on a quasi-static ramp 0 → `top` → 0 µm (rate
+/// 0): (at 6 µm rising, at 6 µm falling, at the top, lowest, highest) [V].
+fn quasi_static_ramp(params: piezo_models::InversePiParams, top: f64) -> [f64; 5] {
+    let mut model = ModifiedInversePi::new(params);
+    let steps = 20_000;
+    let (mut rising_6, mut falling_6, mut at_top) = (f64::NAN, f64::NAN, f64::NAN);
+    let (mut lowest, mut highest) = (f64::INFINITY, f64::NEG_INFINITY);
+    for n in 0..=2 * steps {
+        let y = top * (1.0 - (n as f64 - steps as f64).abs() / steps as f64);
+        let u = model.evaluate(y, 0.0);
+        lowest = lowest.min(u);
+        highest = highest.max(u);
+        let near_6 = (y - 6.0).abs() <= 0.5 * top / steps as f64;
+        if near_6 && n < steps {
+            rising_6 = u;
+        } else if near_6 {
+            falling_6 = u;
+        } else if n == steps {
+            at_top = u;
+        }
+    }
+    [rising_6, falling_6, at_top, lowest, highest]
+}
+
+/// Table 1's y column of w_s is read × 10⁻² (MODEL.md §7): the y model,
+/// like the x model, must command about the 0..10 V that eq. (6) drove the
+/// paper's stage with over its stroke, and about G(y) of eq. (9). Taken as
+/// printed it asks −14 V to reach 6 µm and under 3 V for the top of the
+/// stroke. Bounds: the eq. (6) range 0..11 V widened by 0.5 V for the
+/// hysteresis around G; the middle of the loop at 6 µm (the mean of the
+/// rising and falling commands) within 0.5 V of G(6) = 4.11 V, the cubic
+/// that carries the model's slope; the top of the stroke above 8 V.
+#[test]
+fn paper_y_model_commands_the_papers_voltage_range() {
+    let models = InversePiModels::paper();
+    let top = 12.22; // the plant's y stroke at 10 V (MODEL.md §5), as u1max is taken
+    let [rising_6, falling_6, at_top, lowest, highest] = quasi_static_ramp(models.y, top);
+    assert!(
+        lowest >= -0.5 && highest <= 11.5,
+        "y model commands {lowest:.2}..{highest:.2} V on its stroke"
+    );
+    let g6 = models.y.a[0] * 216.0 + models.y.a[1] * 36.0 + models.y.a[2] * 6.0 + models.y.a[3];
+    assert!(
+        ((rising_6 + falling_6) / 2.0 - g6).abs() <= 0.5,
+        "6 um: {rising_6:.3} V rising, {falling_6:.3} V falling, G(6) = {g6:.3} V"
+    );
+    assert!(at_top > 8.0, "top of the stroke: {at_top:.2} V");
+    // The letter of the table (w_s 100 times larger) fails each of these.
+    let mut printed = models.y;
+    for w in &mut printed.ws {
+        *w *= 100.0;
+    }
+    printed.u1max *= 100.0;
+    let [rising_6, _, at_top, lowest, highest] = quasi_static_ramp(printed, top);
+    assert!(rising_6 < -10.0 && at_top < 3.0 && lowest < -15.0 && highest > 35.0);
+}
