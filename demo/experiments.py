@@ -16,7 +16,7 @@ actuator at 0 V, every reading 0):
   Seed 000 does not print the sine frequency of Fig. 6-7: 1 Hz, the
   fastest component of its identification signal eq. (6), read before any
   run (Fig. 8's "higher frequency" is 10 Hz).
-- Fig. 11: eq. (13) as a y demand [um] (2..9 um), x and theta at 0.
+- Fig. 11: eq. (13) as a y demand [um] (2..8 um), x and theta at 0.
 - Fig. 12: the circle eq. (14)-(15) as printed, theta at 0.
 - Fig. 13: theta_z by eq. (16), x at its half stroke as for every rotation;
   seed 000 does not print Fig. 13's y demand: y follows eq. (15)'s sine
@@ -284,7 +284,7 @@ CONDITIONS = [
     "Fig. 6, 7, 10 and Table 3: feedback on the driven axis only, feedforward of the demand "
     "(plus the decoupling compensation when it is on) on the others, as the paper. Fig. 11-13: "
     "the whole controller of Fig. 9, PI on every axis.",
-    "Fig. 11: eq. (13) read as a y demand in um (its values, 2..9, fit the y stroke), x and "
+    "Fig. 11: eq. (13) read as a y demand in um (its values, 2..8, fit the y stroke), x and "
     "theta at 0.",
     "Fig. 12: contour error = distance of the measured point from the demanded circle minus "
     "its radius; the 2-norm is the square root of the sum of squares over one revolution "

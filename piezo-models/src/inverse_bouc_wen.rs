@@ -4,8 +4,9 @@
 //! # Inverse model, eq. (6)
 //!
 //! Seed 001 writes the inverse as v = y_r/p − q·h, with h the state of the
-//! model. h itself moves with v, so taken sample by sample that formula uses
-//! a state one sample old. Here eq. (6) is solved exactly instead: v is the
+//! model; the inverse of eq. (4)'s y = p·v + q·h is v = (y_r − q·h)/p, so
+//! the printed q·h lacks its 1/p. And h itself moves with v, so taken sample
+//! by sample that formula uses a state one sample old. Here eq. (6) is solved exactly instead: v is the
 //! input for which the forward model, advanced from its current state along
 //! the straight path to v, outputs y_r (p·v + q·h(v) = y_r). The forward map
 //! is increasing along a branch (dy/du = p + q·dh/du > 0 for any loop a
@@ -17,10 +18,12 @@
 //!
 //! # Model-based decoupling, eq. (7)-(16)
 //!
-//! D_x = H_XX[v_x] + H_XY[v_y] (eq. 8). Eq. (9)-(11) add to v_x the voltage
-//! v_xy = H_XX⁻¹ H_XY[v_y] that cancels the coupled displacement; through the
-//! inverse feedforward that is the same as asking H_XX⁻¹ for u_x − H_XY[v_y]
-//! instead of u_x. So the decoupling here is a correction of the references
+//! D_x = H_XX[v_x] + H_XY[v_y] (eq. 8). Eq. (9)-(10) add to v_x the voltage
+//! v_xy = H_XX⁻¹ H_XY[v_y]; with the printed plus sign that doubles the
+//! coupled displacement, and §4's text compensates it "by applying an
+//! opposite driving voltage", so the sign is read as a minus. Through the
+//! inverse feedforward that is the same as asking H_XX⁻¹ for
+//! u_x − H_XY[v_y] instead of u_x. So the decoupling here is a correction of the references
 //! (as seed 000's eq. 11 is), and it works with either feedforward: the
 //! [`CouplingEstimator`] runs H_XY and H_YX forward on the applied commands
 //! and gives the coupled displacements to subtract. Each estimate uses the

@@ -10,6 +10,11 @@
 //! ```
 //!
 //! y is the demanded displacement [µm], ẏ its rate [µm/s], u the command [V].
+//! Eq. (3) as printed writes the dead-zone weights as w_s(ẏ); eq. (4), the
+//! text around it ("the weights of the backlash operators change linearly
+//! with the input rate") and Table 1 (a k_i and b_i for each of the ten
+//! backlash operators, one w_s,i for each dead zone) make the backlash
+//! weights the rate-dependent ones, and so does this model.
 //! The backlash operators (eq. 1) keep one memory each; eq. 1's initial value
 //! `max(u(0) − r, min(u(0) + r, 0))` is the backlash update from a memory of 0,
 //! so the memories start at 0 and the first sample needs no special case.

@@ -14,7 +14,8 @@
 //! be ineffective (θ is of order 10⁻⁴ rad). Channel feedback: fb1 = v_y,
 //! fb2 = v_x + v_θ, fb3 = v_x − v_θ.
 //!
-//! Integrators: forward Euler, I ← I + e·T, the current sample included.
+//! Integrators: backward Euler (the right rectangle), I ← I + e·T with the
+//! current sample's error included.
 //! Anti-windup by conditional integration: an axis's integrator holds while a
 //! channel it drives was limited (command_min or command_max) at the previous
 //! sample and the axis's error pushes that channel further into the limit. The
