@@ -179,9 +179,19 @@ pub enum ProtocolError {
     #[error("the fit part is empty (the split is at sample {0})")]
     EmptyFitPart(usize),
     #[error(
-        "no sample is left to fit: the warm-up ({warm_up} samples; by default the settling and the first loading, up to the input's second turning point), rest segments and settling after steps cover the fit part (--keep-rest-and-steps fits rests and steps too)"
+        "no sample is left to fit: {}",
+        nothing_to_fit(*warm_up, *first_loading, *rests, *steps)
     )]
-    NothingToFit { warm_up: usize },
+    NothingToFit {
+        /// The warm-up given (`--warm-up`) [samples]; 0 when the default
+        /// (settling and first loading) applies.
+        warm_up: usize,
+        /// Samples of the default start: settling and first loading, up to
+        /// the input's second turning point.
+        first_loading: usize,
+        rests: usize,
+        steps: usize,
+    },
     #[error(
         "no sample is left to score: the warm-up ({warm_up} samples), rest segments and settling after steps cover the {samples} samples after the split"
     )]
@@ -190,6 +200,41 @@ pub enum ProtocolError {
     Fit(#[from] FitError),
     #[error("{0}")]
     BoucWen(#[from] BoucWenFitError),
+}
+
+/// What covered the fit part when nothing was left to fit, and what to do
+/// about each cause (a hint only where it would help: with rests and steps
+/// kept, the start alone may still cover a record that never turns).
+fn nothing_to_fit(warm_up: usize, first_loading: usize, rests: usize, steps: usize) -> String {
+    let mut causes = Vec::new();
+    let mut hints = Vec::new();
+    if warm_up > 0 {
+        causes.push(format!("the warm-up given ({warm_up} samples)"));
+        hints.push("a shorter --warm-up");
+    }
+    if first_loading > 0 {
+        causes.push(format!(
+            "the start ({first_loading} samples: the settling and the first loading, up to the \
+             input's second turning point, which a drive that never turns twice never reaches)"
+        ));
+        hints.push("a longer fit part, or --warm-up 0 to fit from the first sample");
+    }
+    if rests > 0 {
+        causes.push(format!(
+            "{rests} rest segment(s) (the input held for --min-rest or longer)"
+        ));
+    }
+    if steps > 0 {
+        causes.push(format!("the settling (--settle) after {steps} step(s)"));
+    }
+    if rests > 0 || steps > 0 {
+        hints.push("--keep-rest-and-steps to fit rests and steps too");
+    }
+    format!(
+        "{} cover the fit part; try {}",
+        causes.join(", "),
+        hints.join("; or ")
+    )
 }
 
 /// Which samples of a record are fitted and which scored.
@@ -226,7 +271,7 @@ impl Plan {
         let thresholds = thresholds(&u[..fit_end], sample_period, &options.segments)
             .ok_or(ProtocolError::NoExcitation)?;
         let segments = if options.detect_segments {
-            detect_segments(u, &thresholds)
+            detect_segments(u, &thresholds).staircase(u, fit_end, thresholds.span)
         } else {
             Segments::default()
         };
@@ -241,6 +286,8 @@ impl Plan {
                 0
             }
         };
+        // Samples of the default start (settling and first loading).
+        let mut first_loading = 0;
         let excluded = {
             let mut all = segments.excluded(thresholds.settle_samples, u.len());
             all.push(0..warm_up_samples.min(u.len()));
@@ -261,6 +308,9 @@ impl Plan {
                 // settled (its state is the one the model computed).
                 if start < fit_end {
                     all.push(start..end.min(fit_end));
+                }
+                if start == 0 && options.warm_up_seconds.is_none() {
+                    first_loading = end.min(fit_end);
                 }
             }
             merge(&mut all);
@@ -292,8 +342,22 @@ impl Plan {
         };
         let fitted = plan.fitted();
         if !fitted.iter().any(|f| *f) {
+            let in_fit_part = |start: usize| start < fit_end;
             return Err(ProtocolError::NothingToFit {
-                warm_up: warm_up_samples,
+                warm_up: warm_up_samples.min(fit_end),
+                first_loading,
+                rests: plan
+                    .segments
+                    .rests
+                    .iter()
+                    .filter(|r| in_fit_part(r.start))
+                    .count(),
+                steps: plan
+                    .segments
+                    .steps
+                    .iter()
+                    .filter(|s| in_fit_part(**s))
+                    .count(),
             });
         }
         if fit_end < u.len() && !plan.scored().iter().any(|s| *s) {
@@ -1288,5 +1352,78 @@ mod tests {
         let plan = Plan::new(&stairs, 0.005, stairs.len(), &PlanOptions::default()).unwrap();
         let fitted = plan.fitted().iter().filter(|f| **f).count();
         assert!(fitted > stairs.len() / 2, "{fitted} of {}", stairs.len());
+    }
+
+    /// Stairs held longer than the shortest rest are the excitation of a
+    /// staircase, not rests: with holds at 3 or more levels they are fitted
+    /// once settled (every one of them was left out as a rest, and nothing
+    /// was left to fit). A record that waits at one level keeps its rests.
+    #[test]
+    fn a_staircase_held_longer_than_a_rest_is_fitted() {
+        // Three triangles of 1 V stairs held 1 s each (200 samples at 200
+        // Hz), 0..5 V, the 0.5 s shortest rest well inside every stair; the
+        // first two fitted (the first loading, to the second turning point,
+        // is the first triangle), the third scored.
+        let stairs: Vec<f64> = (0..3 * 10 * 200)
+            .map(|n| {
+                let stair = (n / 200) % 10;
+                (if stair < 5 { stair } else { 10 - stair }) as f64
+            })
+            .collect();
+        let plan = Plan::new(&stairs, 0.005, 4000, &PlanOptions::default()).unwrap();
+        assert!(plan.segments.rests.is_empty(), "{:?}", plan.segments.rests);
+        assert!(
+            plan.segments.stairs.len() >= 28,
+            "{:?}",
+            plan.segments.stairs
+        );
+        let fitted = plan.fitted().iter().filter(|f| **f).count();
+        let scored = plan.scored().iter().filter(|f| **f).count();
+        assert!(fitted > 1500, "{fitted} of 4000");
+        assert!(scored > 1500, "{scored} of 2000");
+
+        // Rests at one level (0 V) between bursts of a sine: rests still.
+        let waits: Vec<f64> = (0..2000)
+            .map(|n| {
+                let k = n % 500;
+                if k < 200 {
+                    0.0
+                } else {
+                    5.0 * (1.0 - (std::f64::consts::TAU * (k - 200) as f64 / 100.0).cos())
+                }
+            })
+            .collect();
+        let plan = Plan::new(&waits, 0.005, 1000, &PlanOptions::default()).unwrap();
+        assert!(plan.segments.stairs.is_empty());
+        assert_eq!(plan.segments.rests.len(), 4, "{:?}", plan.segments.rests);
+    }
+
+    /// When nothing is left to fit, the error names what covered the fit
+    /// part and suggests only what would help: rests and steps name
+    /// --keep-rest-and-steps, a start that never turns names the warm-up
+    /// (it once blamed a warm-up of 0 samples and suggested
+    /// --keep-rest-and-steps, which then failed the same way).
+    #[test]
+    fn nothing_to_fit_names_its_causes() {
+        let ramp: Vec<f64> = (0..400).map(|n| n as f64 * 0.01).collect();
+        let e = Plan::new(&ramp, 0.005, 400, &PlanOptions::default()).unwrap_err();
+        let message = e.to_string();
+        assert!(message.contains("the start (400 samples"), "{message}");
+        assert!(message.contains("--warm-up 0"), "{message}");
+        assert!(!message.contains("--keep-rest-and-steps"), "{message}");
+        let e = Plan::new(
+            &ramp,
+            0.005,
+            400,
+            &PlanOptions {
+                warm_up_seconds: Some(5.0),
+                ..PlanOptions::default()
+            },
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains("the warm-up given (400 samples)"),
+            "{e}"
+        );
     }
 }

@@ -278,7 +278,12 @@ pub fn reversing_classical_operators(
     let mut memories = [0.0; CLASSICAL_OPERATORS];
     let mut rose = [false; CLASSICAL_OPERATORS];
     let mut fell = [false; CLASSICAL_OPERATORS];
+    let (mut y_low, mut y_high) = (f64::INFINITY, f64::NEG_INFINITY);
     for (&yn, &fit) in y.iter().zip(fitted) {
+        if fit {
+            y_low = y_low.min(yn);
+            y_high = y_high.max(yn);
+        }
         for (i, (memory, r)) in memories.iter_mut().zip(thresholds).enumerate() {
             let next = backlash(yn, *r, *memory);
             if fit {
@@ -288,7 +293,12 @@ pub fn reversing_classical_operators(
             *memory = next;
         }
     }
-    std::array::from_fn(|i| rose[i] && fell[i])
+    // An operator of threshold 0 is its input itself, the model's straight
+    // line: it needs no reversal to be identified, only fitted samples at
+    // more than one level. A staircase whose every change falls in a left-out
+    // settling window reverses no operator on its fitted samples; without
+    // this the model was a constant, worse than the straight line it holds.
+    std::array::from_fn(|i| (rose[i] && fell[i]) || (thresholds[i] == 0.0 && y_high > y_low))
 }
 
 impl RateDependentLayout {
@@ -345,6 +355,7 @@ pub fn masked_classical_regressors(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::models::ClassicalPiParams;
     use piezo_models::inverse_pi::{linear_regressors, u1max_over_range};
 
     #[test]
@@ -372,5 +383,28 @@ mod tests {
         assert_eq!(PROPOSED.parameter_count(), 31);
         assert_eq!(TRADITIONAL_TEN.parameter_count(), 31);
         assert_eq!(TRADITIONAL_SIX.parameter_count(), 27);
+    }
+
+    /// A staircase whose every change falls in a left-out settling window:
+    /// no operator reverses on the fitted samples, and the straight line
+    /// (threshold 0) is still the model's, as long as the fitted samples
+    /// stand at more than one level; on one level it carries nothing.
+    #[test]
+    fn the_straight_line_operator_is_kept_without_reversals() {
+        let stairs = [0.0, 2.0, 4.0, 6.0, 4.0, 2.0, 0.0];
+        let y: Vec<f64> = stairs
+            .iter()
+            .flat_map(|level| std::iter::repeat_n(*level, 50))
+            .collect();
+        // The first 10 samples of each stair settle and are left out.
+        let fitted: Vec<bool> = (0..y.len()).map(|n| n % 50 >= 10).collect();
+        let thresholds = ClassicalPiParams::evenly_spaced_thresholds(6.0);
+        assert_eq!(thresholds[0], 0.0);
+        let kept = reversing_classical_operators(&thresholds, &y, &fitted);
+        assert!(kept[0], "{kept:?}");
+        assert!(kept[1..].iter().all(|k| !k), "{kept:?}");
+        let one_level: Vec<bool> = (0..y.len()).map(|n| (60..100).contains(&n)).collect();
+        let kept = reversing_classical_operators(&thresholds, &y, &one_level);
+        assert!(kept.iter().all(|k| !k), "{kept:?}");
     }
 }

@@ -118,9 +118,47 @@ pub struct Segments {
     pub rests: Vec<Range<usize>>,
     /// Samples at which the input has just stepped (u[n] − u[n−1] is a step).
     pub steps: Vec<usize>,
+    /// Held input that is the excitation, not a pause in it: the stairs of a
+    /// staircase ([`Segments::staircase`]), fitted and scored like any other
+    /// sample once settled.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub stairs: Vec<Range<usize>>,
 }
 
+/// Held levels, at least this many and this far apart (a share of the input
+/// span), make the holds a staircase: a record that rests waits at one level
+/// or two (its rest, the middle of its range), a staircase climbs through
+/// many.
+pub const STAIRCASE_LEVELS: usize = 3;
+const STAIRCASE_LEVEL_SHARE: f64 = 0.05;
+
 impl Segments {
+    /// Reads the holds of a quasi-static staircase as its excitation: when
+    /// the rests of `u[..fit_end]` stand at [`STAIRCASE_LEVELS`] or more
+    /// levels at least [`STAIRCASE_LEVEL_SHARE`] of `span` apart, every rest
+    /// becomes a stair, kept in the fit (after its settling, as after any
+    /// step). Left out as rests, the stairs of a staircase held longer than
+    /// the shortest rest left nothing to fit.
+    pub fn staircase(mut self, u: &[f64], fit_end: usize, span: f64) -> Segments {
+        let mut levels: Vec<f64> = self
+            .rests
+            .iter()
+            .filter(|r| r.start < fit_end)
+            .map(|r| u[r.start..r.end].iter().sum::<f64>() / r.len() as f64)
+            .collect();
+        levels.sort_by(f64::total_cmp);
+        let apart = STAIRCASE_LEVEL_SHARE * span;
+        let distinct = levels
+            .windows(2)
+            .filter(|pair| pair[1] - pair[0] >= apart)
+            .count()
+            + usize::from(!levels.is_empty());
+        if distinct >= STAIRCASE_LEVELS {
+            self.stairs = std::mem::take(&mut self.rests);
+        }
+        self
+    }
+
     /// The samples to leave out of a fit: every rest, and `settle` samples
     /// from each step on (clipped to `len`), merged and sorted.
     pub fn excluded(&self, settle: usize, len: usize) -> Vec<Range<usize>> {
@@ -200,7 +238,11 @@ pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
     let steps = (1..u.len())
         .filter(|&n| (u[n] - u[n - 1]).abs() > thresholds.step)
         .collect();
-    Segments { rests, steps }
+    Segments {
+        rests,
+        steps,
+        stairs: Vec::new(),
+    }
 }
 
 /// Maximal runs of at least `min_samples` within `tolerance` of their first

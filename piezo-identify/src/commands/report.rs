@@ -107,6 +107,14 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
             steps.join(", ")
         }
     );
+    if !plan.segments.stairs.is_empty() {
+        println!(
+            "the input is held at {} or more levels: a staircase, whose {} stairs are fitted \
+             and scored once settled, not left out as rests",
+            piezo_identify::segments::STAIRCASE_LEVELS,
+            plan.segments.stairs.len()
+        );
+    }
     let fitted = plan.fitted().iter().filter(|f| **f).count();
     println!(
         "left out of the fit (warm-up: settling {:.3} s and first loading; rests; settling after steps): {}; {fitted} of {} samples fitted",
