@@ -141,14 +141,14 @@ const UNITS: &[UnitDefinition] = &[
     // The Bouc-Wen models in command volts: p and A in µm/V, δ in µm/V².
     piezo_fmu_tables::MICROMETRE_PER_VOLT,
     piezo_fmu_tables::MICROMETRE_PER_VOLT_SQUARED,
-    // Δk4 turns a rotation demand in millidegrees into micrometres (the unit
-    // seed 000 writes its rotation demands in, eq. 16).
+    // Δk4 turns a rotation demand in microradians into micrometres (the
+    // reading of Table 2's numbers: piezo_models::decoupling).
     UnitDefinition {
-        name: "um/mdeg",
+        name: "um/urad",
         base: BaseUnit {
             m: 1,
             rad: -1,
-            factor: 1e-6 / (1e-3 * std::f64::consts::PI / 180.0),
+            factor: 1.0,
             ..BaseUnit::NONE
         },
         display_units: &[],
@@ -529,7 +529,7 @@ const Y_MODEL: &[Variable<PiezoControllerFmu>] =
 
 // Δk, Δb, p, q of the four compensations D_i (seed 000 eq. 11, Table 2).
 const DECOUPLING_DK: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", dk,
-        "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um], D4 on theta_zd [um/mdeg] (Guo et al. eq. 11)",
+        "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um], D4 on theta_zd [um/urad] (Guo et al. eq. 11)",
         "", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
 const DECOUPLING_DB: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", db,
         "Offset Δb_i of compensation D_i (Guo et al. eq. 11)",

@@ -12,7 +12,7 @@
 //! | 1 | x2: x_d2 − s2 | y_d [µm] | y sine |
 //! | 2 | x3: x_d3 − s3 | y_d [µm] | y sine |
 //! | 3 | y: y_d − s1 | x_d [µm] | x sine |
-//! | 4 | y: y_d − s1 | θ_zd [mdeg] | θ sine |
+//! | 4 | y: y_d − s1 | θ_zd [µrad] | θ sine |
 //!
 //! The fit minimises Σ (e − D(f))² over (Δk, Δb, p, q): least squares for the
 //! line, then Nelder-Mead from the line with the cutoffs at the extremes of the
@@ -165,11 +165,16 @@ pub fn fit_compensation_with_cutoff(
     let start = vec![dk, db, e_max, e_min];
     // A simplex around the start: each vertex moves one parameter by a step
     // of the size the data give it.
+    // The slope's step is a tenth of the slope, and at least what moves the
+    // compensation by a tenth of the error's span over the demand's: in the
+    // demand's own unit, so that the fit is the same whatever that unit is
+    // (D4's θ_zd in µrad runs to hundreds where D1-D3's µm run to ten).
+    let e_span = (e_max - e_min).max(1e-3);
     let steps = [
-        0.1 * dk.abs().max(0.01),
-        0.1 * (e_max - e_min).max(1e-3),
-        0.1 * (e_max - e_min).max(1e-3),
-        0.1 * (e_max - e_min).max(1e-3),
+        0.1 * dk.abs().max(0.1 * e_span / f_span),
+        0.1 * e_span,
+        0.1 * e_span,
+        0.1 * e_span,
     ];
     let mut simplex = vec![start.clone()];
     for (j, step) in steps.iter().enumerate() {

@@ -41,6 +41,7 @@
 use std::f64::consts::PI;
 use std::sync::LazyLock;
 
+use piezo_models::decoupling::rotation_demand;
 use piezo_models::{
     BoucWenModels, BoucWenParams, ControllerParams, DecouplingModel, DecouplingParams,
     HysteresisModel, InversePiParams, PiGains,
@@ -328,8 +329,8 @@ fn coupling_pairs(
             vec![(2, f, e)]
         }
         DrivenAxis::Theta => {
-            // D4 takes θ_zd in millidegrees (seed 000 eq. 16's unit).
-            let (f, e) = collect(&|k| r[k][2].to_degrees() * 1e3, &|k| r[k][1] - s[k][0]);
+            // D4 takes θ_zd in the controller's unit for it.
+            let (f, e) = collect(&|k| rotation_demand(r[k][2]), &|k| r[k][1] - s[k][0]);
             vec![(3, f, e)]
         }
     }

@@ -14,9 +14,17 @@
 //! - Table 2 prints q_1 = 10 with p_1 = 2.05, a lower cutoff above the upper
 //!   one; since "a value of ±10 means the cutoff is not used", q_1 is read as
 //!   −10.
-//! - θ_zd enters D4 in millidegrees, the unit in which seed 000 writes its
-//!   rotation demands (eq. 16: 9.2·sin(·)×10⁻³ deg), so that Δk4 = −0.75×10⁻²
-//!   gives a compensation of the same order (µm) as the others.
+//! - θ_zd enters D4 in microradians. Table 2 does not say; the unit is read
+//!   from the printed numbers. Over eq. (16)'s rotation (±9.2×10⁻³ deg =
+//!   ±160.6 µrad) Δk4 = −0.75×10⁻² and Δb4 = 0.87 then give D4 from 2.07 µm
+//!   down to its printed lower cutoff q4 = −0.18 µm (which holds 16 % of the
+//!   cycle), a 2.25 µm span against Table 3's 1.68 µm y-from-rotation
+//!   coupling, which the law cuts to 0.37 µm. In millidegrees, the unit of
+//!   eq. (16) itself, D4 would span 0.14 µm and never reach q4, and no other
+//!   term of the law moves with θ_zd: the printed law could not make Table 3's
+//!   cut. The `stage` preset, fitted on this plant by the paper's procedure,
+//!   agrees: Δk4 = −0.0048 µm/µrad, 0.63 times the printed value (the other
+//!   three slopes are within 2 times Table 2's).
 
 use serde::{Deserialize, Serialize};
 
@@ -66,6 +74,11 @@ fn cutoff(f: f64, p: f64, q: f64) -> f64 {
     f.max(q).min(p)
 }
 
+/// The rotation demand θ_zd in the unit D4 takes (µrad), from radians.
+pub fn rotation_demand(theta_zd_rad: f64) -> f64 {
+    theta_zd_rad * 1e6
+}
+
 /// eq. (11): demanded displacements of the x actuators `x_d2`, `x_d3` and of y
 /// `y_d` [µm], sensor spacing L [mm].
 pub fn decouple(
@@ -77,13 +90,13 @@ pub fn decouple(
 ) -> DecoupledReferences {
     let x_d = 0.5 * (x_d2 + x_d3);
     let theta_zd_rad = (x_d2 - x_d3) / (sensor_spacing_mm * 1e3);
-    let theta_zd_mdeg = theta_zd_rad.to_degrees() * 1e3;
+    let theta_zd = rotation_demand(theta_zd_rad);
     let d = |i: usize, f: f64| cutoff(params.dk[i] * f + params.db[i], params.p[i], params.q[i]);
     DecoupledReferences {
         x_r2: x_d2 + d(0, y_d),
         x_r3: x_d3 + d(1, y_d),
         y_rx: y_d + d(2, x_d),
-        y_rtheta: y_d + d(3, theta_zd_mdeg),
+        y_rtheta: y_d + d(3, theta_zd),
     }
 }
 
@@ -116,22 +129,22 @@ mod tests {
         // Large x: D3 = −0.2·x + 1.5 falls to the lower cutoff q3 = −10.
         let r = decouple(&p, 100.0, 100.0, 0.0, L_MM);
         assert!((r.y_rx - (-10.0)).abs() < 1e-12);
-        // Large positive rotation: D4 = −0.0075·θ + 0.87 falls to q4 = −0.18.
-        let theta_mdeg_per_um = (1.0 / (L_MM * 1e3)).to_degrees() * 1e3;
-        let differential = 200.0 / theta_mdeg_per_um; // θ_zd = 200 mdeg
+        // Large positive rotation: D4 = −0.0075·θ + 0.87 falls to q4 = −0.18
+        // from θ_zd = 140 µrad.
+        let differential = 200e-6 * L_MM * 1e3; // θ_zd = 200 µrad
         let r = decouple(&p, differential / 2.0, -differential / 2.0, 0.0, L_MM);
         assert!((r.y_rtheta - (-0.18)).abs() < 1e-9, "{r:?}");
     }
 
     #[test]
-    fn rotation_enters_in_millidegrees() {
+    fn rotation_enters_in_microradians() {
         let p = DecouplingParams {
-            dk: [0.0, 0.0, 0.0, 1.0],
+            dk: [0.0, 0.0, 0.0, 0.01],
             db: [0.0; 4],
             p: [10.0; 4],
             q: [-10.0; 4],
         };
-        // 9.2e-3 deg (eq. 16's amplitude) = 9.2 mdeg.
+        // 9.2e-3 deg (eq. 16's amplitude) = 160.57 µrad: D4 = 0.01 · 160.57.
         let differential = 9.2e-3_f64.to_radians() * L_MM * 1e3;
         let r = decouple(
             &p,
@@ -140,6 +153,8 @@ mod tests {
             0.0,
             L_MM,
         );
-        assert!((r.y_rtheta - 9.2).abs() < 1e-9, "{r:?}");
+        let expected = 0.01 * 9.2e-3_f64.to_radians() * 1e6;
+        assert!((expected - 1.6057).abs() < 1e-4);
+        assert!((r.y_rtheta - expected).abs() < 1e-9, "{r:?}");
     }
 }

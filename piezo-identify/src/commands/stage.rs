@@ -64,7 +64,7 @@ pub(crate) struct StageArgs {
 pub(crate) struct DecouplingArgs {
     /// Record with a driving-demand column and a coupling-error column.
     pub(crate) file: PathBuf,
-    /// Driving demand column (y_d or x_d [um], theta_zd [mdeg]): index or header [default: the
+    /// Driving demand column (y_d or x_d [um], theta_zd [urad]): index or header [default: the
     /// first column that is neither the time column nor a given --error]
     #[arg(long)]
     pub(crate) demand: Option<String>,
