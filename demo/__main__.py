@@ -2,12 +2,20 @@
 
     python -m demo --out out/demo [--plant dist/FlexureStage.fmu]
                    [--controller dist/PiezoController.fmu] [--only KEY ...]
+
+Each file is written under a temporary name in --out and renamed into place:
+an interrupted run leaves every file complete, the new or the previous one.
+metrics.json holds the figures of every run in --out: those of this
+invocation replace theirs, and --only (or Ctrl-C) keeps the others. report.md
+is written from metrics.json whenever it holds every run, so the two agree.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -19,19 +27,50 @@ from .cosim import SAMPLE_PERIOD, Fmu, simulate
 from .experiments import CONDITIONS, experiments, report_figures
 from .report import figure, write_report
 
+
+@contextlib.contextmanager
+def replaced(path: Path):
+    """A temporary name beside `path` (same folder, same suffix, which
+    matplotlib reads the format from) to write to; renamed to `path` once
+    the block ends, removed if it raises. Ctrl-C mid-write left a truncated
+    CSV under its final name beside the previous run's report."""
+    partial = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
+    try:
+        yield partial
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)
+
+
+def previous_metrics(path: Path) -> dict:
+    """The figures an earlier invocation left in metrics.json, by run key;
+    none when there is no such file or it is not one this command wrote."""
+    try:
+        entries = json.loads(path.read_text())
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as e:
+        print(f"{path}: not read ({e}); it is rewritten with this invocation's runs only",
+              file=sys.stderr)
+        return {}
+    return entries if isinstance(entries, dict) else {}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--plant", type=Path, default=Path("dist/FlexureStage.fmu"))
     parser.add_argument("--controller", type=Path, default=Path("dist/PiezoController.fmu"))
-    parser.add_argument("--only", nargs="*", help="run only these experiment keys")
+    parser.add_argument("--only", nargs="*",
+                        help="run only these experiment keys (metrics.json keeps the others)")
     args = parser.parse_args(argv)
     for path in (args.plant, args.controller):
         if not path.is_file():
             print(f"{path}: no such FMU (run `make fmus`)", file=sys.stderr)
             return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    runs = experiments()
+    every_run = experiments()
+    runs = every_run
     if args.only:
         unknown = set(args.only) - {e.key for e in runs}
         if unknown:
@@ -41,28 +80,56 @@ def main(argv=None) -> int:
     total_steps = sum(round(e.duration / SAMPLE_PERIOD) for e in runs)
     started = time.perf_counter()
     results = {}
-    with Fmu(args.plant) as plant, Fmu(args.controller) as controller:
-        spacing_um = float(controller.variables["L"].start) * 1e3
-        with tqdm(total=total_steps, unit="step", unit_scale=True, desc="co-simulation") as bar:
-            for experiment in runs:
-                bar.set_postfix_str(experiment.key)
-                run = simulate(
-                    plant, controller, experiment.reference(), experiment.duration,
-                    plant_parameters=experiment.plant, controller_parameters=experiment.controller,
-                    progress=bar.update,
-                )
-                run.write_csv(args.out / f"{experiment.key}.csv")
-                figure(experiment, run, spacing_um, args.out / f"{experiment.key}.png")
-                results[experiment.key] = report_figures(experiment, run, spacing_um)
+    interrupted = False
+    try:
+        with Fmu(args.plant) as plant, Fmu(args.controller) as controller:
+            spacing_um = float(controller.variables["L"].start) * 1e3
+            with tqdm(total=total_steps, unit="step", unit_scale=True,
+                      desc="co-simulation") as bar:
+                for experiment in runs:
+                    bar.set_postfix_str(experiment.key)
+                    run = simulate(
+                        plant, controller, experiment.reference(), experiment.duration,
+                        plant_parameters=experiment.plant,
+                        controller_parameters=experiment.controller, progress=bar.update,
+                    )
+                    with replaced(args.out / f"{experiment.key}.csv") as partial:
+                        run.write_csv(partial)
+                    with replaced(args.out / f"{experiment.key}.png") as partial:
+                        figure(experiment, run, spacing_um, partial)
+                    results[experiment.key] = report_figures(experiment, run, spacing_um)
+    except KeyboardInterrupt:
+        # The runs finished so far are on disk; their figures go into
+        # metrics.json (and report.md) below, as an --only of them would.
+        interrupted = True
     wall = time.perf_counter() - started
-    (args.out / "metrics.json").write_text(json.dumps(results, indent=2))
-    if not args.only:
-        write_report(args.out / "report.md", results, {
-            "fmpy": fmpy.__version__, "step": SAMPLE_PERIOD, "preview": 2, "preset": "stage",
-            "experiments": runs, "conditions": CONDITIONS, "wall": wall,
-            "simulated": sum(e.duration for e in runs),
-        })
-        print(f"wrote {args.out / 'report.md'}")
+    metrics_path, report_path = args.out / "metrics.json", args.out / "report.md"
+    ran_everything = not interrupted and len(runs) == len(every_run)
+    # A complete invocation writes its own runs alone (an entry of a run no
+    # longer defined goes); a partial one keeps the others' figures, so that
+    # metrics.json and report.md still describe every file in the folder.
+    merged = results if ran_everything else {**previous_metrics(metrics_path), **results}
+    if results:
+        with replaced(metrics_path) as partial:
+            partial.write_text(json.dumps(merged, indent=2))
+    missing = [e.key for e in every_run if e.key not in merged]
+    if results and not missing:
+        with replaced(report_path) as partial:
+            write_report(partial, merged, {
+                "fmpy": fmpy.__version__, "step": SAMPLE_PERIOD, "preview": 2, "preset": "stage",
+                "experiments": every_run, "conditions": CONDITIONS, "wall": wall,
+                "simulated": sum(e.duration for e in runs if e.key in results),
+                "ran": None if ran_everything else len(results),
+            })
+        print(f"wrote {report_path}")
+    elif results and report_path.exists():
+        print(f"{report_path} left as it was: metrics.json lacks {len(missing)} runs "
+              f"(run without --only to write both)", file=sys.stderr)
+    if interrupted:
+        print(f"interrupted: {len(results)} of {len(runs)} runs written to {args.out}, "
+              f"each file complete; run the same command again to run them all",
+              file=sys.stderr)
+        return 130
     print(f"{len(runs)} runs, {wall:.1f} s wall time; CSV, PNG and metrics.json in {args.out}")
     return 0
 

@@ -315,6 +315,15 @@ def write_report(path: Path, results: dict, context: dict) -> None:
                      f"[csv]({e.key}.csv) | [png]({e.key}.png) |")
     lines += ["", "## Conditions and readings", ""]
     lines += [f"- {c}" for c in context["conditions"]]
-    lines += ["", f"Wall time of the co-simulation: {context['wall']:.1f} s "
-              f"for {context['simulated']:.0f} s of simulated time.", ""]
+    if context.get("ran") is None:
+        lines += ["", f"Wall time of the co-simulation: {context['wall']:.1f} s "
+                  f"for {context['simulated']:.0f} s of simulated time.", ""]
+    else:
+        # An invocation that ran some of the runs (--only, or interrupted)
+        # rewrites the report from metrics.json, where the others' figures
+        # are an earlier invocation's.
+        lines += ["", f"Wall time of the co-simulation: {context['wall']:.1f} s "
+                  f"for {context['simulated']:.0f} s of simulated time, the last invocation's "
+                  f"{context['ran']} runs; the other runs' figures and files are from earlier "
+                  f"invocations (metrics.json).", ""]
     path.write_text("\n".join(lines))

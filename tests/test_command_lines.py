@@ -85,3 +85,52 @@ def test_a_closed_stdout_still_gets_the_matrix_written(tmp_path):
     assert process.wait(timeout=60) == 0, error
     assert error == ""
     assert (out / "matrix.md").is_file()
+
+
+# --------------------------------------------------------------------------
+# python -m demo (the report)
+
+SHORT = "fig8_y_10hz_ff"  # 1.5 s simulated, about a second
+
+
+def test_an_interrupt_mid_write_keeps_the_previous_file_whole(tmp_path, monkeypatch):
+    from demo import __main__ as report_command
+    from demo import cosim
+
+    previous = "t[s],y[um]\n0,1\n"
+    (tmp_path / f"{SHORT}.csv").write_text(previous)
+
+    def interrupted_write(run, path):
+        path.write_text("t[s],y[um]\n0,")  # a part of the file, then Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cosim.Run, "write_csv", interrupted_write)
+    try:
+        status = report_command.main(["--out", str(tmp_path), "--only", SHORT])
+    except KeyboardInterrupt:  # as raised, it would end the test session
+        pytest.fail("the interrupt escaped the command")
+    assert status == 130
+    assert (tmp_path / f"{SHORT}.csv").read_text() == previous
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{SHORT}.csv"]
+
+
+def test_only_keeps_the_other_runs_and_the_report_agrees(tmp_path, monkeypatch):
+    from demo import __main__ as report_command
+    from demo.experiments import experiments
+
+    earlier = {e.key: {"from": "an earlier run"} for e in experiments()}
+    (tmp_path / "metrics.json").write_text(json.dumps(earlier))
+    reported = {}
+
+    def write_report(path, results, context):
+        reported.update(results)
+        path.write_text("the report")
+
+    monkeypatch.setattr(report_command, "write_report", write_report)
+    assert report_command.main(["--out", str(tmp_path), "--only", SHORT]) == 0
+    written = json.loads((tmp_path / "metrics.json").read_text())
+    assert set(written) == set(earlier)
+    assert written[SHORT] != earlier[SHORT] and "tracking_rms" in written[SHORT]
+    assert all(written[key] == earlier[key] for key in earlier if key != SHORT)
+    assert json.dumps(reported) == json.dumps(written)  # the same figures, as JSON holds them
+    assert (tmp_path / "report.md").read_text() == "the report"
