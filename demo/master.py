@@ -106,6 +106,8 @@ def run(scenario: dict | str | Path, series: str | Path | None = None,
     output and signal. Raises MasterError when the run fails and
     subprocess.TimeoutExpired after `timeout` seconds."""
     exe = str(binary())
+    if series is not None:
+        refuse_series(Path(series))
     with tempfile.TemporaryDirectory(prefix="piezo-cosim-") as scratch:
         # --parent: the run ends with this process (a killed dask worker
         # leaves no run behind).
@@ -130,6 +132,20 @@ def run(scenario: dict | str | Path, series: str | Path | None = None,
         if series is not None and csv != series:
             write_parquet(read_series(csv), series)
     return result
+
+
+def refuse_series(path: Path) -> None:
+    """Raises MasterError (status 2, the scenario's) when `path` cannot be
+    where a run's series goes: checked before the run, not after it. A
+    Parquet series is written here, from the master's CSV, once the run has
+    ended: a folder or a missing folder failed there, in a traceback."""
+    if path.is_dir():
+        raise MasterError(f"{path}: is a folder; name the series file in it", 2)
+    folder = path.parent
+    if not folder.is_dir():
+        raise MasterError(f"{path}: there is no folder {folder} to write the series in", 2)
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise MasterError(f"{path}: the folder {folder} is not writable", 2)
 
 
 def run_batch(scenarios: list[dict], timeout: float | None = None,

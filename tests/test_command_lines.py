@@ -15,7 +15,7 @@ import sys
 
 import pytest
 
-from demo import matrix
+from demo import master, matrix
 from tests.conftest import REPO_ROOT, require_closed_loop_build
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
@@ -134,3 +134,28 @@ def test_only_keeps_the_other_runs_and_the_report_agrees(tmp_path, monkeypatch):
     assert all(written[key] == earlier[key] for key in earlier if key != SHORT)
     assert json.dumps(reported) == json.dumps(written)  # the same figures, as JSON holds them
     assert (tmp_path / "report.md").read_text() == "the report"
+
+
+# --------------------------------------------------------------------------
+# demo.master
+
+@pytest.mark.parametrize("name", ["series.parquet", "series.csv"])
+def test_a_series_path_that_is_a_folder_is_refused_before_the_run(tmp_path, name):
+    folder = tmp_path / name
+    folder.mkdir()
+    done = subprocess.run([sys.executable, "-m", "demo.master", "run", str(EXAMPLE),
+                           "--series", str(folder)], cwd=REPO_ROOT, capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 2 and done.stdout == ""
+    assert len(done.stderr.strip().splitlines()) == 1 and str(folder) in done.stderr
+
+
+def test_a_series_in_a_missing_folder_is_refused_before_the_run(tmp_path, monkeypatch):
+    def no_run(*args, **kwargs):
+        raise AssertionError("the master was started")
+
+    monkeypatch.setattr(master.subprocess, "run", no_run)
+    target = tmp_path / "missing" / "series.parquet"
+    with pytest.raises(master.MasterError) as refused:
+        master.run(EXAMPLE, series=target)
+    assert refused.value.returncode == 2 and str(target) in str(refused.value)
