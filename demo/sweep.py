@@ -46,7 +46,9 @@ each column's unit (where it has one) in its Arrow field's metadata
   Runs that failed or timed out end the command with status 1.
 - A spec that does not fit is refused before any run, with its file, line and
   problem (exit status 2): the master checks a scenario of every combination
-  of named cases and one per further value of each variable.
+  of named cases and one per further value of each variable. So is an --out
+  that names a file, or holds a study's table that cannot be read (the file
+  is left as it is, with --restart too).
 - A table holds the runs of its spec as it is now: a kept row is numbered and
   named as a fresh sweep of the spec would write it (a grid extended since
   runs its new points only); the failed or timed-out rows of runs the spec no
@@ -1165,7 +1167,12 @@ def read_rows(out: Path, study: str) -> list[dict]:
     rows = []
     path = table_path(out, study)
     if path.is_file():
-        rows += pq.read_table(path).to_pylist()
+        try:
+            rows += pq.read_table(path).to_pylist()
+        except (OSError, ValueError) as e:  # pyarrow's ArrowInvalid is a ValueError
+            raise UnreadableTable(
+                f"{path}: not a table this command can read ({e}); it is left as it is: "
+                f"move it away, or choose another --out") from None
     journal = journal_path(out, study)
     if journal.is_file():
         for line in journal.read_text().splitlines():
@@ -1387,6 +1394,12 @@ class Journal:
 
 class StaleTable(SpecError):
     pass
+
+
+class UnreadableTable(SpecError):
+    """A file where a study's table goes that is not a Parquet table (a
+    truncated copy, another program's file): refused before any run, and
+    neither replaced nor deleted."""
 
 
 def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> list[Run]:
@@ -1938,6 +1951,18 @@ def main(argv=None) -> int:
         return 130
 
 
+def positive_count(text: str) -> int:
+    """An argument that counts something, 1 or more: dask's LocalCluster
+    takes 0 workers as "one per core", which --workers 0 did silently."""
+    try:
+        count = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if count < 1:
+        raise argparse.ArgumentTypeError(f"{count} is not a count of workers (1 or more)")
+    return count
+
+
 def _arguments(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("specs", nargs="+", type=Path, help="sweep spec files (TOML)")
@@ -1945,8 +1970,8 @@ def _arguments(argv):
                         help="folder of the tables and the report (default out/sweep)")
     parser.add_argument("--scheduler", help="address of a running dask scheduler "
                                             "(tcp://HOST:PORT); default: a LocalCluster")
-    parser.add_argument("--workers", type=int, help="LocalCluster worker processes "
-                                                    "(default: one per core)")
+    parser.add_argument("--workers", type=positive_count, help="LocalCluster worker processes "
+                                                               "(default: one per core)")
     parser.add_argument("--restart", action="store_true",
                         help="discard the existing tables of these specs and run everything")
     parser.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto",
@@ -1993,6 +2018,7 @@ def _run_studies(args, run_keys: dict) -> int:
             runs, fmus = expanded[spec.study] = expand(spec)
             check_scenarios(runs, fmus, spec)
             run_keys[spec.study] = {run.key for run in runs}
+        check_out(args.out, studies)
     except (SpecError, FileNotFoundError) as e:
         print(e, file=sys.stderr)
         return 2
@@ -2001,6 +2027,22 @@ def _run_studies(args, run_keys: dict) -> int:
     except ClusterError as e:
         print(e, file=sys.stderr)
         return EXIT_CLUSTER
+
+
+def check_out(out: Path, studies: list[str]) -> None:
+    """Raises SpecError (status 2) before any run when `out` cannot hold
+    the studies' tables: a file, not a folder, or one that cannot be made;
+    a table there that cannot be read (UnreadableTable). Either failed in a
+    traceback once the cluster had started, with the status of failed
+    runs."""
+    if out.exists() and not out.is_dir():
+        raise SpecError(f"{out}: --out names a file; it names the folder of the tables")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SpecError(f"{out}: cannot make the folder of the tables ({e.strerror})") from None
+    for study in studies:
+        read_rows(out, study)
 
 
 def summary_line(summary: dict, table: Path) -> str:

@@ -15,7 +15,7 @@ import sys
 
 import pytest
 
-from demo import master, matrix
+from demo import master, matrix, sweep
 from tests.conftest import REPO_ROOT, require_closed_loop_build
 
 PLANT = REPO_ROOT / "dist" / "FlexureStage.fmu"
@@ -159,3 +159,71 @@ def test_a_series_in_a_missing_folder_is_refused_before_the_run(tmp_path, monkey
     with pytest.raises(master.MasterError) as refused:
         master.run(EXAMPLE, series=target)
     assert refused.value.returncode == 2 and str(target) in str(refused.value)
+
+
+# --------------------------------------------------------------------------
+# demo.sweep
+
+SPEC = f"""
+study = "tiny"
+
+[template]
+duration = 0.05
+
+[template.fmu.plant]
+path = "{PLANT}"
+
+[template.fmu.controller]
+path = "{CONTROLLER}"
+
+[template.metrics]
+driven = "y"
+from = 0.0
+
+[template.signal."controller.y_ref"]
+offset = 1.0
+sines = [{{ amplitude = 1.0, frequency = "= frequency" }}]
+
+[[variable]]
+name = "frequency"
+values = [5.0]
+"""
+
+
+@pytest.mark.parametrize("workers", ["0", "-2"])
+def test_a_sweep_refuses_no_workers_at_the_parser(tmp_path, workers, capsys):
+    with pytest.raises(SystemExit) as refused:
+        sweep.main([str(tmp_path / "spec.toml"), "--workers", workers])
+    assert refused.value.code == 2
+    assert "--workers" in capsys.readouterr().err
+
+
+def test_a_sweep_out_that_is_a_file_is_refused_before_any_run(tmp_path, capsys):
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(SPEC)
+    out = tmp_path / "results"
+    out.write_text("mine")
+    assert sweep.main([str(spec), "--out", str(out), "--progress", "none"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and str(out) in error
+    assert out.read_text() == "mine"
+
+
+@pytest.mark.parametrize("restart", [[], ["--restart"]])
+def test_a_truncated_table_is_named_and_kept(tmp_path, restart, capsys):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(SPEC)
+    out = tmp_path / "out"
+    out.mkdir()
+    table = sweep.table_path(out, "tiny")
+    pq.write_table(pa.table({"run": list(range(1000)), "key": [str(i) for i in range(1000)]}),
+                   str(table))
+    truncated = table.read_bytes()[: table.stat().st_size // 2]
+    table.write_bytes(truncated)
+    assert sweep.main([str(spec), "--out", str(out), "--progress", "none", *restart]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and str(table) in error
+    assert table.read_bytes() == truncated
