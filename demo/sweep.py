@@ -430,6 +430,10 @@ def load_spec(path: str | Path) -> Spec:
         text = path.read_text()
     except OSError as e:
         raise SpecError(f"{path}: {e.strerror}") from None
+    # A byte-order mark, as some Windows editors start a UTF-8 file with:
+    # tomllib refuses it ("1:1: Invalid statement"), and the Rust tools
+    # skip it. Dropping it moves no line or column.
+    text = text.removeprefix("\ufeff")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

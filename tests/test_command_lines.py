@@ -227,3 +227,11 @@ def test_a_truncated_table_is_named_and_kept(tmp_path, restart, capsys):
     error = capsys.readouterr().err.strip()
     assert len(error.splitlines()) == 1 and str(table) in error
     assert table.read_bytes() == truncated
+
+
+def test_a_spec_with_a_byte_order_mark_is_read(tmp_path):
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(SPEC, encoding="utf-8-sig")
+    assert spec.read_bytes().startswith(b"\xef\xbb\xbf")
+    loaded = sweep.load_spec(spec)
+    assert loaded.study == "tiny"
