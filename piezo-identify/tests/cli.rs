@@ -1230,3 +1230,39 @@ fn outputs_are_checked_before_the_work_and_never_overwrite_an_input() {
         );
     }
 }
+
+/// A reader that stops reading (`piezo-identify … | head -1`) does not stop
+/// the work: the fit runs on and its files are written, exit 0 (the summary
+/// once panicked on the closed pipe, exit 101, with nothing written).
+#[test]
+fn a_closed_standard_output_does_not_lose_the_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("record.csv");
+    write_good_record(&record);
+    let model = dir.path().join("model.json");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_piezo-identify"))
+        .args([
+            "inverse-pi",
+            record.to_str().unwrap(),
+            "--time",
+            "time",
+            "--split",
+            "0.5",
+            "--starts",
+            "2",
+            "--max-iterations",
+            "40",
+            "--out",
+            model.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take()); // the reader is gone before the first line
+    let status = child.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert!(written["params"].is_object(), "{written}");
+}

@@ -345,7 +345,7 @@ impl ProtocolArgs {
     ) -> (Vec<f64>, ValidationZero) {
         let recorded = validation.record.output.clone();
         if self.validate_zero == "recorded" {
-            println!("displacement as recorded (--validate-zero recorded)");
+            say!("displacement as recorded (--validate-zero recorded)");
             let zero = ValidationZero {
                 mode: "recorded",
                 alignment: None,
@@ -355,7 +355,7 @@ impl ProtocolArgs {
         }
         match plan.zero_alignment(&fit.record, &validation.record) {
             Ok(alignment) => {
-                println!(
+                say!(
                     "displacement zero: its rest at {:.4} V (samples {}..{}) reads {:+.6} um from {}'s (samples {}..{}), {:.2} % of the fit part's stroke; subtracted from every sample (--validate-zero recorded keeps it as written)",
                     alignment.rest_input,
                     alignment.validation_rest.start,
@@ -375,7 +375,7 @@ impl ProtocolArgs {
                 (output, zero)
             }
             Err(reason) => {
-                println!(
+                say!(
                     "displacement as recorded: its zero cannot be compared with {}'s, because {reason}",
                     fit.name
                 );

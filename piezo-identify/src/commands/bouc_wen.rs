@@ -213,7 +213,7 @@ pub(crate) fn print_forward_errors(
     refined: bool,
     scored_line: bool,
 ) {
-    println!("{part}, {} samples:", e.bouc_wen.samples);
+    say!("{part}, {} samples:", e.bouc_wen.samples);
     if refined {
         print_figure("Bouc-Wen", &e.bouc_wen, "um");
         print_figure("GA-PSO only", &e.gapso, "um");
@@ -283,9 +283,9 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     }
     let record = &loaded.record;
     let dt = record.sample_period;
-    println!("{}", describe(record, &loaded.name));
+    say!("{}", describe(record, &loaded.name));
     if let Some(columns) = &loaded.columns {
-        println!("columns: {}", describe_columns(columns));
+        say!("columns: {}", describe_columns(columns));
     }
     print_plan(&plan, &loaded.name);
 
@@ -295,7 +295,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     reporter.finish();
     print_bouc_wen_fit(&fit, &settings);
 
-    println!(
+    say!(
         "\nerrors of the displacement each model gives for the measured input (RMS, largest; % of the fit part's stroke {:.6} um):",
         fit.stroke
     );
@@ -313,7 +313,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     let mut validation_errors = None;
     let mut zero_alignment = None;
     if let (Some(v), Some((_, scored))) = (&validation, &validation_scored) {
-        println!("\n{}", describe(&v.record, &v.name));
+        say!("\n{}", describe(&v.record, &v.name));
         let (output, zero) = args
             .protocol
             .validation_output(&plan, &loaded, v, fit.stroke);
@@ -327,7 +327,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
         );
         validation_errors = Some(errors);
     }
-    println!("time: {:.2} s", fit.seconds);
+    say!("time: {:.2} s", fit.seconds);
 
     if let Some(path) = &args.protocol.predictions {
         let predictions = fit.predictions_on(&record.input, dt);
@@ -343,7 +343,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
             ],
             &plan,
         )?;
-        println!("predictions written to {}", path.display());
+        say!("predictions written to {}", path.display());
     }
     let best = fit.identification.best();
     if let Some(out) = &args.out {
@@ -357,7 +357,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
                 "columns": loaded.columns,
             }),
         )?;
-        println!("model written to {}", out.display());
+        say!("model written to {}", out.display());
     }
     if let Some(path) = &args.protocol.report {
         write_json(
@@ -383,7 +383,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
                 "seconds": fit.seconds,
             }),
         )?;
-        println!("report written to {}", path.display());
+        say!("report written to {}", path.display());
     }
     Ok(())
 }
@@ -395,12 +395,13 @@ pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSet
             .unusable_searches
             .get(i + 1)
             .map_or(fit.options.decimation, |s| s.decimation);
-        println!(
+        say!(
             "\nthe GA-PSO optimum searched on one sample in {} ({:.2} s) drew a falling branch or diverged between them; searched again on one sample in {next}",
-            search.decimation, search.seconds
+            search.decimation,
+            search.seconds
         );
     }
-    println!(
+    say!(
         "\nGA-PSO: {} particles, {} generations ({} evaluations), seed {}, every {} sample(s): {:.2} s; eq. (5) RMS {:.6} um on the fitted samples",
         settings.gapso.population,
         identification.history.len(),
@@ -411,7 +412,7 @@ pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSet
         identification.gapso.rms
     );
     if settings.refine {
-        println!(
+        say!(
             "Levenberg-Marquardt inside the search box: {} evaluations, {:.2} s, RMS {} um: {}",
             identification.refinement_evaluations,
             identification.refinement_seconds,
@@ -427,13 +428,20 @@ pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSet
     }
     let best = identification.best();
     let p = &best.params;
-    println!(
+    say!(
         "model: p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}; sensor offset {:.6} um",
-        p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta, best.offset
+        p.p,
+        p.q,
+        p.a,
+        p.beta,
+        p.gamma,
+        p.n,
+        p.delta,
+        best.offset
     );
     let walls = best.on_search_walls(&settings.bounds);
     if !walls.is_empty() {
-        println!(
+        say!(
             "note: the fit stopped on the search box's wall ({}, in the scaled shape --bounds \
              takes): a better model may lie beyond it; try --wide-bounds, or --bounds past it",
             walls

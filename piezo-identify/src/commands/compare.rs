@@ -72,8 +72,8 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
         .options(record.sample_period, default_decimation);
     let y = shifted(&centred_moving_average(&record.output, args.smooth), offset);
     let u = &record.input;
-    println!("{}", describe(&record, &name));
-    println!(
+    say!("{}", describe(&record, &name));
+    say!(
         "displacement offset {offset:.6} um; search on every {} sample(s) ({:.1} Hz); F on all {} scored samples",
         options.decimation,
         1.0 / (record.sample_period * options.decimation as f64),
@@ -98,16 +98,22 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
     })?;
     bar.finish_and_clear();
 
-    println!(
+    say!(
         "\nbest of {} random starts each (seed {}); F = sum of squared voltage errors (eq. 7)",
-        options.starts, options.seed
+        options.starts,
+        options.seed
     );
-    println!(
+    say!(
         "{:<44} {:>6} {:>14} {:>12} {:>12} {:>16}",
-        "model", "params", "F [V^2]", "RMS [V]", "max [V]", "eval [ns/sample]"
+        "model",
+        "params",
+        "F [V^2]",
+        "RMS [V]",
+        "max [V]",
+        "eval [ns/sample]"
     );
     for s in &comparison.summaries {
-        println!(
+        say!(
             "{:<44} {:>6} {:>14.6e} {:>12.6} {:>12.6} {:>16.2}",
             s.name,
             s.parameter_count,
@@ -117,30 +123,35 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
             s.evaluation.median_ns_per_sample
         );
     }
-    println!(
+    say!(
         "\nevaluation time: median of {} streaming passes over the record (fastest..slowest):",
         args.repetitions
     );
     for s in &comparison.summaries {
-        println!(
+        say!(
             "  {:<44} {:.2}..{:.2} ns/sample",
-            s.name, s.evaluation.fastest_ns_per_sample, s.evaluation.slowest_ns_per_sample
+            s.name,
+            s.evaluation.fastest_ns_per_sample,
+            s.evaluation.slowest_ns_per_sample
         );
     }
-    println!("\nrandom starts of each model:");
+    say!("\nrandom starts of each model:");
     let fits = [
         &comparison.proposed.starts,
         &comparison.traditional_six.starts,
         &comparison.traditional_ten.starts,
     ];
     for (s, starts) in comparison.summaries.iter().zip(fits) {
-        println!("{}", s.name);
+        say!("{}", s.name);
         print_starts(starts, options.max_iterations);
     }
     let p = &comparison.proposed.params;
-    println!(
+    say!(
         "\nproposed model: c = {:.6} um, u1max = {:.6} um, ws = {:?}, a = {:?}",
-        p.c, p.u1max, p.ws, p.a
+        p.c,
+        p.u1max,
+        p.ws,
+        p.a
     );
     Ok(())
 }

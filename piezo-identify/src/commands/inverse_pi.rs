@@ -125,9 +125,9 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     };
     let record = &loaded.record;
     let dt = record.sample_period;
-    println!("{}", describe(record, &loaded.name));
+    say!("{}", describe(record, &loaded.name));
     if let Some(columns) = &loaded.columns {
-        println!("columns: {}", describe_columns(columns));
+        say!("columns: {}", describe_columns(columns));
     }
     print_plan(&plan, &loaded.name);
 
@@ -137,7 +137,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     reporter.finish();
 
     print_inverse_pi_choices(&fit, &plan, &settings, dt);
-    println!(
+    say!(
         "\nerrors of the voltage each model gives for the measured displacement (RMS, largest; % of the fit part's input span {:.6} V):",
         fit.input_span
     );
@@ -152,7 +152,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     let mut validation_errors = None;
     let mut zero_alignment = None;
     if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
-        println!("\n{}", describe(&v.record, &v.name));
+        say!("\n{}", describe(&v.record, &v.name));
         let (output, zero) = args
             .protocol
             .validation_output(&plan, &loaded, v, fit.stroke);
@@ -167,7 +167,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
         print_inverse_pi_errors("validation file (models from rest at its start)", &errors);
         validation_errors = Some(errors);
     }
-    println!("time: {:.2} s", fit.seconds);
+    say!("time: {:.2} s", fit.seconds);
 
     if let Some(path) = &args.protocol.predictions {
         let predictions = fit.predictions_on(&record.output, dt, &plan.segments.steps);
@@ -183,7 +183,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
             ],
             &plan,
         )?;
-        println!("predictions written to {}", path.display());
+        say!("predictions written to {}", path.display());
     }
     if let Some(out) = &args.out {
         write_json(
@@ -197,7 +197,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
                 "columns": loaded.columns,
             }),
         )?;
-        println!("model written to {}", out.display());
+        say!("model written to {}", out.display());
     }
     if let Some(path) = &args.protocol.report {
         write_json(
@@ -215,7 +215,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
                 })),
             }),
         )?;
-        println!("report written to {}", path.display());
+        say!("report written to {}", path.display());
     }
     Ok(())
 }
@@ -240,18 +240,20 @@ pub(crate) fn print_inverse_pi_choices(
     };
     let weights = |rate: bool| if rate { "rate-dependent" } else { "constant" };
     if let Some(cv) = &fit.cross_validation {
-        println!(
+        say!(
             "\nvalidation inside the fit part: (c, w_s) searched on its first {} fitted samples (to {:.3} s), every candidate's linear part fitted there and scored on the last {} [V RMS]:",
             cv.train_samples,
             cv.train_end as f64 * dt,
             cv.validation_samples
         );
-        println!(
+        say!(
             "  {:<36} {:<16} {:>12}",
-            "moving average", "backlash weights", "RMS [V]"
+            "moving average",
+            "backlash weights",
+            "RMS [V]"
         );
         for c in &cv.proposed {
-            println!(
+            say!(
                 "  {:<36} {:<16} {:>12.6}",
                 smoothing(c.smoothing),
                 weights(c.rate_dependent),
@@ -259,7 +261,7 @@ pub(crate) fn print_inverse_pi_choices(
             );
         }
         for c in &cv.classical {
-            println!(
+            say!(
                 "  {:<36} {:<16} {:>12.6}",
                 smoothing(c.smoothing),
                 "classical P-I",
@@ -274,7 +276,7 @@ pub(crate) fn print_inverse_pi_choices(
             "given"
         }
     };
-    println!(
+    say!(
         "\nproposed model: moving average {} ({}); {} backlash weights ({}{}); classical P-I: moving average {}",
         smoothing(fit.smoothing),
         by(fit.smoothing_validated),
@@ -288,10 +290,10 @@ pub(crate) fn print_inverse_pi_choices(
         smoothing(fit.classical_smoothing)
     );
     if let Some(cycle) = plan.fastest_cycle {
-        println!("fastest cycle of the input: {:.3} s", cycle * dt);
+        say!("fastest cycle of the input: {:.3} s", cycle * dt);
     }
     let polished = fit.starts.iter().filter(|s| s.polished).count();
-    println!(
+    say!(
         "search: every {} sample(s), {} starts ({}), seed {}; best start {}, F {:.6e} on the searched samples",
         fit.decimation,
         settings.starts,
@@ -309,14 +311,17 @@ pub(crate) fn print_inverse_pi_choices(
             .and_then(|b| fit.starts.get(b))
             .map_or(f64::NAN, |s| s.objective)
     );
-    println!(
+    say!(
         "displacement offset {:.6} um; c = {:.6} um, u1max = {:.6}; classical P-I offset {:.6} um",
-        fit.offset, fit.params.c, fit.params.u1max, fit.classical_offset
+        fit.offset,
+        fit.params.c,
+        fit.params.u1max,
+        fit.classical_offset
     );
 }
 
 pub(crate) fn print_inverse_pi_errors(part: &str, e: &InversePiErrors) {
-    println!("{part}, {} samples:", e.proposed.samples);
+    say!("{part}, {} samples:", e.proposed.samples);
     print_figure("proposed", &e.proposed, "V");
     print_figure("classical P-I", &e.classical, "V");
     print_figure("straight line", &e.line, "V");

@@ -1,6 +1,17 @@
 //! The subcommands of `piezo-identify` and what they share; the library does
 //! the math, these modules parse, load, print and write.
 
+/// `println!` that goes on when nobody reads the standard output any more
+/// (`piezo-identify … | head -1`): the summary is for a reader, the files a
+/// command writes after it are the work, and `println!` would panic there
+/// (exit 101, nothing written).
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 pub(crate) mod arguments;
 pub(crate) mod bouc_wen;
 pub(crate) mod compare;

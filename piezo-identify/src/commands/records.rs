@@ -87,7 +87,7 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
     }
     std::fs::write(&args.out, text)
         .map_err(|e| Failure::Run(format!("{}: {e}", args.out.display())))?;
-    println!(
+    say!(
         "{}: {} samples at {} Hz (columns time_s, command_V, displacement_um)",
         args.out.display(),
         record.input.len(),
@@ -109,7 +109,7 @@ pub(crate) fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), Failure> {
         piezo_identify::xy200s::xy200s_preset().map_err(|e| Failure::Run(e.to_string()))?;
     for model in &preset.models {
         let p = &model.identified;
-        println!(
+        say!(
             "{}: printed model spans {:.3} um on the 2 Hz 0..150 V run; rate-independent fit RMS {:.4} um ({:.3} %); output scaled by {:.4}",
             model.name,
             model.printed_span_um,
@@ -117,16 +117,22 @@ pub(crate) fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), Failure> {
             100.0 * model.rms_um / model.printed_span_um,
             model.stroke_scale
         );
-        println!(
+        say!(
             "    p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}",
-            p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta
+            p.p,
+            p.q,
+            p.a,
+            p.beta,
+            p.gamma,
+            p.n,
+            p.delta
         );
     }
     write_json(&args.out, &preset.stage)?;
-    println!("stage parameters written to {}", args.out.display());
+    say!("stage parameters written to {}", args.out.display());
     if let Some(report) = &args.report {
         write_json(report, &preset.models)?;
-        println!("conversion report written to {}", report.display());
+        say!("conversion report written to {}", report.display());
     }
     Ok(())
 }

@@ -77,7 +77,7 @@ pub(crate) fn describe_ranges(ranges: &[std::ops::Range<usize>], dt: f64) -> Str
 pub(crate) fn print_plan(plan: &Plan, name: &str) {
     let dt = plan.sample_period;
     if plan.has_scored_part() {
-        println!(
+        say!(
             "fit part: {:.3}-{:.3} s (samples 0..{}); scored part: {:.3}-{:.3} s (samples {}..{}), the models' state carried over from the fit part",
             0.0,
             plan.fit_end as f64 * dt,
@@ -88,7 +88,7 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
             plan.samples
         );
     } else {
-        println!(
+        say!(
             "fit part: the whole of {name} (give --split or --validate-from to score a part of it)"
         );
     }
@@ -98,7 +98,7 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
         .iter()
         .map(|s| format!("{:.3} s", *s as f64 * dt))
         .collect();
-    println!(
+    say!(
         "rest segments: {}; voltage steps: {}",
         describe_ranges(&plan.segments.rests, dt),
         if steps.is_empty() {
@@ -108,7 +108,7 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
         }
     );
     if !plan.segments.stairs.is_empty() {
-        println!(
+        say!(
             "the input is held at {} or more levels: a staircase, whose {} stairs are fitted \
              and scored once settled, not left out as rests",
             piezo_identify::segments::STAIRCASE_LEVELS,
@@ -116,7 +116,7 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
         );
     }
     let fitted = plan.fitted().iter().filter(|f| **f).count();
-    println!(
+    say!(
         "left out of the fit (warm-up: settling {:.3} s and first loading; rests; settling after steps): {}; {fitted} of {} samples fitted",
         plan.thresholds.settle_samples as f64 * dt,
         describe_ranges(&plan.fit_excluded, dt),
@@ -124,7 +124,7 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
     );
     if plan.has_scored_part() {
         let scored = plan.scored().iter().filter(|s| **s).count();
-        println!(
+        say!(
             "left out of the score (rests, settling after steps): {}; {scored} of {} samples scored",
             describe_ranges(&plan.scored_excluded, dt),
             plan.samples - plan.fit_end
@@ -155,7 +155,7 @@ pub(crate) fn range_excess(values: &[f64], fitted: &[bool], scored: &[bool]) -> 
 
 pub(crate) fn print_extrapolation(what: &str, excess: f64) {
     if excess > 0.01 {
-        println!(
+        say!(
             "note: the scored {what} reaches {:.1} % of the fitted span beyond the fitted range; the models extrapolate there",
             100.0 * excess
         );
@@ -172,7 +172,7 @@ pub(crate) fn print_smaller_loops(
     scored: &[bool],
 ) {
     if let Some((scored_median, fitted_small)) = smaller_loops(values, fitted, scored) {
-        println!(
+        say!(
             "note: the scored {what} runs smaller loops than the fitted one (median travel between turning points {scored_median:.3} {unit}, the fit part's 10th percentile {fitted_small:.3} {unit}); the models were not fitted on loops that small"
         );
     }
@@ -186,9 +186,12 @@ pub(crate) fn pad(flags: &[bool], len: usize) -> Vec<bool> {
 }
 
 pub(crate) fn print_figure(name: &str, e: &ErrorFigures, unit: &str) {
-    println!(
+    say!(
         "  {name:<16} RMS {:.6} {unit} ({:.3} %), largest {:.6} {unit} ({:.3} %)",
-        e.rms, e.rms_percent, e.max_abs, e.max_percent
+        e.rms,
+        e.rms_percent,
+        e.max_abs,
+        e.max_percent
     );
 }
 
@@ -199,7 +202,7 @@ pub(crate) fn print_starts(starts: &[StartResult], max_iterations: u64) {
     let mut iterations: Vec<u64> = starts.iter().map(|s| s.iterations).collect();
     iterations.sort_unstable();
     let best = objectives[0];
-    println!(
+    say!(
         "  starts: F on the searched samples best {:.6e}, median {:.6e}, worst {:.6e}; {} of {} within 0.1 % of the best; \
          iterations median {} ({} stopped at the cap of {max_iterations})",
         best,

@@ -140,18 +140,20 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
         .map_err(|e| stage_failure(&args.plant, e))?;
     bar.finish_and_clear();
     for (name, fit) in [("x", &identified.x_fit), ("y", &identified.y_fit)] {
-        println!(
+        say!(
             "{name} inverse model on eq. (6): F = {:.6e} V^2, RMS {:.6} V, max {:.6} V",
-            fit.f, fit.rms_v, fit.max_v
+            fit.f,
+            fit.rms_v,
+            fit.max_v
         );
     }
     for (name, rms) in &identified.bouc_wen_fits {
-        println!("{name} Bouc-Wen model on seed 001's 2 Hz sine: eq. (5) RMS {rms:.6} um");
+        say!("{name} Bouc-Wen model on seed 001's 2 Hz sine: eq. (5) RMS {rms:.6} um");
     }
     for (round, compensations) in identified.rounds.iter().enumerate() {
-        println!("decoupling round {}:", round + 1);
+        say!("decoupling round {}:", round + 1);
         for (i, c) in compensations.iter().enumerate() {
-            println!(
+            say!(
                 "  D{}: dk {:+.6}, db {:+.6} um, p {:+.4}, q {:+.4}; coupling span {:.4} um -> residual span {:.4} um (RMS {:.4})",
                 i + 1,
                 c.dk,
@@ -168,13 +170,13 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
         .map_err(|e| Failure::Run(format!("cannot serialise the preset: {e}")))?;
     std::fs::write(&args.out, json + "\n")
         .map_err(|e| Failure::Run(format!("{}: {e}", args.out.display())))?;
-    println!("controller preset written to {}", args.out.display());
+    say!("controller preset written to {}", args.out.display());
     if let Some(path) = &args.report {
         let json = serde_json::to_string_pretty(&identified)
             .map_err(|e| Failure::Run(format!("cannot serialise the report: {e}")))?;
         std::fs::write(path, json + "\n")
             .map_err(|e| Failure::Run(format!("{}: {e}", path.display())))?;
-        println!("identification report written to {}", path.display());
+        say!("identification report written to {}", path.display());
     }
     Ok(())
 }
@@ -203,9 +205,10 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), Failure> {
     };
     let (record, used) =
         read_record_with_columns(&args.file, &options).map_err(|e| e.to_string())?;
-    println!(
+    say!(
         "columns: demand {}, coupling error {}",
-        used.input, used.output
+        used.input,
+        used.output
     );
     let c = fit_compensation(&record.input, &record.output).map_err(|e| {
         let message = format!("{}: {e}", args.file.display());
@@ -214,7 +217,7 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), Failure> {
             _ => Failure::Input(message),
         }
     })?;
-    println!(
+    say!(
         "{}: {} pairs; D(f) = clamp({:.6}*f {:+.6}, q = {:.6}, p = {:.6})",
         args.file.display(),
         record.input.len(),
@@ -223,14 +226,16 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), Failure> {
         c.q,
         c.p
     );
-    println!(
+    say!(
         "coupling error span {:.6} um; residual span {:.6} um, RMS {:.6} um",
-        c.error_span, c.residual_span, c.residual_rms
+        c.error_span,
+        c.residual_span,
+        c.residual_rms
     );
     if c.residual_span >= c.error_span {
         // A compensation that leaves the span as wide as it found it has
         // nothing to cancel in these columns: most often the wrong ones.
-        println!(
+        say!(
             "note: the compensation does not narrow the coupling error; check that the demand \
              and error columns are the ones meant (--demand, --error)"
         );
