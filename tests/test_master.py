@@ -380,3 +380,35 @@ def test_a_batch_file_resolves_paths_from_its_folder_and_names_bad_lines(tmp_pat
     assert results[1]["exit"] == 2
     assert results[1]["error"].startswith(f"{runs}:2:26: fmu: invalid type: integer `3`")
     assert results[0]["metrics"] == results[2]["metrics"]
+
+
+def test_run_outputs_are_checked_before_the_run_and_a_table_holds_finite_numbers(tmp_path):
+    """`piezo-cosim run`: an --out or --series that is the scenario itself,
+    a folder, or one file for both is refused before the run (exit 2) and
+    the scenario is left as it was; a reference table with NaN is refused
+    at its line (exit 2; it reached the controller's fmi2SetReal as an FMU
+    failure, exit 1), its line counted with the blank lines before it."""
+    scenario = scenario_of("table3_y.toml")
+    scenario["duration"], scenario["metrics"]["from"] = 0.05, 0.0
+    path = tmp_path / "run.json"
+    path.write_text(json.dumps(scenario))
+    before = path.read_bytes()
+    binary = str(master.binary())
+    for args, problem in (
+            (["--out", str(path)], "is the scenario being run"),
+            (["--series", str(tmp_path / "." / "run.json")], "the series is written as CSV"),
+            (["--out", str(tmp_path)], "is a folder"),
+            (["--out", str(tmp_path / "r.csv"), "--series", str(tmp_path / "r.csv")],
+             "--series and --out both name")):
+        done = subprocess.run([binary, "run", str(path), *args], capture_output=True, text=True)
+        assert done.returncode == 2, done.stderr
+        assert problem in done.stderr, done.stderr
+        assert done.stdout == ""
+    assert path.read_bytes() == before
+    table = tmp_path / "y.csv"
+    table.write_text("t,y\n0,0\n\n0.02,1\n0.04,nan\n")
+    scenario["signal"]["controller.y_ref"] = {"table": {"file": str(table), "column": "y"}}
+    path.write_text(json.dumps(scenario))
+    done = subprocess.run([binary, "run", str(path)], capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    assert f'{table}:5: column "y": "nan" is not a finite number' in done.stderr, done.stderr

@@ -108,8 +108,10 @@ impl crate::Fmu {
 /// malformed file is named with its line and column.
 pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    // A UTF-8 byte-order mark (Windows editors write one) is no JSON.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let map: serde_json::Map<String, serde_json::Value> =
-        serde_json::from_str(&text).map_err(|e| {
+        serde_json::from_str(text).map_err(|e| {
             format!(
                 "{}:{}:{}: {}",
                 path.display(),
@@ -216,6 +218,26 @@ mod tests {
         // Two groups hold k[1], and both are one edit away.
         assert_eq!(meant("z.k[1]", names.clone()), None);
         assert_eq!(meant("amplifier.gain", names.clone()), None);
+    }
+
+    /// A file a Windows editor saved with a UTF-8 byte-order mark reads as
+    /// its twin without one; an error's line and column are an editor's.
+    #[test]
+    fn a_byte_order_mark_is_not_part_of_the_json() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("set.json");
+        std::fs::write(&file, "\u{feff}{\"x.c\": 1.5, \"decoupling\": true}").unwrap();
+        let set = read_parameter_set(&file).unwrap();
+        assert_eq!(
+            set,
+            vec![
+                ("decoupling".to_owned(), ParameterValue::Boolean(true)),
+                ("x.c".to_owned(), ParameterValue::Number(1.5)),
+            ]
+        );
+        std::fs::write(&file, "\u{feff}{\"x.c\": }").unwrap();
+        let e = read_parameter_set(&file).unwrap_err();
+        assert!(e.ends_with("set.json:1:9: expected value"), "{e}");
     }
 
     #[test]

@@ -348,7 +348,17 @@ fn main() -> ExitCode {
         return ExitCode::from(2);
     }
     // A folder the series or the results cannot be written in is found
-    // before the run, not after it.
+    // before the run, not after it; so is a path that is a folder, or the
+    // scenario itself (written over, it was lost), or one path for both.
+    if let (Some(series), Some(out)) = (&series_path, &out)
+        && same_file(series, out)
+    {
+        eprintln!(
+            "--series and --out both name {}: give each its own file",
+            out.display()
+        );
+        return ExitCode::from(2);
+    }
     for path in [&series_path, &out].into_iter().flatten() {
         if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty())
             && !folder.is_dir()
@@ -357,6 +367,21 @@ fn main() -> ExitCode {
                 "{}: no folder {} to write it in",
                 path.display(),
                 folder.display()
+            );
+            return ExitCode::from(2);
+        }
+        if path.is_dir() {
+            eprintln!(
+                "{}: is a folder; give the name of the file to write",
+                path.display()
+            );
+            return ExitCode::from(2);
+        }
+        if same_file(path, &scenario) {
+            eprintln!(
+                "{}: is the scenario being run; writing there would overwrite it, so give \
+                 another name",
+                path.display()
             );
             return ExitCode::from(2);
         }
@@ -414,7 +439,7 @@ fn main() -> ExitCode {
     let text = result.to_string();
     match out {
         Some(path) => {
-            if let Err(e) = std::fs::write(&path, text + "\n") {
+            if let Err(e) = write_whole(&path, &(text + "\n")) {
                 eprintln!("{}: {e}", path.display());
                 return ExitCode::from(1);
             }
@@ -426,6 +451,31 @@ fn main() -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// Whether two paths name one file, written yet or not (`./a.json` and
+/// `a.json`, a link and its target).
+fn same_file(a: &Path, b: &Path) -> bool {
+    let resolved = |path: &Path| -> Option<PathBuf> {
+        path.canonicalize().ok().or_else(|| {
+            let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
+            let folder = folder.unwrap_or(Path::new(".")).canonicalize().ok()?;
+            Some(folder.join(path.file_name()?))
+        })
+    };
+    match (resolved(a), resolved(b)) {
+        (Some(a), Some(b)) => a == b,
+        _ => a == b,
+    }
+}
+
+/// Writes `text` under a temporary name beside `path` and renames it into
+/// place, so that `path` is never a cut result.
+fn write_whole(path: &Path, text: &str) -> std::io::Result<()> {
+    let mut file = series::temporary_beside(path)?;
+    file.write_all(text.as_bytes())?;
+    file.persist(path).map_err(|e| e.error)?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -245,6 +245,9 @@ impl Scenario {
 
     /// Parses scenario text; `origin` names it in errors (a file name, `-`).
     pub fn parse(text: &str, json: bool, origin: &str) -> Result<Scenario, ScenarioError> {
+        // A UTF-8 byte-order mark (Windows editors write one) is no JSON; lines
+        // and columns are counted after it, as an editor shows them.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let scenario: Scenario = if json {
             from_json(text).map_err(|(line, column, problem)| {
                 ScenarioError(format!("{origin}:{line}:{column}: {problem}"))
@@ -279,6 +282,7 @@ impl Scenario {
         origin: &str,
         line: usize,
     ) -> Result<Scenario, ScenarioError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let scenario: Scenario = from_json(text).map_err(|(_, column, problem)| {
             // The text is one line of the file: the file's line is the place.
             ScenarioError(format!("{origin}:{line}:{column}: {problem}"))
@@ -617,6 +621,25 @@ path = "c.fmu"
         assert_eq!((s.step, s.preview, s.steps()), (1e-4, 2, 10_000));
         assert_eq!(s.connections(), stage_wiring());
         assert_eq!(s.connections().len(), 6);
+    }
+
+    /// A scenario saved with a UTF-8 byte-order mark (as Windows editors
+    /// save) reads as its twin without one, in TOML, JSON and a batch line;
+    /// its errors are placed as an editor shows the text.
+    #[test]
+    fn a_byte_order_mark_is_not_part_of_the_scenario() {
+        let plain = Scenario::parse(MINIMAL, false, "s.toml").unwrap();
+        let marked = Scenario::parse(&format!("\u{feff}{MINIMAL}"), false, "s.toml").unwrap();
+        assert_eq!(marked.connections(), plain.connections());
+        let json = r#"{"duration": 1.0, "fmu": {"plant": {"path": "p.fmu"}, "controller": {"path": "c.fmu"}}}"#;
+        let marked = Scenario::parse(&format!("\u{feff}{json}"), true, "s.json").unwrap();
+        assert_eq!(marked.steps(), 10_000);
+        let line = Scenario::parse_json_line(&format!("\u{feff}{json}"), "runs.jsonl", 1).unwrap();
+        assert_eq!(line.steps(), 10_000);
+        let e = Scenario::parse("\u{feff}{\"duration\": }", true, "s.json")
+            .unwrap_err()
+            .0;
+        assert!(e.starts_with("s.json:1:14: "), "{e}");
     }
 
     #[test]

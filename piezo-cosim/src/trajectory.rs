@@ -216,10 +216,24 @@ fn conversion(from: &str, to: &str) -> Option<f64> {
 impl Table {
     fn read(source: &TableSource, unit: Option<&str>) -> Result<Table, String> {
         let name = |path: &Path| path.display().to_string();
+        let text = std::fs::read_to_string(&source.file)
+            .map_err(|e| format!("{}: {e}", name(&source.file)))?;
+        // The reader skips blank lines and counts none of them, and a
+        // record's position is where the reader stood before skipping them:
+        // its line in the file is found from that byte, past the line ends.
+        let line_at = |position: Option<&csv::Position>, counted: u64| {
+            position.map_or(counted, |p| {
+                let bytes = text.as_bytes();
+                let mut start = (p.byte() as usize).min(bytes.len());
+                while start < bytes.len() && matches!(bytes[start], b'\n' | b'\r') {
+                    start += 1;
+                }
+                1 + bytes[..start].iter().filter(|b| **b == b'\n').count() as u64
+            })
+        };
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
-            .from_path(&source.file)
-            .map_err(|e| format!("{}: {e}", name(&source.file)))?;
+            .from_reader(text.as_bytes());
         let headers = reader
             .headers()
             .map_err(|e| format!("{}: {e}", name(&source.file)))?
@@ -274,17 +288,27 @@ impl Table {
             value: Vec::new(),
         };
         for (row, record) in reader.records().enumerate() {
-            let line = row + 2;
-            let record = record.map_err(|e| format!("{}:{line}: {e}", name(&source.file)))?;
+            let counted = row as u64 + 2;
+            let record = record.map_err(|e| {
+                let line = line_at(e.position(), counted);
+                format!("{}:{line}: {e}", name(&source.file))
+            })?;
+            let line = line_at(record.position(), counted);
             let number = |column: usize| -> Result<f64, String> {
                 let text = record.get(column).unwrap_or("");
-                text.parse::<f64>().map_err(|_| {
-                    format!(
-                        "{}:{line}: column {:?}: {text:?} is not a number",
-                        name(&source.file),
-                        &headers[column]
-                    )
-                })
+                // NaN and infinities parse, and would reach an FMU's
+                // fmi2SetReal mid-run as its failure (exit 1): they are the
+                // table's.
+                text.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        format!(
+                            "{}:{line}: column {:?}: {text:?} is not a finite number",
+                            name(&source.file),
+                            &headers[column]
+                        )
+                    })
             };
             let (t, v) = (
                 number(time_column)? * time_factor,
@@ -436,9 +460,24 @@ mod tests {
         };
         let e = y.sample(&[0.0], None).unwrap_err();
         assert!(
-            e.ends_with("r.csv:3: column \"y\": \"ten\" is not a number"),
+            e.ends_with("r.csv:3: column \"y\": \"ten\" is not a finite number"),
             "{e}"
         );
+        // Blank lines count (the reader skips them), and NaN or an infinity
+        // is refused at its line, not sent to an FMU.
+        for (bad, text) in [
+            ("nan", "t,y\n0,0\n\n\n1,nan\n"),
+            ("inf", "t,y\n\n0,0\n1,1\n2,inf\n"),
+        ] {
+            std::fs::write(y.table.as_ref().unwrap().file.clone(), text).unwrap();
+            let e = y.sample(&[0.0], None).unwrap_err();
+            assert!(
+                e.ends_with(&format!(
+                    "r.csv:5: column \"y\": \"{bad}\" is not a finite number"
+                )),
+                "{e}"
+            );
+        }
     }
 
     #[test]
