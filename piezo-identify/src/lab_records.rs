@@ -121,6 +121,10 @@ impl LabRecordSpec {
     }
 }
 
+/// The most samples a lab record may have: 100 million, 100 s at 1 MHz
+/// (1.6 GB held, several GB of text), far beyond any stage record.
+pub const MAX_LAB_SAMPLES: usize = 100_000_000;
+
 /// Why a lab record could not be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LabRecordError {
@@ -128,6 +132,10 @@ pub enum LabRecordError {
     Parameters(#[from] ParamError),
     #[error("{0} must be positive and finite")]
     Setting(&'static str),
+    #[error(
+        "{samples} samples asked (rate times rest and excitation), more than the {MAX_LAB_SAMPLES} a record is allowed here"
+    )]
+    TooLong { samples: f64 },
     #[error(
         "the amplifier clipped the command {command} V at {time} s: the record would not be the drive it claims"
     )]
@@ -147,6 +155,12 @@ pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
     }
     if !(spec.rest_seconds.is_finite() && spec.rest_seconds >= 0.0) {
         return Err(LabRecordError::Setting("rest_seconds"));
+    }
+    // Two f64 per sample are held and written: a rate of 1e12 Hz asked for
+    // 24 TB and aborted the process instead of saying so.
+    let asked = (spec.rest_seconds + spec.excitation_seconds) * spec.sample_rate;
+    if asked > MAX_LAB_SAMPLES as f64 {
+        return Err(LabRecordError::TooLong { samples: asked });
     }
     let mut params = FlexureStageParams::default();
     (params.amplifier.v_min, params.amplifier.v_max) = LAB_AMPLIFIER_LIMITS;
@@ -233,5 +247,12 @@ mod tests {
             lab_record(&spec),
             Err(LabRecordError::Setting("rest_seconds"))
         );
+        // Refused before anything is held (it aborted the process).
+        spec.rest_seconds = 1.0;
+        spec.sample_rate = 1e12;
+        assert!(matches!(
+            lab_record(&spec),
+            Err(LabRecordError::TooLong { .. })
+        ));
     }
 }

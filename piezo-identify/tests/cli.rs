@@ -1130,6 +1130,62 @@ fn scored_loops_smaller_than_the_fitted_ones_get_a_note() {
     write_two_amplitude_record(&path, 4.0);
     let summary = quick_split_fit(&path, "time", "volts", "microns");
     assert!(!summary.contains(note), "{summary}");
+
+    // `--report` keeps the notes the summary prints, word for word.
+    write_two_amplitude_record(&path, 1.0);
+    let report = dir.path().join("report.json");
+    let done = run(&[
+        "inverse-pi",
+        path.to_str().unwrap(),
+        "--time",
+        "time",
+        "--starts",
+        "2",
+        "--max-iterations",
+        "40",
+        "--split",
+        "0.5",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    assert!(done.status.success(), "{}", stderr(&done));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let notes: Vec<&str> = json["notes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    let summary = stdout(&done);
+    let printed: Vec<&str> = summary
+        .lines()
+        .filter_map(|l| l.strip_prefix("note: "))
+        .collect();
+    assert!(
+        !notes.is_empty() && notes == printed,
+        "{notes:?} against {printed:?}"
+    );
+}
+
+/// A column that never changes is refused, naming it: the default output
+/// of a headerless P-885 record is its column 1, zeros throughout (the fit
+/// said "displacement never exceeds 0", which pointed nowhere).
+#[test]
+fn a_constant_column_is_refused_by_name() {
+    let record = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/piezo-p885/Model_Vi_Do.dat"
+    );
+    for model in ["inverse-pi", "bouc-wen"] {
+        let output = run(&[model, record, "--rate", "200", "--split", "0.5"]);
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).contains("the output (column 1) is 0 in every sample: nothing to fit; name the output column with --output"),
+            "{model}: {}",
+            stderr(&output)
+        );
+    }
 }
 
 /// Every output path is checked before any work: one in a folder that does

@@ -203,6 +203,24 @@ pub(crate) struct Loaded {
 pub(crate) fn load(path: &Path, columns: &ColumnArgs) -> Result<Loaded, String> {
     let (record, used) =
         read_record_with_columns(path, &columns.read_options()?).map_err(|e| e.to_string())?;
+    // A column that never changes is no record of a stage: most often the
+    // default took an unused channel (a headerless file's column 1 of
+    // zeros), and the fit's own complaint ("displacement never exceeds 0")
+    // would not say so.
+    for (role, option, values, column) in [
+        ("output", "--output", &record.output, &used.output),
+        ("input", "--input", &record.input, &used.input),
+    ] {
+        if let Some(&first) = values.first()
+            && values.iter().all(|v| *v == first)
+        {
+            return Err(format!(
+                "{}: the {role} ({column}) is {first} in every sample: nothing to fit; name \
+                 the {role} column with {option}",
+                path.display()
+            ));
+        }
+    }
     Ok(Loaded {
         name: path.display().to_string(),
         record,

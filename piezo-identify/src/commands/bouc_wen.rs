@@ -17,8 +17,8 @@ use super::arguments::{
 };
 use super::progress::Reporter;
 use super::report::{
-    describe, describe_columns, pad, print_extrapolation, print_figure, print_plan,
-    print_smaller_loops, range_excess, write_json, write_predictions,
+    Notes, describe, describe_columns, pad, print_figure, print_plan, range_excess, write_json,
+    write_predictions,
 };
 use super::{Failure, plant_failure, protocol_failure};
 
@@ -293,7 +293,8 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     let fit = identify_bouc_wen_protocol(record, &plan, &settings, &|e| reporter.event(e))
         .map_err(|e| protocol_failure(&loaded.name, e))?;
     reporter.finish();
-    print_bouc_wen_fit(&fit, &settings);
+    let mut notes = Notes::default();
+    print_bouc_wen_fit(&fit, &settings, &mut notes);
 
     say!(
         "\nerrors of the displacement each model gives for the measured input (RMS, largest; % of the fit part's stroke {:.6} um):",
@@ -304,11 +305,11 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     if let Some(unseen) = &fit.unseen {
         print_forward_errors("scored part (not seen by the fit)", unseen, refined, true);
         let fitted = pad(&plan.fitted(), plan.samples);
-        print_extrapolation(
+        notes.extrapolation(
             "input",
             range_excess(&record.input, &fitted, &plan.scored()),
         );
-        print_smaller_loops("input", "V", &record.input, &fitted, &plan.scored());
+        notes.smaller_loops("input", "V", &record.input, &fitted, &plan.scored());
     }
     let mut validation_errors = None;
     let mut zero_alignment = None;
@@ -364,6 +365,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
             path,
             &serde_json::json!({
                 "record": loaded.name,
+                "notes": notes.0,
                 "columns": loaded.columns,
                 "plan": plan,
                 "settings": settings,
@@ -388,7 +390,11 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSettings) {
+pub(crate) fn print_bouc_wen_fit(
+    fit: &BoucWenProtocolFit,
+    settings: &BoucWenSettings,
+    notes: &mut Notes,
+) {
     let identification = &fit.identification;
     for (i, search) in fit.unusable_searches.iter().enumerate() {
         let next = fit
@@ -441,14 +447,14 @@ pub(crate) fn print_bouc_wen_fit(fit: &BoucWenProtocolFit, settings: &BoucWenSet
     );
     let walls = best.on_search_walls(&settings.bounds);
     if !walls.is_empty() {
-        say!(
-            "note: the fit stopped on the search box's wall ({}, in the scaled shape --bounds \
+        notes.add(format!(
+            "the fit stopped on the search box's wall ({}, in the scaled shape --bounds \
              takes): a better model may lie beyond it; try --wide-bounds, or --bounds past it",
             walls
                 .iter()
                 .map(|(name, wall)| format!("{name} = {wall}"))
                 .collect::<Vec<_>>()
                 .join(", ")
-        );
+        ));
     }
 }

@@ -15,8 +15,8 @@ use super::arguments::{
 };
 use super::progress::Reporter;
 use super::report::{
-    describe, describe_columns, pad, print_extrapolation, print_figure, print_plan,
-    print_smaller_loops, range_excess, write_json, write_predictions,
+    Notes, describe, describe_columns, pad, print_figure, print_plan, range_excess, write_json,
+    write_predictions,
 };
 use super::{Failure, protocol_failure};
 
@@ -137,6 +137,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     reporter.finish();
 
     print_inverse_pi_choices(&fit, &plan, &settings, dt);
+    let mut notes = Notes::default();
     say!(
         "\nerrors of the voltage each model gives for the measured displacement (RMS, largest; % of the fit part's input span {:.6} V):",
         fit.input_span
@@ -146,8 +147,8 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
         print_inverse_pi_errors("scored part (not seen by the fit)", unseen);
         let y = centred_moving_average(&record.output, fit.smoothing);
         let fitted = pad(&plan.fitted(), plan.samples);
-        print_extrapolation("displacement", range_excess(&y, &fitted, &plan.scored()));
-        print_smaller_loops("displacement", "um", &y, &fitted, &plan.scored());
+        notes.extrapolation("displacement", range_excess(&y, &fitted, &plan.scored()));
+        notes.smaller_loops("displacement", "um", &y, &fitted, &plan.scored());
     }
     let mut validation_errors = None;
     let mut zero_alignment = None;
@@ -204,6 +205,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
             path,
             &serde_json::json!({
                 "record": loaded.name,
+                "notes": notes.0,
                 "columns": loaded.columns,
                 "plan": plan,
                 "settings": settings,

@@ -153,28 +153,44 @@ pub(crate) fn range_excess(values: &[f64], fitted: &[bool], scored: &[bool]) -> 
     ((fit_low - low).max(high - fit_high) / span).max(0.0)
 }
 
-pub(crate) fn print_extrapolation(what: &str, excess: f64) {
-    if excess > 0.01 {
-        say!(
-            "note: the scored {what} reaches {:.1} % of the fitted span beyond the fitted range; the models extrapolate there",
-            100.0 * excess
-        );
-    }
-}
+/// The notes a fit prints after its errors, kept for `--report` too (a
+/// script reading the JSON sees what a reader of the summary sees).
+#[derive(Default)]
+pub(crate) struct Notes(pub(crate) Vec<String>);
 
-/// A note when the scored `what` runs loops under half the size of the
-/// fitted ones ([`smaller_loops`]).
-pub(crate) fn print_smaller_loops(
-    what: &str,
-    unit: &str,
-    values: &[f64],
-    fitted: &[bool],
-    scored: &[bool],
-) {
-    if let Some((scored_median, fitted_small)) = smaller_loops(values, fitted, scored) {
-        say!(
-            "note: the scored {what} runs smaller loops than the fitted one (median travel between turning points {scored_median:.3} {unit}, the fit part's 10th percentile {fitted_small:.3} {unit}); the models were not fitted on loops that small"
-        );
+impl Notes {
+    /// Prints `note` as "note: …" and keeps it.
+    pub(crate) fn add(&mut self, note: String) {
+        say!("note: {note}");
+        self.0.push(note);
+    }
+
+    /// A note when the scored `what` reaches beyond the fitted range by more
+    /// than 1 % of its span (`excess`, a fraction of it).
+    pub(crate) fn extrapolation(&mut self, what: &str, excess: f64) {
+        if excess > 0.01 {
+            self.add(format!(
+                "the scored {what} reaches {:.1} % of the fitted span beyond the fitted range; the models extrapolate there",
+                100.0 * excess
+            ));
+        }
+    }
+
+    /// A note when the scored `what` runs loops under half the size of the
+    /// fitted ones ([`smaller_loops`]).
+    pub(crate) fn smaller_loops(
+        &mut self,
+        what: &str,
+        unit: &str,
+        values: &[f64],
+        fitted: &[bool],
+        scored: &[bool],
+    ) {
+        if let Some((scored_median, fitted_small)) = smaller_loops(values, fitted, scored) {
+            self.add(format!(
+                "the scored {what} runs smaller loops than the fitted one (median travel between turning points {scored_median:.3} {unit}, the fit part's 10th percentile {fitted_small:.3} {unit}); the models were not fitted on loops that small"
+            ));
+        }
     }
 }
 
