@@ -973,6 +973,27 @@ fn decoupling_names_its_columns() {
     );
     assert!(out.contains("clamp(0.200000*f -0.500000"), "{out}");
     assert!(!out.contains("note:"), "{out}");
+    // --out keeps every digit the printed line rounds (a slope of 0.2 + 1e-9
+    // prints as 0.200000).
+    let mut text = String::from("demand,error\n");
+    for n in 0..100 {
+        let demand = 0.1 * n as f64;
+        text.push_str(&format!("{demand},{}\n", (0.2 + 1e-9) * demand - 0.5));
+    }
+    let fine = dir.path().join("fine.csv");
+    std::fs::write(&fine, text).unwrap();
+    let json = dir.path().join("d1.json");
+    let done = run(&[
+        "decoupling",
+        fine.to_str().unwrap(),
+        "--out",
+        json.to_str().unwrap(),
+    ]);
+    assert!(done.status.success(), "{}", stderr(&done));
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let dk = written["fit"]["dk"].as_f64().unwrap();
+    assert!((dk - (0.2 + 1e-9)).abs() < 1e-12, "{written}");
     let same = run(&[
         "decoupling",
         path.to_str().unwrap(),

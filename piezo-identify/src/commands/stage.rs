@@ -12,6 +12,7 @@ use piezo_identify::{Column, ReadOptions, Roles, Sampling};
 
 use super::arguments::{SearchArgs, check_destinations, open_plant};
 use super::progress::progress_bar;
+use super::report::write_json;
 use super::{Failure, stage_failure};
 
 #[derive(Args)]
@@ -76,6 +77,10 @@ pub(crate) struct DecouplingArgs {
     /// the spacing of the samples does not matter)
     #[arg(long)]
     pub(crate) time: Option<String>,
+    /// Write the compensation (dk, db, p, q at full precision, the residual and error spans)
+    /// as JSON
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
 }
 
 /// Decimation of the plant's 10 kHz eq. (6) records for the search (500 Hz).
@@ -182,6 +187,7 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
 }
 
 pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), Failure> {
+    check_destinations(&[("--out", args.out.as_deref())], &[args.file.as_path()])?;
     if let (Some(demand), Some(error)) = (&args.demand, &args.error)
         && demand.trim() == error.trim()
     {
@@ -239,6 +245,20 @@ pub(crate) fn decoupling(args: &DecouplingArgs) -> Result<(), Failure> {
             "note: the compensation does not narrow the coupling error; check that the demand \
              and error columns are the ones meant (--demand, --error)"
         );
+    }
+    if let Some(out) = &args.out {
+        // The printed figures are rounded to 6 decimals; the file keeps
+        // every digit for `decoupling_params`.
+        write_json(
+            out,
+            &serde_json::json!({
+                "compensation": "D(f) = clamp(dk*f + db, q, p), seed 000 eq. (11)",
+                "record": args.file.display().to_string(),
+                "columns": used,
+                "fit": c,
+            }),
+        )?;
+        say!("compensation written to {}", out.display());
     }
     Ok(())
 }
