@@ -253,6 +253,23 @@ pub(crate) fn load_validation(
 }
 
 impl ProtocolArgs {
+    /// [`check_destinations`] for a fit's outputs: its model (`--out`), the
+    /// report and the predictions.
+    pub(crate) fn check_destinations(
+        &self,
+        out: Option<&Path>,
+        inputs: &[&Path],
+    ) -> Result<(), String> {
+        check_destinations(
+            &[
+                ("--out", out),
+                ("--report", self.report.as_deref()),
+                ("--predictions", self.predictions.as_deref()),
+            ],
+            inputs,
+        )
+    }
+
     pub(crate) fn plan_options(&self, default_warm_up: Option<f64>) -> PlanOptions {
         PlanOptions {
             segments: SegmentOptions {

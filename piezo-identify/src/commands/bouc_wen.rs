@@ -12,13 +12,11 @@ use piezo_identify::protocol::{
     BoucWenProtocolFit, BoucWenSettings, ForwardErrors, identify_bouc_wen_protocol,
 };
 
-use super::arguments::{
-    ColumnArgs, Loaded, ProtocolArgs, check_destinations, load, load_validation, open_plant,
-};
+use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, load_validation, open_plant};
 use super::progress::Reporter;
 use super::report::{
-    Notes, describe, describe_columns, pad, print_figure, print_plan, range_excess, write_json,
-    write_predictions,
+    Notes, bouc_wen_parameters, describe, describe_columns, pad, print_figure, print_plan,
+    range_excess, write_json, write_predictions,
 };
 use super::{Failure, plant_failure, protocol_failure};
 
@@ -232,14 +230,8 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     inputs.extend(args.protocol.validate.as_deref());
     inputs.extend(args.plant.as_deref());
     inputs.extend(args.plant_parameters.as_deref());
-    check_destinations(
-        &[
-            ("--out", args.out.as_deref()),
-            ("--report", args.protocol.report.as_deref()),
-            ("--predictions", args.protocol.predictions.as_deref()),
-        ],
-        &inputs,
-    )?;
+    args.protocol
+        .check_destinations(args.out.as_deref(), &inputs)?;
     let (loaded, default_decimation, default_warm_up) = bouc_wen_record(args)?;
     // The validation file is read before the fit: a typo costs nothing.
     let validation = match &args.protocol.validate {
@@ -435,14 +427,8 @@ pub(crate) fn print_bouc_wen_fit(
     let best = identification.best();
     let p = &best.params;
     say!(
-        "model: p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}; sensor offset {:.6} um",
-        p.p,
-        p.q,
-        p.a,
-        p.beta,
-        p.gamma,
-        p.n,
-        p.delta,
+        "model: {}; sensor offset {:.6} um",
+        bouc_wen_parameters(p),
         best.offset
     );
     let walls = best.on_search_walls(&settings.bounds);

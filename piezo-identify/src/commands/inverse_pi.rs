@@ -10,9 +10,7 @@ use piezo_identify::protocol::{
 };
 use piezo_identify::validation::centred_moving_average;
 
-use super::arguments::{
-    ColumnArgs, ProtocolArgs, auto_or, check_destinations, load, load_validation,
-};
+use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load, load_validation};
 use super::progress::Reporter;
 use super::report::{
     Notes, describe, describe_columns, pad, print_figure, print_plan, range_excess, write_json,
@@ -67,14 +65,8 @@ pub(crate) struct InversePiArgs {
 pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     let mut inputs = vec![args.file.as_path()];
     inputs.extend(args.protocol.validate.as_deref());
-    check_destinations(
-        &[
-            ("--out", args.out.as_deref()),
-            ("--report", args.protocol.report.as_deref()),
-            ("--predictions", args.protocol.predictions.as_deref()),
-        ],
-        &inputs,
-    )?;
+    args.protocol
+        .check_destinations(args.out.as_deref(), &inputs)?;
     let loaded = load(&args.file, &args.columns)?;
     // The validation file is read before the fit: a typo costs nothing.
     let validation = match &args.protocol.validate {

@@ -7,7 +7,7 @@ use clap::Args;
 
 use super::Failure;
 use super::arguments::{check_destinations, seconds};
-use super::report::write_json;
+use super::report::{bouc_wen_parameters, write_json};
 
 #[derive(Args)]
 pub(crate) struct LabRecordArgs {
@@ -117,16 +117,7 @@ pub(crate) fn xy200s_preset(args: &Xy200sPresetArgs) -> Result<(), Failure> {
             100.0 * model.rms_um / model.printed_span_um,
             model.stroke_scale
         );
-        say!(
-            "    p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}",
-            p.p,
-            p.q,
-            p.a,
-            p.beta,
-            p.gamma,
-            p.n,
-            p.delta
-        );
+        say!("    {}", bouc_wen_parameters(p));
     }
     write_json(&args.out, &preset.stage)?;
     say!("stage parameters written to {}", args.out.display());

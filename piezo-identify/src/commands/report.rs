@@ -201,6 +201,14 @@ pub(crate) fn pad(flags: &[bool], len: usize) -> Vec<bool> {
     padded
 }
 
+/// A Bouc-Wen model's parameters on one line, as the summaries print them.
+pub(crate) fn bouc_wen_parameters(p: &piezo_models::BoucWenParams) -> String {
+    format!(
+        "p {:.6e}, q {:+.0}, A {:.6e}, beta {:.6e}, gamma {:.6e}, n {:.4}, delta {:.6e}",
+        p.p, p.q, p.a, p.beta, p.gamma, p.n, p.delta
+    )
+}
+
 pub(crate) fn print_figure(name: &str, e: &ErrorFigures, unit: &str) {
     say!(
         "  {name:<16} RMS {:.6} {unit} ({:.3} %), largest {:.6} {unit} ({:.3} %)",
