@@ -383,29 +383,45 @@ def test_a_batch_file_resolves_paths_from_its_folder_and_names_bad_lines(tmp_pat
 
 
 def test_run_outputs_are_checked_before_the_run_and_a_table_holds_finite_numbers(tmp_path):
-    """`piezo-cosim run`: an --out or --series that is the scenario itself,
-    a folder, or one file for both is refused before the run (exit 2) and
-    the scenario is left as it was; a reference table with NaN is refused
-    at its line (exit 2; it reached the controller's fmi2SetReal as an FMU
-    failure, exit 1), its line counted with the blank lines before it."""
+    """`piezo-cosim run`: an --out that is the scenario itself, a folder, a
+    file the scenario reads (its reference table), or one file for --out
+    and --series is refused before the run (exit 2) and the files are left
+    as they were; /dev/null takes both, and a link is written through, not
+    replaced. A reference table with NaN is refused at its line (exit 2; it
+    reached the controller's fmi2SetReal as an FMU failure, exit 1), its
+    line counted with the blank lines before it."""
     scenario = scenario_of("table3_y.toml")
     scenario["duration"], scenario["metrics"]["from"] = 0.05, 0.0
     path = tmp_path / "run.json"
     path.write_text(json.dumps(scenario))
     before = path.read_bytes()
     binary = str(master.binary())
+    table = tmp_path / "y.csv"
+    table.write_text("t,y\n0,0\n0.05,1\n")
+    scenario["signal"]["controller.y_ref"] = {"table": {"file": str(table), "column": "y"}}
+    path.write_text(json.dumps(scenario))
+    before = path.read_bytes()
     for args, problem in (
-            (["--out", str(path)], "is the scenario being run"),
-            (["--series", str(tmp_path / "." / "run.json")], "the series is written as CSV"),
+            (["--out", str(tmp_path / "." / "run.json")], "is the scenario being run"),
             (["--out", str(tmp_path)], "is a folder"),
+            (["--series", str(table)], "which the scenario reads"),
             (["--out", str(tmp_path / "r.csv"), "--series", str(tmp_path / "r.csv")],
              "--series and --out both name")):
         done = subprocess.run([binary, "run", str(path), *args], capture_output=True, text=True)
         assert done.returncode == 2, done.stderr
         assert problem in done.stderr, done.stderr
         assert done.stdout == ""
-    assert path.read_bytes() == before
-    table = tmp_path / "y.csv"
+    assert path.read_bytes() == before and table.read_text() == "t,y\n0,0\n0.05,1\n"
+    done = subprocess.run([binary, "run", str(path), "--out", "/dev/null", "--series", "/dev/null"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    real, link = tmp_path / "real.json", tmp_path / "link.json"
+    real.write_text("{}")
+    link.symlink_to(real)
+    done = subprocess.run([binary, "run", str(path), "--out", str(link)], capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr
+    assert link.is_symlink() and json.loads(real.read_text())["status"] == "ok"
     table.write_text("t,y\n0,0\n\n0.02,1\n0.04,nan\n")
     scenario["signal"]["controller.y_ref"] = {"table": {"file": str(table), "column": "y"}}
     path.write_text(json.dumps(scenario))

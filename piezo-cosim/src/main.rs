@@ -340,6 +340,7 @@ fn main() -> ExitCode {
     };
     if let Some(path) = &series_path
         && path.extension().is_none_or(|e| e != "csv")
+        && !is_device(path)
     {
         eprintln!(
             "{}: the series is written as CSV (name it .csv); `python -m demo.master` also writes Parquet",
@@ -394,6 +395,23 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // Nor may a result overwrite a file the run reads (a reference table,
+    // a parameter set, an FMU).
+    for path in [&series_path, &out].into_iter().flatten() {
+        if let Some(input) = scenario
+            .input_files()
+            .into_iter()
+            .find(|f| same_file(path, f))
+        {
+            eprintln!(
+                "{}: is {}, which the scenario reads; writing there would overwrite it, so \
+                 give another name",
+                path.display(),
+                input.display()
+            );
+            return ExitCode::from(2);
+        }
+    }
     let options = RunOptions {
         series: series_path.is_some(),
         check_only,
@@ -439,7 +457,7 @@ fn main() -> ExitCode {
     let text = result.to_string();
     match out {
         Some(path) => {
-            if let Err(e) = write_whole(&path, &(text + "\n")) {
+            if let Err(e) = series::write_result(&path, |out| writeln!(out, "{text}")) {
                 eprintln!("{}: {e}", path.display());
                 return ExitCode::from(1);
             }
@@ -453,9 +471,19 @@ fn main() -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// Whether `path` is there and neither a regular file nor a folder:
+/// `/dev/null`, a named pipe, written straight through.
+fn is_device(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
 /// Whether two paths name one file, written yet or not (`./a.json` and
 /// `a.json`, a link and its target).
 fn same_file(a: &Path, b: &Path) -> bool {
+    // `/dev/null` for both outputs, or any device, is no file to lose.
+    if is_device(a) || is_device(b) {
+        return false;
+    }
     let resolved = |path: &Path| -> Option<PathBuf> {
         path.canonicalize().ok().or_else(|| {
             let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
@@ -467,15 +495,6 @@ fn same_file(a: &Path, b: &Path) -> bool {
         (Some(a), Some(b)) => a == b,
         _ => a == b,
     }
-}
-
-/// Writes `text` under a temporary name beside `path` and renames it into
-/// place, so that `path` is never a cut result.
-fn write_whole(path: &Path, text: &str) -> std::io::Result<()> {
-    let mut file = series::temporary_beside(path)?;
-    file.write_all(text.as_bytes())?;
-    file.persist(path).map_err(|e| e.error)?;
-    Ok(())
 }
 
 #[cfg(test)]

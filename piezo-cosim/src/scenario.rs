@@ -311,6 +311,23 @@ impl Scenario {
         }
     }
 
+    /// Every file the run reads: the FMUs, their parameter sets, the
+    /// reference tables (resolved as [`resolve_paths`](Self::resolve_paths)
+    /// leaves them).
+    pub fn input_files(&self) -> Vec<&Path> {
+        let mut files = Vec::new();
+        for fmu in self.fmu.values() {
+            files.push(fmu.path.as_path());
+            files.extend(fmu.parameter_sets.iter().map(PathBuf::as_path));
+        }
+        files.extend(
+            self.signal
+                .values()
+                .filter_map(|s| s.table.as_ref().map(|t| t.file.as_path())),
+        );
+        files
+    }
+
     /// The connections of the run.
     pub fn connections(&self) -> Vec<Connection> {
         self.connection.clone().unwrap_or_else(stage_wiring)
