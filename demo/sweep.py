@@ -828,7 +828,7 @@ def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict, files: dic
             set_path = spec.file(name)
             if set_path not in sets:
                 try:
-                    sets[set_path] = json.loads(set_path.read_text())
+                    sets[set_path] = json.loads(set_path.read_text(encoding="utf-8-sig"))
                 except (OSError, json.JSONDecodeError) as e:
                     raise _fail(spec.path, spec.text, name, f"parameter set {set_path}: {e}") \
                         from None
@@ -997,7 +997,8 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
                         given_in = [n for n in set_names if name in sets[spec.file(n)]]
                         if name not in own_values and given_in:
                             set_path = spec.file(given_in[-1])
-                            raise _fail(set_path, set_path.read_text(), f'"{name}"', problem)
+                            text = set_path.read_text(encoding="utf-8-sig")
+                            raise _fail(set_path, text, f'"{name}"', problem)
                         raise _fail(spec.path, spec.text, name, problem)
                     parameters[name] = perturbed(nominal, factor, low, high)
                     # The factor applied, after the range (the swept value); a

@@ -235,3 +235,33 @@ def test_a_spec_with_a_byte_order_mark_is_read(tmp_path):
     assert spec.read_bytes().startswith(b"\xef\xbb\xbf")
     loaded = sweep.load_spec(spec)
     assert loaded.study == "tiny"
+
+
+# --------------------------------------------------------------------------
+# piezo-identify on a plant FMU
+
+def test_a_parameter_set_the_plant_refuses_is_what_was_given(tmp_path):
+    """`piezo-identify bouc-wen --plant` with a parameter set whose value
+    the FMU refuses when it starts a session exits 2 (what was given does
+    not fit), naming the parameter, before any run; a call refused while
+    the plant runs would be the run's (exit 1)."""
+    parameters = tmp_path / "gain.json"
+    parameters.write_text('{"amplifier.gain": -5}')
+    done = subprocess.run(
+        [str(REPO_ROOT / "target" / "release" / "piezo-identify"), "bouc-wen", "--plant",
+         str(PLANT), "--plant-parameters", str(parameters), "--periods", "2"],
+        capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    assert "while starting a session" in done.stderr, done.stderr
+    assert "amplifier.gain = -5 is outside its allowed range" in done.stderr, done.stderr
+
+
+def test_a_parameter_set_with_a_byte_order_mark_is_read(tmp_path):
+    """A sweep's parameter set saved with a byte-order mark reads as its
+    twin without one, as piezo-cosim reads it (json.loads refused it)."""
+    (tmp_path / "noise.json").write_text('{"noise.seed": 7}', encoding="utf-8-sig")
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(SPEC.replace(f'path = "{PLANT}"',
+                                 f'path = "{PLANT}"\nparameter_sets = ["noise.json"]'))
+    runs, _ = sweep.expand(sweep.load_spec(spec))
+    assert len(runs) == 1

@@ -30,6 +30,15 @@ pub enum PlantError {
         time: f64,
         log: String,
     },
+    /// A call of a session's start (set-up, the parameter set, initialization)
+    /// refused: the FMU or the parameters given, not the run.
+    #[error("{path}: {call} returned status {status} while starting a session: {log}")]
+    Start {
+        path: PathBuf,
+        call: &'static str,
+        status: u32,
+        log: String,
+    },
 }
 
 /// An unpacked plant FMU with its binary loaded.
@@ -140,16 +149,37 @@ impl PlantFmu {
             plant: self,
             instance,
         };
+        let starting = |e: PlantError| match e {
+            PlantError::Call {
+                path,
+                call,
+                status,
+                log,
+                ..
+            } => PlantError::Start {
+                path,
+                call,
+                status,
+                log,
+            },
+            other => other,
+        };
         let status = session.instance.setup(0.0);
-        session.check("fmi2SetupExperiment", status)?;
+        session
+            .check("fmi2SetupExperiment", status)
+            .map_err(starting)?;
         let status = session.instance.enter_init();
-        session.check("fmi2EnterInitializationMode", status)?;
+        session
+            .check("fmi2EnterInitializationMode", status)
+            .map_err(starting)?;
         for (_, vr, value) in &self.parameters {
             let (call, status) = session.instance.set_typed(*vr, *value);
-            session.check(call, status)?;
+            session.check(call, status).map_err(starting)?;
         }
         let status = session.instance.exit_init();
-        session.check("fmi2ExitInitializationMode", status)?;
+        session
+            .check("fmi2ExitInitializationMode", status)
+            .map_err(starting)?;
         Ok(session)
     }
 

@@ -69,20 +69,13 @@ impl From<String> for Failure {
 /// A plant FMU's problem: one that is not a plant of FlexureStage's
 /// interface, or that refuses the parameter set or its start (set-up,
 /// parameters, initialization), is what was given; a call that fails once
-/// it runs is the run's.
+/// it runs (an input, a step, a state) is the run's.
 pub(crate) fn plant_failure(error: PlantError) -> Failure {
-    let given = match &error {
-        PlantError::Archive { .. } | PlantError::Interface { .. } => true,
-        PlantError::Call { call, .. } => {
-            call.starts_with("fmi2Set")
-                || *call == "fmi2EnterInitializationMode"
-                || *call == "fmi2ExitInitializationMode"
+    match error {
+        PlantError::Archive { .. } | PlantError::Interface { .. } | PlantError::Start { .. } => {
+            Failure::Input(error.to_string())
         }
-    };
-    if given {
-        Failure::Input(error.to_string())
-    } else {
-        Failure::Run(error.to_string())
+        PlantError::Call { .. } => Failure::Run(error.to_string()),
     }
 }
 
