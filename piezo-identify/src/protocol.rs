@@ -404,7 +404,7 @@ impl Plan {
     ) -> (Segments, Vec<bool>) {
         let thresholds = self.thresholds.resampled(self.sample_period, sample_period);
         let segments = if detect {
-            detect_segments(u, &thresholds)
+            detect_segments(u, &thresholds).staircase(u, u.len(), thresholds.span)
         } else {
             Segments::default()
         };
@@ -1377,10 +1377,29 @@ mod tests {
             "{:?}",
             plan.segments.stairs
         );
-        let fitted = plan.fitted().iter().filter(|f| **f).count();
-        let scored = plan.scored().iter().filter(|f| **f).count();
+        // Every jump is a step, and its settling (0.1 s, 20 samples) is
+        // neither fitted nor scored; the rest of each stair is, once the
+        // first loading (the first triangle) is over.
+        let jumps: Vec<usize> = (1..stairs.len())
+            .filter(|&n| stairs[n] != stairs[n - 1])
+            .collect();
+        assert_eq!(plan.segments.steps, jumps);
+        let (fitted, scored) = (plan.fitted(), plan.scored());
+        let used = |n: usize| fitted.get(n).copied().unwrap_or(false) || scored[n];
+        for &jump in jumps.iter().filter(|&&j| j >= 2000) {
+            let settle = plan.thresholds.settle_samples;
+            assert!((jump..jump + settle).all(|n| !used(n)), "{jump}");
+            assert!((jump + settle..jump + 200).all(used), "{jump}");
+        }
+        let fitted = fitted.iter().filter(|f| **f).count();
+        let scored = scored.iter().filter(|f| **f).count();
         assert!(fitted > 1500, "{fitted} of 4000");
         assert!(scored > 1500, "{scored} of 2000");
+        // A validation file of the same staircase is scored the same way
+        // (its holds were left out as rests, and nothing was scored).
+        let (segments, validation) = plan.validation_scored(&stairs, 0.005, None, true);
+        assert!(segments.rests.is_empty() && !segments.stairs.is_empty());
+        assert!(validation.iter().filter(|s| **s).count() > 3000);
 
         // Rests at one level (0 V) between bursts of a sine: rests still.
         let waits: Vec<f64> = (0..2000)
