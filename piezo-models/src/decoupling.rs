@@ -24,7 +24,7 @@
 //!   term of the law moves with θ_zd: the printed law could not make Table 3's
 //!   cut. The `stage` preset, fitted on this plant by the paper's procedure,
 //!   agrees: Δk4 = −0.0048 µm/µrad, 0.63 times the printed value (the other
-//!   three slopes are within 2 times Table 2's).
+//!   three slopes are within 2.1 times Table 2's).
 
 use serde::{Deserialize, Serialize};
 

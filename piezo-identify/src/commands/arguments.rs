@@ -12,7 +12,7 @@ use piezo_identify::plant::{PlantFmu, read_parameter_set};
 use piezo_identify::protocol::{Plan, PlanOptions, ZeroAlignment};
 use piezo_identify::segments::{SegmentOptions, Segments};
 use piezo_identify::validation::displacement_offset;
-use piezo_identify::{Column, FitOptions, ReadOptions, Record, Roles, Sampling, read_record};
+use piezo_identify::{Column, FitOptions, ReadOptions, Record, Roles, Sampling};
 use serde::Serialize;
 
 /// Where the record is cut, what is left out of fit and score, and the
@@ -176,10 +176,6 @@ impl SearchArgs {
             ..FitOptions::default()
         }
     }
-}
-
-pub(crate) fn read(path: &Path, options: &ReadOptions) -> Result<Record, String> {
-    read_record(path, options).map_err(|e| e.to_string())
 }
 
 pub(crate) fn resolve_offset(text: &str, y: &[f64], warm_up_samples: usize) -> Result<f64, String> {
@@ -523,8 +519,13 @@ pub(crate) fn check_destinations(
 }
 
 /// Whether two paths name one file, written yet or not (so `./a.csv` and
-/// `a.csv`, or a link and its target, count as one).
+/// `a.csv`, or a link and its target, count as one). A device such as
+/// `/dev/null`, named for two outputs, loses nothing.
 fn same_file(a: &Path, b: &Path) -> bool {
+    let device = |path: &Path| std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir());
+    if device(a) || device(b) {
+        return false;
+    }
     match (resolved(a), resolved(b)) {
         (Some(a), Some(b)) => a == b,
         _ => a == b,

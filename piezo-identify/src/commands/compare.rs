@@ -12,7 +12,7 @@ use piezo_identify::validation::{centred_moving_average, shifted};
 use piezo_identify::{FitError, StartResult};
 
 use super::Failure;
-use super::arguments::{ColumnArgs, SearchArgs, read, resolve_offset};
+use super::arguments::{ColumnArgs, SearchArgs, load, resolve_offset};
 use super::progress::progress_bar;
 use super::report::{describe, print_starts};
 
@@ -61,7 +61,8 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
             .file
             .as_ref()
             .expect("clap requires a file without --synthetic");
-        let record = read(path, &args.columns.read_options()?)?;
+        // Read as the fits read a record: a constant column is refused by name.
+        let record = load(path, &args.columns)?.record;
         let warm_up = (args.search.warm_up / record.sample_period).round() as usize;
         let smoothed = centred_moving_average(&record.output, args.smooth);
         let offset = resolve_offset(&args.offset, &smoothed, warm_up)?;
