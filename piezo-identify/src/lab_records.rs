@@ -57,6 +57,11 @@ pub enum Excitation {
         frequency: f64,
         envelope_period: f64,
     },
+    /// The command's range in `levels` evenly spaced stairs, climbed from
+    /// the lowest to the highest and back down again and again, each held
+    /// `hold` seconds: the quasi-static record a lab takes with a DC source
+    /// stepped by hand or by a script (a loop of held points).
+    Staircase { levels: usize, hold: f64 },
 }
 
 /// How the record is taken.
@@ -117,6 +122,17 @@ impl LabRecordSpec {
                 let envelope = 1.0 - 0.8 * (1.0 - (2.0 * phase - 1.0).abs());
                 mean + amplitude * envelope * (std::f64::consts::TAU * frequency * t).sin()
             }
+            Excitation::Staircase { levels, hold } => {
+                // levels ≥ 2 (checked by `lab_record`): up 0..L−1, down L−2..1.
+                let last = levels - 1;
+                let stair = (t / hold).floor() as usize % (2 * last);
+                let level = if stair <= last {
+                    stair
+                } else {
+                    2 * last - stair
+                };
+                mean - amplitude + 2.0 * amplitude * level as f64 / last as f64
+            }
         }
     }
 }
@@ -132,6 +148,8 @@ pub enum LabRecordError {
     Parameters(#[from] ParamError),
     #[error("{0} must be positive and finite")]
     Setting(&'static str),
+    #[error("a staircase needs at least 2 levels, not {0}")]
+    Levels(usize),
     #[error(
         "{samples} samples asked (rate times rest and excitation), more than the {MAX_LAB_SAMPLES} a record is allowed here"
     )]
@@ -155,6 +173,14 @@ pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
     }
     if !(spec.rest_seconds.is_finite() && spec.rest_seconds >= 0.0) {
         return Err(LabRecordError::Setting("rest_seconds"));
+    }
+    if let Excitation::Staircase { levels, hold } = spec.excitation {
+        if levels < 2 {
+            return Err(LabRecordError::Levels(levels));
+        }
+        if !(hold.is_finite() && hold > 0.0) {
+            return Err(LabRecordError::Setting("hold"));
+        }
     }
     // Two f64 per sample are held and written: a rate of 1e12 Hz asked for
     // 24 TB and aborted the process instead of saying so.
@@ -230,6 +256,29 @@ mod tests {
     }
 
     #[test]
+    fn a_staircase_climbs_the_drive_range_and_comes_back_down() {
+        let spec = LabRecordSpec::new(
+            100.0,
+            Drive::Unipolar,
+            Excitation::Staircase {
+                levels: 4,
+                hold: 0.5,
+            },
+            4.0,
+        );
+        let record = lab_record(&spec).unwrap();
+        let rest = 200;
+        // Stairs 0.5, 3.5, 6.5, 9.5 V up, 6.5, 3.5 down, 0.5 again.
+        let held: Vec<f64> = (0..8).map(|k| record.input[rest + 50 * k + 25]).collect();
+        let expected = [0.5, 3.5, 6.5, 9.5, 6.5, 3.5, 0.5, 3.5];
+        for (got, want) in held.iter().zip(expected) {
+            assert!((got - want).abs() < 1e-12, "{held:?}");
+        }
+        // Held within each stair.
+        assert!(record.input[rest..rest + 50].iter().all(|u| *u == 0.5));
+    }
+
+    #[test]
     fn refuses_bad_settings() {
         let mut spec = LabRecordSpec::new(
             0.0,
@@ -249,6 +298,17 @@ mod tests {
         );
         // Refused before anything is held (it aborted the process).
         spec.rest_seconds = 1.0;
+        spec.excitation = Excitation::Staircase {
+            levels: 1,
+            hold: 0.2,
+        };
+        assert_eq!(lab_record(&spec), Err(LabRecordError::Levels(1)));
+        spec.excitation = Excitation::Staircase {
+            levels: 4,
+            hold: f64::NAN,
+        };
+        assert_eq!(lab_record(&spec), Err(LabRecordError::Setting("hold")));
+        spec.excitation = Excitation::Sine { frequency: 1.0 };
         spec.sample_rate = 1e12;
         assert!(matches!(
             lab_record(&spec),

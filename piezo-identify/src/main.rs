@@ -58,8 +58,8 @@ enum Command {
     /// the printed Tables 1-2 (units and conversion: piezo_identify::xy200s).
     Xy200sPreset(Xy200sPresetArgs),
     /// Write a record taken from the simulated stage (FlexureStage, y
-    /// actuator) the way a lab takes one: rest at 0 V, a step onto a sine,
-    /// a sensor offset and noise; columns time [s], command [V],
+    /// actuator) the way a lab takes one: rest at 0 V, a step onto a sine
+    /// or a staircase, a sensor offset and noise; columns time [s], command [V],
     /// displacement [um].
     LabRecord(LabRecordArgs),
 }

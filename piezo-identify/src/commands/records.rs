@@ -24,10 +24,17 @@ pub(crate) struct LabRecordArgs {
     /// seconds (0: a plain sine).
     #[arg(long, default_value_t = 0.0, value_parser = seconds)]
     pub(crate) sweep: f64,
-    /// Seconds at rest (0 V) before the step onto the sine.
+    /// Instead of a sine, a staircase through the command range and back,
+    /// each stair held this many seconds (0: a sine).
+    #[arg(long, default_value_t = 0.0, value_parser = seconds)]
+    pub(crate) stairs: f64,
+    /// Stairs from the lowest command to the highest (with --stairs).
+    #[arg(long, default_value_t = 10)]
+    pub(crate) levels: usize,
+    /// Seconds at rest (0 V) before the step onto the excitation.
     #[arg(long, default_value_t = 2.0, value_parser = seconds)]
     pub(crate) rest: f64,
-    /// Seconds of sine after the step.
+    /// Seconds of the sine (or staircase) after the step.
     #[arg(long, default_value_t = 8.0, value_parser = seconds)]
     pub(crate) seconds: f64,
     /// Sensor offset [um].
@@ -64,7 +71,17 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
         } else {
             Drive::Unipolar
         },
-        excitation: if args.sweep > 0.0 {
+        excitation: if args.stairs > 0.0 {
+            if args.sweep > 0.0 {
+                return Err(Failure::Input(
+                    "--stairs and --sweep are two excitations: give one".into(),
+                ));
+            }
+            Excitation::Staircase {
+                levels: args.levels,
+                hold: args.stairs,
+            }
+        } else if args.sweep > 0.0 {
             Excitation::SweptSine {
                 frequency: args.frequency,
                 envelope_period: args.sweep,
