@@ -233,8 +233,7 @@ pub fn reversing_operators(
     let dead_zone_thresholds = &dead_zone_thresholds[..ws.len()];
     let thresholds = backlash_thresholds(u1max);
     let mut memories = [0.0; BACKLASH_OPERATORS];
-    let mut rose = [false; BACKLASH_OPERATORS];
-    let mut fell = [false; BACKLASH_OPERATORS];
+    let mut moves = [FittedMoves::default(); BACKLASH_OPERATORS];
     let mut lowest = [f64::INFINITY; BACKLASH_OPERATORS];
     let mut highest = [f64::NEG_INFINITY; BACKLASH_OPERATORS];
     let (mut z_low, mut z_high) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -245,16 +244,15 @@ pub fn reversing_operators(
             z_high = z_high.max(z);
         }
         for (i, (memory, r)) in memories.iter_mut().zip(&thresholds).enumerate() {
-            let next = backlash(z, *r, *memory);
+            *memory = backlash(z, *r, *memory);
             if fit {
-                rose[i] |= next > *memory;
-                fell[i] |= next < *memory;
-                lowest[i] = lowest[i].min(next);
-                highest[i] = highest[i].max(next);
+                moves[i].see(*memory);
+                lowest[i] = lowest[i].min(*memory);
+                highest[i] = highest[i].max(*memory);
             }
-            *memory = next;
         }
     }
+    let (rose, fell) = (moves.map(|m| m.rose), moves.map(|m| m.fell));
     let travel = MIN_REVERSING_TRAVEL * (z_high - z_low);
     std::array::from_fn(|i| rose[i] && fell[i] && highest[i] - lowest[i] >= travel)
 }
@@ -269,6 +267,30 @@ pub fn reversing_operators(
 /// operator (r = 0.45 of the span: it travels 10 % of it).
 pub const MIN_REVERSING_TRAVEL: f64 = 0.1;
 
+/// Whether an operator's output rose and fell from one fitted sample to the
+/// next fitted sample, wherever in between it moved: a staircase makes every
+/// move in a left-out settling window (its output stands still over each
+/// stair's fitted samples), and the operators it reverses were judged not
+/// to reverse when only moves between neighbouring samples counted (the
+/// classical P-I model was then left with its straight line).
+#[derive(Clone, Copy, Debug, Default)]
+struct FittedMoves {
+    last: Option<f64>,
+    rose: bool,
+    fell: bool,
+}
+
+impl FittedMoves {
+    /// The operator's output at the next fitted sample.
+    fn see(&mut self, output: f64) {
+        if let Some(last) = self.last {
+            self.rose |= output > last;
+            self.fell |= output < last;
+        }
+        self.last = Some(output);
+    }
+}
+
 /// [`reversing_operators`] for the classical P-I model's operators on y.
 pub fn reversing_classical_operators(
     thresholds: &[f64; CLASSICAL_OPERATORS],
@@ -276,8 +298,7 @@ pub fn reversing_classical_operators(
     fitted: &[bool],
 ) -> [bool; CLASSICAL_OPERATORS] {
     let mut memories = [0.0; CLASSICAL_OPERATORS];
-    let mut rose = [false; CLASSICAL_OPERATORS];
-    let mut fell = [false; CLASSICAL_OPERATORS];
+    let mut moves = [FittedMoves::default(); CLASSICAL_OPERATORS];
     let (mut y_low, mut y_high) = (f64::INFINITY, f64::NEG_INFINITY);
     for (&yn, &fit) in y.iter().zip(fitted) {
         if fit {
@@ -285,20 +306,18 @@ pub fn reversing_classical_operators(
             y_high = y_high.max(yn);
         }
         for (i, (memory, r)) in memories.iter_mut().zip(thresholds).enumerate() {
-            let next = backlash(yn, *r, *memory);
+            *memory = backlash(yn, *r, *memory);
             if fit {
-                rose[i] |= next > *memory;
-                fell[i] |= next < *memory;
+                moves[i].see(*memory);
             }
-            *memory = next;
         }
     }
     // An operator of threshold 0 is its input itself, the model's straight
     // line: it needs no reversal to be identified, only fitted samples at
-    // more than one level. A staircase whose every change falls in a left-out
-    // settling window reverses no operator on its fitted samples; without
-    // this the model was a constant, worse than the straight line it holds.
-    std::array::from_fn(|i| (rose[i] && fell[i]) || (thresholds[i] == 0.0 && y_high > y_low))
+    // more than one level (a record that only rises, or a single stair).
+    std::array::from_fn(|i| {
+        (moves[i].rose && moves[i].fell) || (thresholds[i] == 0.0 && y_high > y_low)
+    })
 }
 
 impl RateDependentLayout {
@@ -386,11 +405,13 @@ mod tests {
     }
 
     /// A staircase whose every change falls in a left-out settling window:
-    /// no operator reverses on the fitted samples, and the straight line
-    /// (threshold 0) is still the model's, as long as the fitted samples
-    /// stand at more than one level; on one level it carries nothing.
+    /// each operator's output stands still over the fitted samples of every
+    /// stair and moves only in between, and the staircase up and down
+    /// reverses every operator narrower than half its span (all of the
+    /// classical model's: r up to 0.45 of it), so all are kept. On one level
+    /// the fitted samples carry nothing, not even the straight line.
     #[test]
-    fn the_straight_line_operator_is_kept_without_reversals() {
+    fn operators_reversed_between_fitted_samples_are_kept() {
         let stairs = [0.0, 2.0, 4.0, 6.0, 4.0, 2.0, 0.0];
         let y: Vec<f64> = stairs
             .iter()
@@ -401,8 +422,11 @@ mod tests {
         let thresholds = ClassicalPiParams::evenly_spaced_thresholds(6.0);
         assert_eq!(thresholds[0], 0.0);
         let kept = reversing_classical_operators(&thresholds, &y, &fitted);
-        assert!(kept[0], "{kept:?}");
-        assert!(kept[1..].iter().all(|k| !k), "{kept:?}");
+        assert!(kept.iter().all(|k| *k), "{kept:?}");
+        // Up only: nothing reverses but the line is kept.
+        let up: Vec<bool> = (0..y.len()).map(|n| n < 200 && n % 50 >= 10).collect();
+        let kept = reversing_classical_operators(&thresholds, &y, &up);
+        assert!(kept[0] && kept[1..].iter().all(|k| !k), "{kept:?}");
         let one_level: Vec<bool> = (0..y.len()).map(|n| (60..100).contains(&n)).collect();
         let kept = reversing_classical_operators(&thresholds, &y, &one_level);
         assert!(kept.iter().all(|k| !k), "{kept:?}");
