@@ -20,6 +20,8 @@ declare -A LAB=(
   [lab_5kHz_unipolar_10Hz]="--rate 5000 --drive unipolar --frequency 10 --seconds 4"
   [lab_5kHz_bipolar_1Hz]="--rate 5000 --drive bipolar --frequency 1 --seconds 6"
   [lab_200Hz_unipolar_1Hz_swept]="--rate 200 --drive unipolar --frequency 1 --seconds 30 --sweep 10"
+  [lab_200Hz_unipolar_stairs]="--rate 200 --drive unipolar --stairs 0.2 --seconds 40"
+  [lab_5kHz_unipolar_stairs]="--rate 5000 --drive unipolar --stairs 0.2 --seconds 40"
 )
 for name in "${!LAB[@]}"; do
   # shellcheck disable=SC2086

@@ -15,17 +15,20 @@
 //! - **What is fitted** ([`Plan`], [`crate::segments`]): not the rest
 //!   segments, not the settling after each voltage step, not the first
 //!   settling time of the record; the models run through all of them. The
-//!   same samples are left out of the score.
+//!   same samples are left out of the score. Over the settling after a
+//!   step the inverse models are driven with the settled displacement
+//!   ([`crate::validation::held_over_settling`] says why).
 //! - **Choices made from the fit part only** (inverse P-I): the smoothing of
 //!   the displacement (none, or a centred moving average over 1/160, 1/80 or
 //!   1/40 of the fastest cycle: at most 0.1 % amplitude loss at that cycle)
 //!   and rate-dependent or constant backlash weights are chosen by forward
 //!   validation inside the fit part: the (c, w_s) search runs on its first
-//!   70 % of fitted samples, every candidate's linear part is solved there,
-//!   and the candidates are compared on the last 30 %, predicted with the
-//!   operator state carried over, as the scored part will be. Rate-dependent
-//!   weights (ten more parameters) are taken only when they lower that error
-//!   by more than 5 %. The classical P-I baseline gets its own smoothing by
+//!   70 % of fitted samples; with each of its [`INNER_CANDIDATES`] best
+//!   distinct ends every candidate's linear part is solved there, and the
+//!   candidates are compared on the last 30 %, predicted with the operator
+//!   state carried over, as the scored part will be. Rate-dependent weights
+//!   (ten more parameters) are taken only when their best error is lower
+//!   than the constant weights' best by more than 5 %. The classical P-I baseline gets its own smoothing by
 //!   the same comparison.
 //! - **Cost**: the (c, w_s) searches run on every m-th sample, m such that
 //!   at most about 3000 samples are searched and at least 100 per fastest
@@ -75,11 +78,15 @@ use crate::segments::{
     SegmentOptions, SegmentThresholds, Segments, detect_segments, fastest_cycle, first_loading_end,
     merge, thresholds,
 };
-use crate::validation::smoothed_between_steps;
+use crate::validation::{Steps, inverse_model_input, smoothed_between_steps};
 
 /// Share of the fit part's fitted samples the inner search runs on; the rest
 /// scores the candidates.
 pub const INNER_TRAIN_FRACTION: f64 = 0.7;
+/// Ends of the inner search compared by the forward validation: one end
+/// alone made the choice of weights depend on the seed where two basins of
+/// the search fit alike and extrapolate differently.
+pub const INNER_CANDIDATES: usize = 5;
 /// Rate-dependent weights must lower the inner validation error by more than
 /// this fraction.
 pub const RATE_DEPENDENCE_MARGIN: f64 = 0.05;
@@ -383,6 +390,29 @@ impl Plan {
         flags(self.samples, self.fit_end, &self.scored_excluded)
     }
 
+    /// The record's voltage steps and the settling after each.
+    pub fn steps(&self) -> Steps<'_> {
+        Steps {
+            starts: &self.segments.steps,
+            settle: self.thresholds.settle_samples,
+        }
+    }
+
+    /// The settling after a step in samples of a record sampled every
+    /// `sample_period` s (a validation file's).
+    pub fn settle_samples_at(&self, sample_period: f64) -> usize {
+        self.thresholds
+            .resampled(self.sample_period, sample_period)
+            .settle_samples
+    }
+
+    /// How many of the input's fastest cycles the fitted samples span, in
+    /// time (None when the input has no cycle).
+    pub fn fitted_cycles(&self) -> Option<f64> {
+        let fitted = self.fitted().iter().filter(|f| **f).count();
+        self.fastest_cycle.map(|cycle| fitted as f64 / cycle)
+    }
+
     /// Whether the record has a scored part.
     pub fn has_scored_part(&self) -> bool {
         self.fit_end < self.samples
@@ -618,6 +648,9 @@ pub struct Candidate {
     /// Half width of the moving average [samples].
     pub smoothing: usize,
     pub rate_dependent: bool,
+    /// The start of the inner search whose (c, w_s) it takes (None for the
+    /// classical model).
+    pub start: Option<usize>,
     /// RMS error on the validation samples [V].
     pub validation_rms: f64,
 }
@@ -688,16 +721,16 @@ pub struct InversePiPredictions {
 
 impl InversePiIdentification {
     /// Each model's voltage for the measured displacement `y` of a record
-    /// run from its first sample; `steps` its voltage steps (the smoothing
-    /// stops at them).
+    /// run from its first sample; `steps` its voltage steps (the models are
+    /// driven with [`inverse_model_input`]).
     pub fn predictions_on(
         &self,
         y: &[f64],
         sample_period: f64,
-        steps: &[usize],
+        steps: Steps,
     ) -> InversePiPredictions {
         let prepared = |half_width: usize, offset: f64| -> Vec<f64> {
-            smoothed_between_steps(y, half_width, steps)
+            inverse_model_input(y, half_width, steps)
                 .iter()
                 .map(|v| v - offset)
                 .collect()
@@ -726,14 +759,14 @@ impl InversePiIdentification {
     }
 
     /// The models' errors on a record (`y` measured displacement, `u`
-    /// voltage) run from its first sample; `steps` its voltage steps (the
-    /// smoothing stops at them), `scored` the samples scored.
+    /// voltage) run from its first sample; `steps` its voltage steps (as
+    /// for [`Self::predictions_on`]), `scored` the samples scored.
     pub fn errors_on(
         &self,
         y: &[f64],
         u: &[f64],
         sample_period: f64,
-        steps: &[usize],
+        steps: Steps,
         scored: &[bool],
     ) -> InversePiErrors {
         let predictions = self.predictions_on(y, sample_period, steps);
@@ -763,34 +796,107 @@ fn inner_split(fitted: &[bool], fraction: f64) -> usize {
     fitted.len()
 }
 
-/// Least squares of `targets` on the given columns of the rows `train`
-/// (`intercept` the position of the constant among them), RMS of the
-/// prediction on the rows `validation`.
-fn validation_rms(
-    x: &DMatrix<f64>,
-    targets: &[f64],
-    columns: &[usize],
-    intercept: usize,
-    train: &[usize],
-    validation: &[usize],
-) -> f64 {
-    let sub = |rows: &[usize]| {
-        DMatrix::from_fn(rows.len(), columns.len(), |i, j| x[(rows[i], columns[j])])
-    };
-    let train_targets: Vec<f64> = train.iter().map(|&r| targets[r]).collect();
-    let solution = solve_least_squares_with_intercept_regularized(
-        sub(train),
-        &train_targets,
-        intercept,
-        LINEAR_RSS_INCREASE,
-    );
-    let predicted = sub(validation) * nalgebra::DVector::from_vec(solution.coefficients);
-    let sum: f64 = validation
-        .iter()
-        .zip(predicted.iter())
-        .map(|(&r, p)| (p - targets[r]).powi(2))
-        .sum();
-    (sum / validation.len().max(1) as f64).sqrt()
+/// The (c, w_s) the forward validation compares: the best
+/// [`INNER_CANDIDATES`] distinct ends of the inner search's polished starts.
+fn inner_candidates(starts: &[StartResult]) -> Vec<&StartResult> {
+    let mut polished: Vec<&StartResult> = starts.iter().filter(|s| s.polished).collect();
+    polished.sort_by(|a, b| a.objective.total_cmp(&b.objective));
+    let mut kept: Vec<&StartResult> = Vec::new();
+    for start in polished {
+        let same = |other: &&StartResult| {
+            (other.c - start.c).abs() <= 1e-6 * start.c.abs()
+                && other
+                    .ws
+                    .iter()
+                    .zip(&start.ws)
+                    .all(|(a, b)| (a - b).abs() <= 1e-6)
+        };
+        if !kept.iter().any(same) && kept.len() < INNER_CANDIDATES {
+            kept.push(start);
+        }
+    }
+    kept
+}
+
+/// The forward validation inside the fit part: the linear part fitted on
+/// the fitted samples before `train_end`, scored on those after it.
+struct InnerSplit {
+    /// The fitted samples of the whole fit part.
+    fitted: Vec<bool>,
+    /// The fitted samples before `train_end` (the operators' reversals are
+    /// judged where the linear part is fitted).
+    train_mask: Vec<bool>,
+    /// The voltage at each fitted sample, in sample order.
+    targets: Vec<f64>,
+    /// Positions in `targets` of the train and validation samples.
+    train: Vec<usize>,
+    validation: Vec<usize>,
+}
+
+impl InnerSplit {
+    fn new(fitted: &[bool], u: &[f64], train_end: usize) -> InnerSplit {
+        let rows: Vec<usize> = (0..fitted.len()).filter(|&n| fitted[n]).collect();
+        InnerSplit {
+            fitted: fitted.to_vec(),
+            train_mask: (0..fitted.len())
+                .map(|n| fitted[n] && n < train_end)
+                .collect(),
+            targets: rows.iter().map(|&n| u[n]).collect(),
+            train: (0..rows.len()).filter(|&i| rows[i] < train_end).collect(),
+            validation: (0..rows.len()).filter(|&i| rows[i] >= train_end).collect(),
+        }
+    }
+
+    /// The proposed model's validation RMS [V] for (c, w_s) on the shifted
+    /// displacement `y`, one per layout (rate-dependent or constant
+    /// backlash weights).
+    fn proposed_rms(&self, y: &[f64], dt: f64, c: f64, ws: &[f64], layouts: &[bool]) -> Vec<f64> {
+        let y_max = range_of(y, &self.train_mask).1;
+        let thresholds = SIX_DEAD_ZONE_PATTERN.map(|p| p * c);
+        let u1max = u1max_for(ws, &thresholds, y_max);
+        let mut x = masked_rate_dependent_regressors(PROPOSED, c, ws, u1max, y, dt, &self.fitted);
+        let reversing = reversing_operators(PROPOSED, c, ws, u1max, y, &self.train_mask);
+        for operator in (0..reversing.len()).filter(|&i| !reversing[i]) {
+            for column in PROPOSED.operator_columns(operator) {
+                x.column_mut(column).fill(0.0);
+            }
+        }
+        layouts
+            .iter()
+            .map(|&rate_dependent| {
+                let columns: Vec<usize> = if rate_dependent {
+                    (0..PROPOSED.linear_columns()).collect()
+                } else {
+                    (0..4).chain(14..24).collect()
+                };
+                self.rms(&x, &columns, 3)
+            })
+            .collect()
+    }
+
+    /// Least squares of the targets on the given columns of the train rows
+    /// (`intercept` the position of the constant among them), RMS of the
+    /// prediction on the validation rows.
+    fn rms(&self, x: &DMatrix<f64>, columns: &[usize], intercept: usize) -> f64 {
+        let sub = |rows: &[usize]| {
+            DMatrix::from_fn(rows.len(), columns.len(), |i, j| x[(rows[i], columns[j])])
+        };
+        let train_targets: Vec<f64> = self.train.iter().map(|&r| self.targets[r]).collect();
+        let solution = solve_least_squares_with_intercept_regularized(
+            sub(&self.train),
+            &train_targets,
+            intercept,
+            LINEAR_RSS_INCREASE,
+        );
+        let predicted = sub(&self.validation) * nalgebra::DVector::from_vec(solution.coefficients);
+        let sum: f64 = self
+            .validation
+            .iter()
+            .zip(predicted.iter())
+            .map(|(&r, p)| (p - self.targets[r]).powi(2))
+            .sum();
+        (sum / self.validation.len().max(1) as f64).sqrt()
+    }
 }
 
 /// Fits seed 000's proposed model to `record` by the protocol of the module
@@ -815,7 +921,11 @@ pub fn identify_inverse_pi(
         .copied()
         .filter(|&s| s < fit_end)
         .collect();
-    let smooth = |half_width: usize| smoothed_between_steps(y_fit, half_width, &fit_steps);
+    let fit_settling = Steps {
+        starts: &fit_steps,
+        settle: plan.thresholds.settle_samples,
+    };
+    let smooth = |half_width: usize| inverse_model_input(y_fit, half_width, fit_settling);
     let smoothings = match settings.smoothing {
         Some(h) => vec![h],
         None => plan.smoothing_candidates(),
@@ -872,43 +982,27 @@ pub fn identify_inverse_pi(
             &tick,
         )?;
         let (c, ws) = (inner.params.c, inner.params.ws);
-        let rows: Vec<usize> = (0..fit_end).filter(|&n| fitted[n]).collect();
-        let targets: Vec<f64> = rows.iter().map(|&n| u_fit[n]).collect();
-        let train: Vec<usize> = (0..rows.len()).filter(|&i| rows[i] < train_end).collect();
-        // The train samples over the whole fit part, for the operators'
-        // reversals (judged where the linear part is fitted).
-        let train_mask: Vec<bool> = (0..fit_end).map(|n| fitted[n] && n < train_end).collect();
-        let validation: Vec<usize> = (0..rows.len()).filter(|&i| rows[i] >= train_end).collect();
+        let searched = inner_candidates(&inner.starts);
+        let split = InnerSplit::new(&fitted, u_fit, train_end);
         let mut proposed = Vec::new();
         let mut classical = Vec::new();
         for &half_width in &smoothings {
             let (y, _) = prepared(half_width);
-            let y_max = range_of(&y[..train_end], &train_flags).1;
-            let thresholds = SIX_DEAD_ZONE_PATTERN.map(|p| p * c);
-            let u1max = u1max_for(&ws, &thresholds, y_max);
-            let mut x = masked_rate_dependent_regressors(PROPOSED, c, &ws, u1max, &y, dt, &fitted);
-            let reversing = reversing_operators(PROPOSED, c, &ws, u1max, &y, &train_mask);
-            for operator in (0..reversing.len()).filter(|&i| !reversing[i]) {
-                for column in PROPOSED.operator_columns(operator) {
-                    x.column_mut(column).fill(0.0);
+            for start in &searched {
+                let errors = split.proposed_rms(&y, dt, start.c, &start.ws, &layouts);
+                for (&rate_dependent, validation_rms) in layouts.iter().zip(errors) {
+                    proposed.push(Candidate {
+                        smoothing: half_width,
+                        rate_dependent,
+                        start: Some(start.start),
+                        validation_rms,
+                    });
                 }
-            }
-            for &rate_dependent in &layouts {
-                let columns: Vec<usize> = if rate_dependent {
-                    (0..PROPOSED.linear_columns()).collect()
-                } else {
-                    (0..4).chain(14..24).collect()
-                };
-                proposed.push(Candidate {
-                    smoothing: half_width,
-                    rate_dependent,
-                    validation_rms: validation_rms(&x, &targets, &columns, 3, &train, &validation),
-                });
             }
             let (low, high) = range_of(&y[..train_end], &train_flags);
             let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
             let mut x = masked_classical_regressors(&thresholds, &y, &fitted);
-            let reversing = reversing_classical_operators(&thresholds, &y, &train_mask);
+            let reversing = reversing_classical_operators(&thresholds, &y, &split.train_mask);
             for column in (0..reversing.len()).filter(|&i| !reversing[i]) {
                 x.column_mut(column).fill(0.0);
             }
@@ -916,14 +1010,8 @@ pub fn identify_inverse_pi(
             classical.push(Candidate {
                 smoothing: half_width,
                 rate_dependent: false,
-                validation_rms: validation_rms(
-                    &x,
-                    &targets,
-                    &columns,
-                    CLASSICAL_OPERATORS,
-                    &train,
-                    &validation,
-                ),
+                start: None,
+                validation_rms: split.rms(&x, &columns, CLASSICAL_OPERATORS),
             });
         }
         let best = |rate: bool| {
@@ -955,8 +1043,8 @@ pub fn identify_inverse_pi(
             classical_best,
             Some(CrossValidation {
                 train_end,
-                train_samples: train.len(),
-                validation_samples: validation.len(),
+                train_samples: split.train.len(),
+                validation_samples: split.validation.len(),
                 c,
                 ws: ws.to_vec(),
                 proposed,
@@ -1009,13 +1097,13 @@ pub fn identify_inverse_pi(
         unseen: None,
         seconds: 0.0,
     };
-    identification.fit_errors = identification.errors_on(y_fit, u_fit, dt, &fit_steps, &fitted);
+    identification.fit_errors = identification.errors_on(y_fit, u_fit, dt, fit_settling, &fitted);
     if plan.has_scored_part() {
         identification.unseen = Some(identification.errors_on(
             &record.output,
             &record.input,
             dt,
-            &plan.segments.steps,
+            plan.steps(),
             &plan.scored(),
         ));
     }

@@ -87,6 +87,58 @@ pub fn smoothed_between_steps(y: &[f64], half_width: usize, steps: &[usize]) -> 
     smoothed
 }
 
+/// A record's voltage steps and the settling after each.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Steps<'a> {
+    /// The first sample after each step, sorted.
+    pub starts: &'a [usize],
+    /// Samples of settling after each step.
+    pub settle: usize,
+}
+
+/// The displacement with each step's settling held at its settled value:
+/// from each step's first sample to the end of its settling (cut short by
+/// the next step and by the record's end) the displacement is that of the
+/// first sample after the settling (the last before the next step or the
+/// end when the settling is cut short).
+///
+/// A step moves the actuator's voltage once, one way, and its hysteresis
+/// with it; the stage's structural modes meanwhile ring in the measured
+/// displacement (FlexureStage's 790 Hz mode swings past the new position
+/// and back several times at 5 kHz). An inverse hysteresis model driven by
+/// that ringing turns its play operators at reversals the actuator never
+/// made, and leaves them in a state its fit must then explain: on a 5 kHz
+/// staircase of 0.2 s stairs the ringing made the (c, w_s) search's
+/// objective a field of local minima, each seed ending in another. The
+/// settling is neither fitted nor scored; only the models' state after it
+/// depends on what they are driven with there.
+pub fn held_over_settling(y: &[f64], steps: Steps) -> Vec<f64> {
+    let mut held = y.to_vec();
+    if y.is_empty() || steps.settle == 0 {
+        return held;
+    }
+    let starts: Vec<usize> = steps
+        .starts
+        .iter()
+        .copied()
+        .filter(|&s| s < y.len())
+        .collect();
+    for (k, &start) in starts.iter().enumerate() {
+        let next = starts.get(k + 1).copied().unwrap_or(y.len());
+        let end = (start + steps.settle).min(next);
+        let settled = if end < next { y[end] } else { y[end - 1] };
+        held[start..end].fill(settled);
+    }
+    held
+}
+
+/// What an inverse model is driven with: the displacement held over each
+/// step's settling ([`held_over_settling`]), then smoothed between steps
+/// ([`smoothed_between_steps`]).
+pub fn inverse_model_input(y: &[f64], half_width: usize, steps: Steps) -> Vec<f64> {
+    smoothed_between_steps(&held_over_settling(y, steps), half_width, steps.starts)
+}
+
 /// The spans that turn voltage errors into relative figures.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ScaleReference {
@@ -175,6 +227,55 @@ mod tests {
             centred_moving_average(&y, 1)
         );
         assert_eq!(centred_moving_average(&y, 1)[2], 3.0);
+    }
+
+    #[test]
+    fn the_settling_after_a_step_is_held_at_its_settled_value() {
+        // Steps at 2 (settled at 5) and 7 (cut short by the end at 9).
+        let y = [0.0, 0.0, 9.0, 12.0, 7.0, 10.0, 10.0, 4.0, 1.0];
+        let steps = Steps {
+            starts: &[2, 7],
+            settle: 3,
+        };
+        assert_eq!(
+            held_over_settling(&y, steps),
+            vec![0.0, 0.0, 10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0]
+        );
+        // A step before the settling ends holds the last sample before it;
+        // the next step's settling (4..7) holds its own settled value.
+        let steps = Steps {
+            starts: &[2, 4],
+            settle: 3,
+        };
+        assert_eq!(
+            held_over_settling(&y, steps),
+            vec![0.0, 0.0, 12.0, 12.0, 4.0, 4.0, 4.0, 4.0, 1.0]
+        );
+        // No settling, no steps: the record as measured.
+        for steps in [
+            Steps {
+                starts: &[2],
+                settle: 0,
+            },
+            Steps::default(),
+        ] {
+            assert_eq!(held_over_settling(&y, steps), y.to_vec());
+        }
+        assert_eq!(
+            inverse_model_input(
+                &y,
+                1,
+                Steps {
+                    starts: &[2, 7],
+                    settle: 3
+                }
+            ),
+            smoothed_between_steps(
+                &[0.0, 0.0, 10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0],
+                1,
+                &[2, 7]
+            )
+        );
     }
 
     #[test]

@@ -1361,3 +1361,102 @@ fn a_closed_standard_output_does_not_lose_the_results() {
         serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
     assert!(written["params"].is_object(), "{written}");
 }
+
+/// `lab-record --stairs` writes a staircase; fitted on less than one of its
+/// cycles (16 s of 0.2 s stairs at 200 Hz, split in two: 0.94 of the 3.6 s
+/// cycle is left once the rest, the first loading and each stair's settling
+/// are out) both fits say so, in the summary and in `--report`; the same
+/// staircase for 40 s gets no such note. A validation file that cycles ten
+/// times faster than the fitted staircase is noted; the staircase itself as
+/// validation file is not. Two excitations at once are refused.
+#[test]
+fn a_fit_on_less_than_one_cycle_or_scored_on_faster_ones_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = |name: &str, seconds: &str| {
+        let path = dir.path().join(name);
+        let output = run(&[
+            "lab-record",
+            "--rate",
+            "200",
+            "--stairs",
+            "0.2",
+            "--seconds",
+            seconds,
+            "--out",
+            path.to_str().unwrap(),
+        ]);
+        assert!(output.status.success(), "{}", stderr(&output));
+        path.to_str().unwrap().to_owned()
+    };
+    let short = record("short.csv", "16");
+    let long = record("long.csv", "40");
+    let report = dir.path().join("report.json");
+    for command in ["inverse-pi", "bouc-wen"] {
+        for (file, noted) in [(&short, true), (&long, false)] {
+            let output = run(&[
+                command,
+                file,
+                "--split",
+                "0.5",
+                "--report",
+                report.to_str().unwrap(),
+            ]);
+            assert!(output.status.success(), "{}", stderr(&output));
+            let summary = stdout(&output);
+            let note =
+                "note: the fitted samples amount to 0.94 of the input's fastest cycle (3.600 s)";
+            assert_eq!(summary.contains(note), noted, "{command} {file}: {summary}");
+            let written: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+            let in_report = written["notes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|n| n.as_str().unwrap().contains("of the input's fastest cycle"));
+            assert_eq!(in_report, noted, "{command} {file}: {written}");
+        }
+    }
+    // A validation file that cycles ten times faster than the fit part.
+    let fast = dir.path().join("fast.csv");
+    let output = run(&[
+        "lab-record",
+        "--rate",
+        "200",
+        "--frequency",
+        "10",
+        "--seconds",
+        "3",
+        "--out",
+        fast.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    for command in ["inverse-pi", "bouc-wen"] {
+        for (validate, noted) in [(fast.to_str().unwrap(), true), (long.as_str(), false)] {
+            let output = run(&[command, &long, "--validate", validate]);
+            assert!(output.status.success(), "{}", stderr(&output));
+            let summary = stdout(&output);
+            let note = "note: the scored input cycles faster than the fitted one (fastest cycle 0.1000 s, the fit part's 3.5900 s)";
+            assert_eq!(
+                summary.contains("note: the scored input cycles faster"),
+                noted,
+                "{command} --validate {validate}: {summary}"
+            );
+            assert!(!noted || summary.contains(note), "{summary}");
+        }
+    }
+    let output = run(&[
+        "lab-record",
+        "--stairs",
+        "0.2",
+        "--sweep",
+        "10",
+        "--out",
+        dir.path().join("both.csv").to_str().unwrap(),
+    ]);
+    refused_as_input(&output);
+    assert!(
+        stderr(&output).contains("--stairs and --sweep"),
+        "{}",
+        stderr(&output)
+    );
+}

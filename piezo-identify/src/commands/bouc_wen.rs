@@ -302,7 +302,9 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
             range_excess(&record.input, &fitted, &plan.scored()),
         );
         notes.smaller_loops("input", "V", &record.input, &fitted, &plan.scored());
+        notes.faster_cycles(&plan, &record.input, dt, &plan.scored());
     }
+    notes.few_cycles(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;
     if let (Some(v), Some((_, scored))) = (&validation, &validation_scored) {
@@ -318,6 +320,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
             refined,
             true,
         );
+        notes.faster_cycles(&plan, &v.record.input, v.record.sample_period, scored);
         validation_errors = Some(errors);
     }
     say!("time: {:.2} s", fit.seconds);

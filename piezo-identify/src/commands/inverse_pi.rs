@@ -8,7 +8,7 @@ use clap::Args;
 use piezo_identify::protocol::{
     InversePiErrors, InversePiIdentification, InversePiSettings, Plan, identify_inverse_pi,
 };
-use piezo_identify::validation::centred_moving_average;
+use piezo_identify::validation::{Steps, inverse_model_input};
 
 use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load, load_validation};
 use super::progress::Reporter;
@@ -137,11 +137,13 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     print_inverse_pi_errors("fit part", &fit.fit_errors);
     if let Some(unseen) = &fit.unseen {
         print_inverse_pi_errors("scored part (not seen by the fit)", unseen);
-        let y = centred_moving_average(&record.output, fit.smoothing);
+        let y = inverse_model_input(&record.output, fit.smoothing, plan.steps());
         let fitted = pad(&plan.fitted(), plan.samples);
         notes.extrapolation("displacement", range_excess(&y, &fitted, &plan.scored()));
         notes.smaller_loops("displacement", "um", &y, &fitted, &plan.scored());
+        notes.faster_cycles(&plan, &record.input, dt, &plan.scored());
     }
+    notes.few_cycles(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;
     if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
@@ -150,20 +152,25 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
             .protocol
             .validation_output(&plan, &loaded, v, fit.stroke);
         zero_alignment = Some(zero);
+        let steps = Steps {
+            starts: &segments.steps,
+            settle: plan.settle_samples_at(v.record.sample_period),
+        };
         let errors = fit.errors_on(
             &output,
             &v.record.input,
             v.record.sample_period,
-            &segments.steps,
+            steps,
             scored,
         );
         print_inverse_pi_errors("validation file (models from rest at its start)", &errors);
+        notes.faster_cycles(&plan, &v.record.input, v.record.sample_period, scored);
         validation_errors = Some(errors);
     }
     say!("time: {:.2} s", fit.seconds);
 
     if let Some(path) = &args.protocol.predictions {
-        let predictions = fit.predictions_on(&record.output, dt, &plan.segments.steps);
+        let predictions = fit.predictions_on(&record.output, dt, plan.steps());
         write_predictions(
             path,
             dt,
