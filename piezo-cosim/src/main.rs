@@ -15,6 +15,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use piezo_cosim::{OpenFmus, RunError, RunOptions, RunOutput, Scenario, run, run_with, series};
+use result_files::{is_device, same_file};
 use serde_json::json;
 
 #[derive(Parser)]
@@ -361,21 +362,8 @@ fn main() -> ExitCode {
         return ExitCode::from(2);
     }
     for path in [&series_path, &out].into_iter().flatten() {
-        if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty())
-            && !folder.is_dir()
-        {
-            eprintln!(
-                "{}: no folder {} to write it in",
-                path.display(),
-                folder.display()
-            );
-            return ExitCode::from(2);
-        }
-        if path.is_dir() {
-            eprintln!(
-                "{}: is a folder; give the name of the file to write",
-                path.display()
-            );
+        if let Err(e) = result_files::check_destination(path) {
+            eprintln!("{}: {e}", path.display());
             return ExitCode::from(2);
         }
         if same_file(path, &scenario) {
@@ -457,7 +445,7 @@ fn main() -> ExitCode {
     let text = result.to_string();
     match out {
         Some(path) => {
-            if let Err(e) = series::write_result(&path, |out| writeln!(out, "{text}")) {
+            if let Err(e) = result_files::write_atomically(&path, |out| writeln!(out, "{text}")) {
                 eprintln!("{}: {e}", path.display());
                 return ExitCode::from(1);
             }
@@ -469,32 +457,6 @@ fn main() -> ExitCode {
         }
     }
     ExitCode::SUCCESS
-}
-
-/// Whether `path` is there and neither a regular file nor a folder:
-/// `/dev/null`, a named pipe, written straight through.
-fn is_device(path: &Path) -> bool {
-    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
-}
-
-/// Whether two paths name one file, written yet or not (`./a.json` and
-/// `a.json`, a link and its target).
-fn same_file(a: &Path, b: &Path) -> bool {
-    // `/dev/null` for both outputs, or any device, is no file to lose.
-    if is_device(a) || is_device(b) {
-        return false;
-    }
-    let resolved = |path: &Path| -> Option<PathBuf> {
-        path.canonicalize().ok().or_else(|| {
-            let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
-            let folder = folder.unwrap_or(Path::new(".")).canonicalize().ok()?;
-            Some(folder.join(path.file_name()?))
-        })
-    };
-    match (resolved(a), resolved(b)) {
-        (Some(a), Some(b)) => a == b,
-        _ => a == b,
-    }
 }
 
 #[cfg(test)]

@@ -13,6 +13,7 @@ use piezo_identify::protocol::{Plan, PlanOptions, ZeroAlignment};
 use piezo_identify::segments::{SegmentOptions, Segments};
 use piezo_identify::validation::displacement_offset;
 use piezo_identify::{Column, FitOptions, ReadOptions, Record, Roles, Sampling};
+use result_files::{check_destination, same_file};
 use serde::Serialize;
 
 /// Where the record is cut, what is left out of fit and score, and the
@@ -481,21 +482,7 @@ pub(crate) fn check_destinations(
         .filter_map(|(option, path)| path.map(|p| (*option, p)))
         .collect();
     for (k, (option, path)) in named.iter().enumerate() {
-        if path.is_dir() {
-            return Err(format!(
-                "{option} {}: is a folder; give the name of the file to write",
-                path.display()
-            ));
-        }
-        if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty())
-            && !folder.is_dir()
-        {
-            return Err(format!(
-                "{option} {}: there is no folder {} to write it in",
-                path.display(),
-                folder.display()
-            ));
-        }
+        check_destination(path).map_err(|e| format!("{option} {}: {e}", path.display()))?;
         for input in inputs {
             if same_file(path, input) {
                 return Err(format!(
@@ -516,28 +503,4 @@ pub(crate) fn check_destinations(
         }
     }
     Ok(())
-}
-
-/// Whether two paths name one file, written yet or not (so `./a.csv` and
-/// `a.csv`, or a link and its target, count as one). A device such as
-/// `/dev/null`, named for two outputs, loses nothing.
-fn same_file(a: &Path, b: &Path) -> bool {
-    let device = |path: &Path| std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir());
-    if device(a) || device(b) {
-        return false;
-    }
-    match (resolved(a), resolved(b)) {
-        (Some(a), Some(b)) => a == b,
-        _ => a == b,
-    }
-}
-
-/// The absolute path a file has or would have: its own where it exists,
-/// else its folder's with its name.
-fn resolved(path: &Path) -> Option<PathBuf> {
-    path.canonicalize().ok().or_else(|| {
-        let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
-        let folder = folder.unwrap_or(Path::new(".")).canonicalize().ok()?;
-        Some(folder.join(path.file_name()?))
-    })
 }

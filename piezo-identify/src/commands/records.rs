@@ -7,7 +7,7 @@ use clap::Args;
 
 use super::Failure;
 use super::arguments::{check_destinations, seconds};
-use super::report::{bouc_wen_parameters, write_json};
+use super::report::{bouc_wen_parameters, write_json, write_result};
 
 #[derive(Args)]
 pub(crate) struct LabRecordArgs {
@@ -102,8 +102,7 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
     for (n, (u, y)) in record.input.iter().zip(&record.output).enumerate() {
         text.push_str(&format!("{},{u},{y}\n", n as f64 * record.sample_period));
     }
-    std::fs::write(&args.out, text)
-        .map_err(|e| Failure::Run(format!("{}: {e}", args.out.display())))?;
+    write_result(&args.out, text.as_bytes())?;
     say!(
         "{}: {} samples at {} Hz (columns time_s, command_V, displacement_um)",
         args.out.display(),

@@ -323,7 +323,7 @@ pub(crate) fn write_predictions(
         text.push_str(part);
         text.push('\n');
     }
-    std::fs::write(path, text).map_err(|e| Failure::Run(format!("{}: {e}", path.display())))
+    write_result(path, text.as_bytes())
 }
 
 /// Writes `value` as JSON; a failure here comes after the work was done
@@ -331,5 +331,13 @@ pub(crate) fn write_predictions(
 pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), Failure> {
     let json = serde_json::to_string_pretty(value)
         .map_err(|e| Failure::Run(format!("cannot serialise {}: {e}", path.display())))?;
-    std::fs::write(path, json + "\n").map_err(|e| Failure::Run(format!("{}: {e}", path.display())))
+    write_result(path, (json + "\n").as_bytes())
+}
+
+/// Writes a result file whole or not at all (`result_files`: a run stopped
+/// while writing leaves no cut file under its name); a failure here comes
+/// after the work, so it is the run's.
+pub(crate) fn write_result(path: &Path, bytes: &[u8]) -> Result<(), Failure> {
+    result_files::write_bytes(path, bytes)
+        .map_err(|e| Failure::Run(format!("{}: {e}", path.display())))
 }

@@ -171,16 +171,10 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
             );
         }
     }
-    let json = serde_json::to_string_pretty(&identified.controller)
-        .map_err(|e| Failure::Run(format!("cannot serialise the preset: {e}")))?;
-    std::fs::write(&args.out, json + "\n")
-        .map_err(|e| Failure::Run(format!("{}: {e}", args.out.display())))?;
+    write_json(&args.out, &identified.controller)?;
     say!("controller preset written to {}", args.out.display());
     if let Some(path) = &args.report {
-        let json = serde_json::to_string_pretty(&identified)
-            .map_err(|e| Failure::Run(format!("cannot serialise the report: {e}")))?;
-        std::fs::write(path, json + "\n")
-            .map_err(|e| Failure::Run(format!("{}: {e}", path.display())))?;
+        write_json(path, &identified)?;
         say!("identification report written to {}", path.display());
     }
     Ok(())

@@ -1,0 +1,207 @@
+//! Where the project's command-line tools (`piezo-identify`, `piezo-cosim`)
+//! write their results, checked before the work and written whole.
+//!
+//! A fit or a co-simulation may run for minutes; a result path that cannot
+//! be written should fail before it, not after ([`check_destination`]), and
+//! a path that names a file the run reads, or two outputs that name one
+//! file, lose data ([`same_file`]). A result is written under a temporary
+//! name beside its file and renamed into place when whole
+//! ([`write_atomically`]), so that a run stopped while writing (Ctrl-C, a
+//! full disk) leaves no cut file under the name a reader takes as complete.
+//! Devices (`/dev/null`, a named pipe) are no files to lose and are written
+//! straight through ([`is_device`]).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Whether `path` exists and is neither a file nor a folder: `/dev/null`,
+/// `/dev/stdout`, a named pipe (links are followed).
+pub fn is_device(path: &Path) -> bool {
+    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
+/// Whether two paths name one file, written yet or not: `./a.csv` and
+/// `a.csv`, a link and its target. A device, named twice, is no file to
+/// lose: never the same file.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    if is_device(a) || is_device(b) {
+        return false;
+    }
+    match (resolved(a), resolved(b)) {
+        (Some(a), Some(b)) => a == b,
+        _ => a == b,
+    }
+}
+
+/// The absolute path a file has, or would have once written: its own where
+/// it exists (links resolved), else its folder's with its name.
+fn resolved(path: &Path) -> Option<PathBuf> {
+    path.canonicalize().ok().or_else(|| {
+        let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
+        let folder = folder.unwrap_or(Path::new(".")).canonicalize().ok()?;
+        Some(folder.join(path.file_name()?))
+    })
+}
+
+/// Why a result cannot be written where it was asked to be
+/// ([`check_destination`]); the caller names the path (and the option).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Unwritable {
+    #[error("is a folder; give the name of the file to write")]
+    Folder,
+    #[error("there is no folder {} to write it in", .0.display())]
+    NoFolder(PathBuf),
+}
+
+/// Whether a result can be written at `path` (a file, new or not, in a
+/// folder that exists; or a device).
+pub fn check_destination(path: &Path) -> Result<(), Unwritable> {
+    if path.is_dir() {
+        return Err(Unwritable::Folder);
+    }
+    if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty())
+        && !folder.is_dir()
+    {
+        return Err(Unwritable::NoFolder(folder.to_owned()));
+    }
+    Ok(())
+}
+
+/// Writes a result file whole or not at all (module comment): `write` fills
+/// a temporary file beside the target, which is renamed over it once
+/// written. A link is followed, and its file replaced, not the link; a
+/// device is written straight through, as `File::create` would (renaming
+/// onto it would replace the device). The file gets the permissions
+/// `File::create` gives (the umask applies), not a temporary file's
+/// owner-only ones.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    if is_device(path) {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        write(&mut out)?;
+        return out.flush();
+    }
+    let target = path.canonicalize().unwrap_or_else(|_| path.to_owned());
+    let folder = match target.parent() {
+        Some(f) if !f.as_os_str().is_empty() => f,
+        _ => Path::new("."),
+    };
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".partial-");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut out = std::io::BufWriter::new(builder.tempfile_in(folder)?);
+    write(&mut out)?;
+    let file = out.into_inner().map_err(|e| e.into_error())?;
+    file.persist(&target).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// [`write_atomically`] of bytes already made.
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomically(path, |out| out.write_all(bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn one_file_by_two_names_and_devices_never() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = dir.path().join("a.csv");
+        std::fs::write(&a, "x").unwrap();
+        let dotted = dir.path().join(".").join("a.csv");
+        assert!(same_file(&a, &dotted));
+        // Not written yet: by its folder and name.
+        let new = dir.path().join("new.json");
+        assert!(same_file(&new, &dir.path().join(".").join("new.json")));
+        assert!(!same_file(&a, &new));
+        #[cfg(unix)]
+        {
+            let link = dir.path().join("link.csv");
+            std::os::unix::fs::symlink(&a, &link).unwrap();
+            assert!(same_file(&a, &link));
+        }
+        let null = Path::new("/dev/null");
+        if null.exists() {
+            assert!(is_device(null));
+            assert!(!same_file(null, null));
+            assert!(!is_device(&a) && !is_device(dir.path()));
+        }
+    }
+
+    #[test]
+    fn a_destination_needs_a_folder_and_is_not_one() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(check_destination(dir.path()), Err(Unwritable::Folder));
+        let missing = dir.path().join("missing");
+        assert_eq!(
+            check_destination(&missing.join("out.csv")),
+            Err(Unwritable::NoFolder(missing.clone()))
+        );
+        assert_eq!(
+            Unwritable::NoFolder(missing.clone()).to_string(),
+            format!("there is no folder {} to write it in", missing.display())
+        );
+        assert_eq!(check_destination(&dir.path().join("out.csv")), Ok(()));
+        assert_eq!(check_destination(Path::new("out.csv")), Ok(()));
+    }
+
+    #[test]
+    fn a_result_is_written_whole_or_not_at_all() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("result.csv");
+        std::fs::write(&path, "old\n").unwrap();
+        // A write that fails half-way leaves the old file and no other.
+        let failed = write_atomically(&path, |out| {
+            out.write_all(b"half")?;
+            Err(std::io::Error::other("stopped"))
+        });
+        assert!(failed.is_err());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "old\n");
+        assert_eq!(names(dir.path()), ["result.csv"]);
+        write_bytes(&path, b"new\n").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "new\n");
+        assert_eq!(names(dir.path()), ["result.csv"]);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            // The umask's permissions, readable by others as File::create's.
+            let mode = std::fs::metadata(&path).unwrap().permissions().mode();
+            assert_ne!(mode & 0o044, 0, "{mode:o}");
+        }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn links_are_followed_and_devices_written_through() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("file.csv");
+        std::fs::write(&file, "old\n").unwrap();
+        let link = dir.path().join("link.csv");
+        std::os::unix::fs::symlink(&file, &link).unwrap();
+        write_bytes(&link, b"new\n").unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().is_symlink());
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "new\n");
+        let null = Path::new("/dev/null");
+        if null.exists() {
+            write_bytes(null, b"nothing\n").unwrap();
+            assert!(is_device(null));
+        }
+    }
+}
