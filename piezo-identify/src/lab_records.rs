@@ -123,9 +123,13 @@ impl LabRecordSpec {
                 mean + amplitude * envelope * (std::f64::consts::TAU * frequency * t).sin()
             }
             Excitation::Staircase { levels, hold } => {
-                // levels ≥ 2 (checked by `lab_record`): up 0..L−1, down L−2..1.
+                // 2 ≤ levels ≤ the record's samples (checked by `lab_record`):
+                // up 0..L−1, down L−2..1. The relative nudge keeps a sample
+                // time that lands on a stair's start (t = k·hold, computed
+                // as n·T) on that stair, so every stair holds as many
+                // samples (at 200 Hz a 0.2 s stair was 39, 40 or 41).
                 let last = levels - 1;
-                let stair = (t / hold).floor() as usize % (2 * last);
+                let stair = (t / hold * (1.0 + 1e-12)).floor() as usize % (2 * last);
                 let level = if stair <= last {
                     stair
                 } else {
@@ -148,7 +152,9 @@ pub enum LabRecordError {
     Parameters(#[from] ParamError),
     #[error("{0} must be positive and finite")]
     Setting(&'static str),
-    #[error("a staircase needs at least 2 levels, not {0}")]
+    #[error(
+        "a staircase needs at least 2 levels and at most one per sample of the record, not {0}"
+    )]
     Levels(usize),
     #[error(
         "{samples} samples asked (rate times rest and excitation), more than the {MAX_LAB_SAMPLES} a record is allowed here"
@@ -174,19 +180,19 @@ pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
     if !(spec.rest_seconds.is_finite() && spec.rest_seconds >= 0.0) {
         return Err(LabRecordError::Setting("rest_seconds"));
     }
-    if let Excitation::Staircase { levels, hold } = spec.excitation {
-        if levels < 2 {
-            return Err(LabRecordError::Levels(levels));
-        }
-        if !(hold.is_finite() && hold > 0.0) {
-            return Err(LabRecordError::Setting("hold"));
-        }
-    }
     // Two f64 per sample are held and written: a rate of 1e12 Hz asked for
     // 24 TB and aborted the process instead of saying so.
     let asked = (spec.rest_seconds + spec.excitation_seconds) * spec.sample_rate;
     if asked > MAX_LAB_SAMPLES as f64 {
         return Err(LabRecordError::TooLong { samples: asked });
+    }
+    if let Excitation::Staircase { levels, hold } = spec.excitation {
+        if levels < 2 || levels as f64 > asked {
+            return Err(LabRecordError::Levels(levels));
+        }
+        if !(hold.is_finite() && hold > 0.0) {
+            return Err(LabRecordError::Setting("hold"));
+        }
     }
     let mut params = FlexureStageParams::default();
     (params.amplifier.v_min, params.amplifier.v_max) = LAB_AMPLIFIER_LIMITS;
@@ -303,6 +309,11 @@ mod tests {
             hold: 0.2,
         };
         assert_eq!(lab_record(&spec), Err(LabRecordError::Levels(1)));
+        // No more stairs than samples (2·(levels − 1) overflowed).
+        for levels in [201, usize::MAX / 2 + 2, usize::MAX] {
+            spec.excitation = Excitation::Staircase { levels, hold: 0.2 };
+            assert_eq!(lab_record(&spec), Err(LabRecordError::Levels(levels)));
+        }
         spec.excitation = Excitation::Staircase {
             levels: 4,
             hold: f64::NAN,

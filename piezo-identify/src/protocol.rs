@@ -16,8 +16,10 @@
 //!   segments, not the settling after each voltage step, not the first
 //!   settling time of the record; the models run through all of them. The
 //!   same samples are left out of the score. Over the settling after a
-//!   step the inverse models are driven with the settled displacement
-//!   ([`crate::validation::held_over_settling`] says why).
+//!   step onto a held input the inverse models are driven with the settled
+//!   displacement ([`crate::validation::held_over_settling`] says why). An
+//!   input that stands at fewer than [`MIN_INPUT_LEVELS`] levels over the
+//!   fitted samples is no loop to fit.
 //! - **Choices made from the fit part only** (inverse P-I): the smoothing of
 //!   the displacement (none, or a centred moving average over 1/160, 1/80 or
 //!   1/40 of the fastest cycle: at most 0.1 % amplitude loss at that cycle)
@@ -75,8 +77,8 @@ use crate::regressors::{
     reversing_classical_operators, reversing_operators,
 };
 use crate::segments::{
-    SegmentOptions, SegmentThresholds, Segments, detect_segments, fastest_cycle, first_loading_end,
-    merge, thresholds,
+    REVERSAL_SPAN_FRACTION, SegmentOptions, SegmentThresholds, Segments, detect_segments,
+    fastest_cycle, first_loading_end, merge, reversals, thresholds,
 };
 use crate::validation::{Steps, inverse_model_input, smoothed_between_steps};
 
@@ -90,6 +92,10 @@ pub const INNER_CANDIDATES: usize = 5;
 /// Rate-dependent weights must lower the inner validation error by more than
 /// this fraction.
 pub const RATE_DEPENDENCE_MARGIN: f64 = 0.05;
+/// ... and by more than this fraction of the input span: below it the
+/// difference is rounding (a record the models fit exactly, as a staircase
+/// of three levels, compared 1.2·10⁻¹⁴ with 1.5·10⁻¹⁴ V).
+pub const RATE_DEPENDENCE_FLOOR: f64 = 1e-6;
 /// Smoothing windows tried, as fractions of the fastest cycle.
 pub const SMOOTHING_CYCLE_FRACTIONS: [f64; 3] = [1.0 / 160.0, 1.0 / 80.0, 1.0 / 40.0];
 /// The search keeps at least this many samples per fastest cycle ...
@@ -136,6 +142,30 @@ pub struct ZeroAlignment {
     /// The validation file's rest reading minus the fit record's: subtracted
     /// from every output sample of the validation file.
     pub shift: f64,
+}
+
+/// Fewer distinct input levels than this over the fitted samples are no
+/// loop to fit ([`ProtocolError::TooFewLevels`]): on a two-level staircase
+/// (a square wave) the proposed model scored 8·10⁻¹² V, "0.000 %", and
+/// rate-dependent weights were chosen on rounding noise.
+pub const MIN_INPUT_LEVELS: usize = 3;
+
+/// The levels the input stands at over the `fitted` samples: its values
+/// sorted and grouped, a group spanning at most `tolerance` (the rest
+/// tolerance). An input that moves through its range (a sine) makes as many
+/// groups as its span holds tolerances; a staircase one per stair.
+fn input_levels(u: &[f64], fitted: &[bool], tolerance: f64) -> usize {
+    let mut values = selected(u, fitted);
+    values.sort_by(f64::total_cmp);
+    let mut levels = 0;
+    let mut group_start = f64::NEG_INFINITY;
+    for v in values {
+        if v - group_start > tolerance {
+            levels += 1;
+            group_start = v;
+        }
+    }
+    levels
 }
 
 /// Why a validation file's zero was not aligned ([`Plan::zero_alignment`]).
@@ -203,6 +233,10 @@ pub enum ProtocolError {
         "no sample is left to score: the warm-up ({warm_up} samples), rest segments and settling after steps cover the {samples} samples after the split"
     )]
     NothingScored { warm_up: usize, samples: usize },
+    #[error(
+        "the input stands at {0} level(s) over the fitted samples, and a loop needs at least {MIN_INPUT_LEVELS}: any model that tells {0} levels apart fits them exactly and says nothing of the loop between them; drive the stage through more levels (a staircase of 3 or more, a sine)"
+    )]
+    TooFewLevels(usize),
     #[error("{0}")]
     Fit(#[from] FitError),
     #[error("{0}")]
@@ -261,6 +295,10 @@ pub struct Plan {
     pub scored_excluded: Vec<Range<usize>>,
     /// Fastest cycle of the input over the fit part, rests aside [samples].
     pub fastest_cycle: Option<f64>,
+    /// The levels the input stands at over the fitted samples (a staircase's
+    /// stairs; as many as the span holds rest tolerances for an input that
+    /// moves through it).
+    pub fitted_levels: usize,
 }
 
 impl Plan {
@@ -346,6 +384,7 @@ impl Plan {
             fit_excluded,
             scored_excluded,
             fastest_cycle: None,
+            fitted_levels: 0,
         };
         let fitted = plan.fitted();
         if !fitted.iter().any(|f| *f) {
@@ -373,6 +412,10 @@ impl Plan {
                 samples: u.len() - fit_end,
             });
         }
+        plan.fitted_levels = input_levels(&u[..fit_end], &plan.fitted(), thresholds.rest_tolerance);
+        if plan.fitted_levels < MIN_INPUT_LEVELS {
+            return Err(ProtocolError::TooFewLevels(plan.fitted_levels));
+        }
         // The excitation's cycle, over the whole fit part but its rests (the
         // first loading is excluded from the fit, not from the excitation).
         let moving = flags(fit_end, 0, &plan.segments.rests);
@@ -390,27 +433,46 @@ impl Plan {
         flags(self.samples, self.fit_end, &self.scored_excluded)
     }
 
-    /// The record's voltage steps and the settling after each.
-    pub fn steps(&self) -> Steps<'_> {
+    /// The record's voltage steps and the settling after each; `input` the
+    /// record's input.
+    pub fn steps<'a>(&'a self, input: &'a [f64]) -> Steps<'a> {
         Steps {
             starts: &self.segments.steps,
             settle: self.thresholds.settle_samples,
+            input,
+            hold_tolerance: self.thresholds.rest_tolerance,
         }
     }
 
-    /// The settling after a step in samples of a record sampled every
-    /// `sample_period` s (a validation file's).
-    pub fn settle_samples_at(&self, sample_period: f64) -> usize {
-        self.thresholds
-            .resampled(self.sample_period, sample_period)
-            .settle_samples
+    /// The steps of a validation file (`segments` found in it by
+    /// [`Self::validation_scored`], `input` its input, sampled every
+    /// `sample_period` s), with this plan's settling in its samples.
+    pub fn validation_steps<'a>(
+        &self,
+        segments: &'a Segments,
+        input: &'a [f64],
+        sample_period: f64,
+    ) -> Steps<'a> {
+        let thresholds = self.thresholds.resampled(self.sample_period, sample_period);
+        Steps {
+            starts: &segments.steps,
+            settle: thresholds.settle_samples,
+            input,
+            hold_tolerance: thresholds.rest_tolerance,
+        }
     }
 
-    /// How many of the input's fastest cycles the fitted samples span, in
-    /// time (None when the input has no cycle).
-    pub fn fitted_cycles(&self) -> Option<f64> {
-        let fitted = self.fitted().iter().filter(|f| **f).count();
-        self.fastest_cycle.map(|cycle| fitted as f64 / cycle)
+    /// The turning points of the input `u` over the fitted samples (turns
+    /// of at least 1 % of the span, wherever between fitted samples they
+    /// fall): fewer than two, and no whole loop, up and down, was fitted.
+    pub fn fitted_turns(&self, u: &[f64]) -> usize {
+        let end = self.fit_end.min(u.len());
+        reversals(
+            &u[..end],
+            &self.fitted()[..end],
+            REVERSAL_SPAN_FRACTION * self.thresholds.span,
+        )
+        .len()
     }
 
     /// Whether the record has a scored part.
@@ -803,13 +865,11 @@ fn inner_candidates(starts: &[StartResult]) -> Vec<&StartResult> {
     polished.sort_by(|a, b| a.objective.total_cmp(&b.objective));
     let mut kept: Vec<&StartResult> = Vec::new();
     for start in polished {
+        // One basin, reached by two starts that stopped a little apart
+        // (F within 10⁻⁵ of each other, c within 10⁻³).
         let same = |other: &&StartResult| {
-            (other.c - start.c).abs() <= 1e-6 * start.c.abs()
-                && other
-                    .ws
-                    .iter()
-                    .zip(&start.ws)
-                    .all(|(a, b)| (a - b).abs() <= 1e-6)
+            (other.objective - start.objective).abs() <= 1e-5 * start.objective.abs()
+                && (other.c - start.c).abs() <= 1e-3 * start.c.abs()
         };
         if !kept.iter().any(same) && kept.len() < INNER_CANDIDATES {
             kept.push(start);
@@ -923,7 +983,7 @@ pub fn identify_inverse_pi(
         .collect();
     let fit_settling = Steps {
         starts: &fit_steps,
-        settle: plan.thresholds.settle_samples,
+        ..plan.steps(u_fit)
     };
     let smooth = |half_width: usize| inverse_model_input(y_fit, half_width, fit_settling);
     let smoothings = match settings.smoothing {
@@ -952,106 +1012,107 @@ pub fn identify_inverse_pi(
     let tick = |s: &StartResult| progress(ProgressEvent::Step { best: s.objective });
 
     // Forward validation inside the fit part.
-    let (smoothing, rate_dependent, classical_smoothing, cross_validation) = if smoothings.len()
-        == 1
-        && layouts.len() == 1
-    {
-        (smoothings[0], layouts[0], smoothings[0], None)
-    } else {
-        let train_end = inner_split(&fitted, INNER_TRAIN_FRACTION);
-        let train_flags: Vec<bool> = fitted[..train_end].to_vec();
-        let heaviest = *smoothings.iter().max().expect("at least one candidate");
-        let prepared = |half_width: usize| -> (Vec<f64>, f64) {
-            let y = smooth(half_width);
-            let offset = settings
-                .offset
-                .unwrap_or_else(|| range_of(&y[..train_end], &train_flags).0);
-            (y.iter().map(|v| v - offset).collect(), offset)
-        };
-        let (y_search, _) = prepared(heaviest);
-        let options = search_options(settings.starts, &train_flags, layouts == [true]);
-        progress(ProgressEvent::Phase {
-            name: "validation search",
-            steps: options.starts,
-        });
-        let inner = fit_modified_inverse_pi_with_progress(
-            &y_search[..train_end],
-            &u_fit[..train_end],
-            dt,
-            &options,
-            &tick,
-        )?;
-        let (c, ws) = (inner.params.c, inner.params.ws);
-        let searched = inner_candidates(&inner.starts);
-        let split = InnerSplit::new(&fitted, u_fit, train_end);
-        let mut proposed = Vec::new();
-        let mut classical = Vec::new();
-        for &half_width in &smoothings {
-            let (y, _) = prepared(half_width);
-            for start in &searched {
-                let errors = split.proposed_rms(&y, dt, start.c, &start.ws, &layouts);
-                for (&rate_dependent, validation_rms) in layouts.iter().zip(errors) {
-                    proposed.push(Candidate {
-                        smoothing: half_width,
-                        rate_dependent,
-                        start: Some(start.start),
-                        validation_rms,
-                    });
-                }
-            }
-            let (low, high) = range_of(&y[..train_end], &train_flags);
-            let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
-            let mut x = masked_classical_regressors(&thresholds, &y, &fitted);
-            let reversing = reversing_classical_operators(&thresholds, &y, &split.train_mask);
-            for column in (0..reversing.len()).filter(|&i| !reversing[i]) {
-                x.column_mut(column).fill(0.0);
-            }
-            let columns: Vec<usize> = (0..x.ncols()).collect();
-            classical.push(Candidate {
-                smoothing: half_width,
-                rate_dependent: false,
-                start: None,
-                validation_rms: split.rms(&x, &columns, CLASSICAL_OPERATORS),
+    let (smoothing, rate_dependent, classical_smoothing, cross_validation) =
+        if smoothings.len() == 1 && layouts.len() == 1 {
+            (smoothings[0], layouts[0], smoothings[0], None)
+        } else {
+            let train_end = inner_split(&fitted, INNER_TRAIN_FRACTION);
+            let train_flags: Vec<bool> = fitted[..train_end].to_vec();
+            let heaviest = *smoothings.iter().max().expect("at least one candidate");
+            let prepared = |half_width: usize| -> (Vec<f64>, f64) {
+                let y = smooth(half_width);
+                let offset = settings
+                    .offset
+                    .unwrap_or_else(|| range_of(&y[..train_end], &train_flags).0);
+                (y.iter().map(|v| v - offset).collect(), offset)
+            };
+            let (y_search, _) = prepared(heaviest);
+            let options = search_options(settings.starts, &train_flags, layouts == [true]);
+            progress(ProgressEvent::Phase {
+                name: "validation search",
+                steps: options.starts,
             });
-        }
-        let best = |rate: bool| {
-            proposed
-                .iter()
-                .filter(|c| c.rate_dependent == rate)
-                .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
-                .copied()
-        };
-        let chosen = match (best(false), best(true)) {
-            (Some(constant), Some(rated)) => {
-                if rated.validation_rms < (1.0 - RATE_DEPENDENCE_MARGIN) * constant.validation_rms {
-                    rated
-                } else {
-                    constant
+            let inner = fit_modified_inverse_pi_with_progress(
+                &y_search[..train_end],
+                &u_fit[..train_end],
+                dt,
+                &options,
+                &tick,
+            )?;
+            let (c, ws) = (inner.params.c, inner.params.ws);
+            let searched = inner_candidates(&inner.starts);
+            let split = InnerSplit::new(&fitted, u_fit, train_end);
+            let mut proposed = Vec::new();
+            let mut classical = Vec::new();
+            for &half_width in &smoothings {
+                let (y, _) = prepared(half_width);
+                for start in &searched {
+                    let errors = split.proposed_rms(&y, dt, start.c, &start.ws, &layouts);
+                    for (&rate_dependent, validation_rms) in layouts.iter().zip(errors) {
+                        proposed.push(Candidate {
+                            smoothing: half_width,
+                            rate_dependent,
+                            start: Some(start.start),
+                            validation_rms,
+                        });
+                    }
                 }
+                let (low, high) = range_of(&y[..train_end], &train_flags);
+                let thresholds = ClassicalPiParams::evenly_spaced_thresholds(high - low);
+                let mut x = masked_classical_regressors(&thresholds, &y, &fitted);
+                let reversing = reversing_classical_operators(&thresholds, &y, &split.train_mask);
+                for column in (0..reversing.len()).filter(|&i| !reversing[i]) {
+                    x.column_mut(column).fill(0.0);
+                }
+                let columns: Vec<usize> = (0..x.ncols()).collect();
+                classical.push(Candidate {
+                    smoothing: half_width,
+                    rate_dependent: false,
+                    start: None,
+                    validation_rms: split.rms(&x, &columns, CLASSICAL_OPERATORS),
+                });
             }
-            (Some(only), None) | (None, Some(only)) => only,
-            (None, None) => unreachable!("at least one layout"),
+            let best = |rate: bool| {
+                proposed
+                    .iter()
+                    .filter(|c| c.rate_dependent == rate)
+                    .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
+                    .copied()
+            };
+            let chosen = match (best(false), best(true)) {
+                (Some(constant), Some(rated)) => {
+                    let gain = constant.validation_rms - rated.validation_rms;
+                    if gain > RATE_DEPENDENCE_MARGIN * constant.validation_rms
+                        && gain > RATE_DEPENDENCE_FLOOR * plan.thresholds.span
+                    {
+                        rated
+                    } else {
+                        constant
+                    }
+                }
+                (Some(only), None) | (None, Some(only)) => only,
+                (None, None) => unreachable!("at least one layout"),
+            };
+            let classical_best = classical
+                .iter()
+                .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
+                .expect("at least one candidate")
+                .smoothing;
+            (
+                chosen.smoothing,
+                chosen.rate_dependent,
+                classical_best,
+                Some(CrossValidation {
+                    train_end,
+                    train_samples: split.train.len(),
+                    validation_samples: split.validation.len(),
+                    c,
+                    ws: ws.to_vec(),
+                    proposed,
+                    classical,
+                }),
+            )
         };
-        let classical_best = classical
-            .iter()
-            .min_by(|a, b| a.validation_rms.total_cmp(&b.validation_rms))
-            .expect("at least one candidate")
-            .smoothing;
-        (
-            chosen.smoothing,
-            chosen.rate_dependent,
-            classical_best,
-            Some(CrossValidation {
-                train_end,
-                train_samples: split.train.len(),
-                validation_samples: split.validation.len(),
-                c,
-                ws: ws.to_vec(),
-                proposed,
-                classical,
-            }),
-        )
-    };
 
     // The final fit on every fitted sample of the fit part.
     let shift = |half_width: usize| -> (Vec<f64>, f64) {
@@ -1103,7 +1164,7 @@ pub fn identify_inverse_pi(
             &record.output,
             &record.input,
             dt,
-            plan.steps(),
+            plan.steps(&record.input),
             &plan.scored(),
         ));
     }
@@ -1510,6 +1571,26 @@ mod tests {
     /// --keep-rest-and-steps, a start that never turns names the warm-up
     /// (it once blamed a warm-up of 0 samples and suggested
     /// --keep-rest-and-steps, which then failed the same way).
+    /// A staircase stands at one level per stair, a sine at as many as its
+    /// span holds tolerances; only the fitted samples count.
+    #[test]
+    fn input_levels_count_stairs_and_tolerances() {
+        let stairs: Vec<f64> = [0.0, 1.0, 2.0, 1.0, 0.0, 1.0]
+            .iter()
+            .flat_map(|level| {
+                (0..10).map(move |n| level + if n % 2 == 0 { 0.001 } else { -0.001 })
+            })
+            .collect();
+        let all = vec![true; stairs.len()];
+        assert_eq!(input_levels(&stairs, &all, 0.01), 3);
+        let first_two: Vec<bool> = (0..stairs.len()).map(|n| n < 20).collect();
+        assert_eq!(input_levels(&stairs, &first_two, 0.01), 2);
+        let sine: Vec<f64> = (0..1000).map(|n| (n as f64 * 0.01).sin()).collect();
+        let levels = input_levels(&sine, &vec![true; 1000], 0.004);
+        // Far more than a staircase: 398 groups for 0.004 on a span of 2.
+        assert!(levels > 300, "{levels}");
+    }
+
     #[test]
     fn nothing_to_fit_names_its_causes() {
         let ramp: Vec<f64> = (0..400).map(|n| n as f64 * 0.01).collect();

@@ -77,7 +77,7 @@ const STEP_SPAN_FRACTION: f64 = 0.05;
 /// ... and by more than this multiple of the 99th percentile of the changes.
 const STEP_PERCENTILE_MULTIPLE: f64 = 2.5;
 /// Smallest turning point counted as a reversal, as a fraction of the span.
-const REVERSAL_SPAN_FRACTION: f64 = 0.01;
+pub(crate) const REVERSAL_SPAN_FRACTION: f64 = 0.01;
 
 /// The thresholds the fit part gives, applied to any record of the same
 /// experiment (the rest of the record, a validation file).

@@ -88,19 +88,26 @@ pub fn smoothed_between_steps(y: &[f64], half_width: usize, steps: &[usize]) -> 
 }
 
 /// A record's voltage steps and the settling after each.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Steps<'a> {
     /// The first sample after each step, sorted.
     pub starts: &'a [usize],
     /// Samples of settling after each step.
     pub settle: usize,
+    /// The record's input, and the largest change of it that is still a
+    /// hold: only the settling of a step onto a held input is held
+    /// ([`held_over_settling`]).
+    pub input: &'a [f64],
+    pub hold_tolerance: f64,
 }
 
-/// The displacement with each step's settling held at its settled value:
-/// from each step's first sample to the end of its settling (cut short by
-/// the next step and by the record's end) the displacement is that of the
-/// first sample after the settling (the last before the next step or the
-/// end when the settling is cut short).
+/// The displacement with the settling of each step onto a held input held
+/// at its settled value: from the step's first sample to the end of its
+/// settling (cut short by the next step and by the record's end) the
+/// displacement is that of the first sample after the settling (the last
+/// before the next step or the end when the settling is cut short). A step
+/// onto an input that moves on during the settling (onto a sine) is left as
+/// measured: the actuator may turn there, and its turns are the model's.
 ///
 /// A step moves the actuator's voltage once, one way, and its hysteresis
 /// with it; the stage's structural modes meanwhile ring in the measured
@@ -126,6 +133,13 @@ pub fn held_over_settling(y: &[f64], steps: Steps) -> Vec<f64> {
     for (k, &start) in starts.iter().enumerate() {
         let next = starts.get(k + 1).copied().unwrap_or(y.len());
         let end = (start + steps.settle).min(next);
+        let window = &steps.input[start.min(steps.input.len())..end.min(steps.input.len())];
+        let onto_hold = window
+            .iter()
+            .all(|u| (u - window[0]).abs() <= steps.hold_tolerance);
+        if window.is_empty() || !onto_hold {
+            continue;
+        }
         let settled = if end < next { y[end] } else { y[end - 1] };
         held[start..end].fill(settled);
     }
@@ -230,46 +244,45 @@ mod tests {
     }
 
     #[test]
-    fn the_settling_after_a_step_is_held_at_its_settled_value() {
-        // Steps at 2 (settled at 5) and 7 (cut short by the end at 9).
+    fn the_settling_after_a_step_onto_a_hold_is_held_at_its_settled_value() {
+        // Steps at 2 (settled at 5) and 7 (cut short by the end at 9), each
+        // onto a held input.
         let y = [0.0, 0.0, 9.0, 12.0, 7.0, 10.0, 10.0, 4.0, 1.0];
-        let steps = Steps {
-            starts: &[2, 7],
+        let u = [0.0, 0.0, 5.0, 5.0, 5.0, 5.0, 5.0, 1.0, 1.0];
+        let steps = |starts, input| Steps {
+            starts,
             settle: 3,
+            input,
+            hold_tolerance: 0.01,
         };
         assert_eq!(
-            held_over_settling(&y, steps),
+            held_over_settling(&y, steps(&[2, 7], &u)),
             vec![0.0, 0.0, 10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0]
         );
         // A step before the settling ends holds the last sample before it;
         // the next step's settling (4..7) holds its own settled value.
-        let steps = Steps {
-            starts: &[2, 4],
-            settle: 3,
-        };
         assert_eq!(
-            held_over_settling(&y, steps),
+            held_over_settling(&y, steps(&[2, 4], &u)),
             vec![0.0, 0.0, 12.0, 12.0, 4.0, 4.0, 4.0, 4.0, 1.0]
+        );
+        // Onto an input that moves on (a sine): as measured.
+        let moving = [0.0, 0.0, 5.0, 6.0, 7.0, 6.0, 5.0, 1.0, 1.0];
+        assert_eq!(
+            held_over_settling(&y, steps(&[2, 7], &moving)),
+            vec![0.0, 0.0, 9.0, 12.0, 7.0, 10.0, 10.0, 1.0, 1.0]
         );
         // No settling, no steps: the record as measured.
         for steps in [
             Steps {
-                starts: &[2],
                 settle: 0,
+                ..steps(&[2], &u)
             },
             Steps::default(),
         ] {
             assert_eq!(held_over_settling(&y, steps), y.to_vec());
         }
         assert_eq!(
-            inverse_model_input(
-                &y,
-                1,
-                Steps {
-                    starts: &[2, 7],
-                    settle: 3
-                }
-            ),
+            inverse_model_input(&y, 1, steps(&[2, 7], &u)),
             smoothed_between_steps(
                 &[0.0, 0.0, 10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0],
                 1,

@@ -1362,15 +1362,16 @@ fn a_closed_standard_output_does_not_lose_the_results() {
     assert!(written["params"].is_object(), "{written}");
 }
 
-/// `lab-record --stairs` writes a staircase; fitted on less than one of its
-/// cycles (16 s of 0.2 s stairs at 200 Hz, split in two: 0.94 of the 3.6 s
-/// cycle is left once the rest, the first loading and each stair's settling
-/// are out) both fits say so, in the summary and in `--report`; the same
-/// staircase for 40 s gets no such note. A validation file that cycles ten
-/// times faster than the fitted staircase is noted; the staircase itself as
-/// validation file is not. Two excitations at once are refused.
+/// `lab-record --stairs` writes a staircase. Split in two, 16 s of 0.2 s
+/// stairs at 200 Hz leave an input that turns once over the fitted samples
+/// (after the first loading, to 5.6 s): both fits say so, in the summary and
+/// in `--report`; 40 s of it are not noted. Both are noted as standing at 10
+/// levels; two levels are refused as given input. A validation file whose
+/// fastest cycle is 36 times shorter than the fitted staircase's is noted;
+/// the staircase itself as validation file is not. Two excitations at once
+/// are refused.
 #[test]
-fn a_fit_on_less_than_one_cycle_or_scored_on_faster_ones_says_so() {
+fn a_fit_on_less_than_one_loop_on_few_levels_or_scored_on_faster_cycles_says_so() {
     let dir = tempfile::tempdir().unwrap();
     let record = |name: &str, seconds: &str| {
         let path = dir.path().join(name);
@@ -1403,20 +1404,48 @@ fn a_fit_on_less_than_one_cycle_or_scored_on_faster_ones_says_so() {
             ]);
             assert!(output.status.success(), "{}", stderr(&output));
             let summary = stdout(&output);
-            let note =
-                "note: the fitted samples amount to 0.94 of the input's fastest cycle (3.600 s)";
+            let note = "note: the input turns 1 time(s) over the fitted samples";
             assert_eq!(summary.contains(note), noted, "{command} {file}: {summary}");
+            assert!(
+                summary.contains("note: the input stands at 10 levels over the fitted samples"),
+                "{command} {file}: {summary}"
+            );
             let written: serde_json::Value =
                 serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-            let in_report = written["notes"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .any(|n| n.as_str().unwrap().contains("of the input's fastest cycle"));
+            let in_report = written["notes"].as_array().unwrap().iter().any(|n| {
+                n.as_str()
+                    .unwrap()
+                    .contains("time(s) over the fitted samples")
+            });
             assert_eq!(in_report, noted, "{command} {file}: {written}");
         }
     }
-    // A validation file that cycles ten times faster than the fit part.
+    let two = dir.path().join("two.csv");
+    let output = run(&[
+        "lab-record",
+        "--rate",
+        "200",
+        "--stairs",
+        "0.2",
+        "--levels",
+        "2",
+        "--seconds",
+        "20",
+        "--out",
+        two.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    for command in ["inverse-pi", "bouc-wen"] {
+        let output = run(&[command, two.to_str().unwrap(), "--split", "0.5"]);
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).contains("the input stands at 2 level(s) over the fitted samples, and a loop needs at least 3"),
+            "{}",
+            stderr(&output)
+        );
+    }
+    // A validation file whose fastest cycle (0.1 s) is 36 times shorter than
+    // the fit part's (3.6 s).
     let fast = dir.path().join("fast.csv");
     let output = run(&[
         "lab-record",
@@ -1435,7 +1464,7 @@ fn a_fit_on_less_than_one_cycle_or_scored_on_faster_ones_says_so() {
             let output = run(&[command, &long, "--validate", validate]);
             assert!(output.status.success(), "{}", stderr(&output));
             let summary = stdout(&output);
-            let note = "note: the scored input cycles faster than the fitted one (fastest cycle 0.1000 s, the fit part's 3.5900 s)";
+            let note = "note: the scored input cycles faster than the fitted one (fastest cycle 0.1000 s, the fit part's 3.6000 s)";
             assert_eq!(
                 summary.contains("note: the scored input cycles faster"),
                 noted,
@@ -1455,7 +1484,7 @@ fn a_fit_on_less_than_one_cycle_or_scored_on_faster_ones_says_so() {
     ]);
     refused_as_input(&output);
     assert!(
-        stderr(&output).contains("--stairs and --sweep"),
+        stderr(&output).contains("'--stairs <STAIRS>' cannot be used with '--sweep <SWEEP>'"),
         "{}",
         stderr(&output)
     );

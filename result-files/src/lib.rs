@@ -51,39 +51,88 @@ pub enum Unwritable {
     Folder,
     #[error("there is no folder {} to write it in", .0.display())]
     NoFolder(PathBuf),
+    #[error("cannot be written: {0}")]
+    Denied(String),
 }
 
-/// Whether a result can be written at `path` (a file, new or not, in a
-/// folder that exists; or a device).
+/// Whether a result can be written at `path`: a device; a file that exists
+/// and can be written; or a new file in a folder that exists and takes new
+/// files (tried with an empty temporary file, removed at once).
 pub fn check_destination(path: &Path) -> Result<(), Unwritable> {
     if path.is_dir() {
         return Err(Unwritable::Folder);
     }
-    if let Some(folder) = path.parent().filter(|f| !f.as_os_str().is_empty())
+    if is_device(path) {
+        return Ok(());
+    }
+    let target = link_target(path);
+    let folder = target.parent().filter(|f| !f.as_os_str().is_empty());
+    if let Some(folder) = folder
         && !folder.is_dir()
     {
         return Err(Unwritable::NoFolder(folder.to_owned()));
     }
+    let denied = |e: std::io::Error| Unwritable::Denied(e.to_string());
+    if target.exists() {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&target)
+            .map_err(denied)?;
+    } else {
+        tempfile::Builder::new()
+            .prefix(".partial-")
+            .tempfile_in(folder.unwrap_or(Path::new(".")))
+            .map_err(denied)?;
+    }
     Ok(())
+}
+
+/// The file a path names once its links are followed, whether that file
+/// exists yet or not (a dangling link names the file it will create).
+fn link_target(path: &Path) -> PathBuf {
+    let mut target = path.to_owned();
+    // Bounded, as the kernel bounds a chain of links (and ends a loop).
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&target) {
+            Ok(m) if m.file_type().is_symlink() => match std::fs::read_link(&target) {
+                Ok(link) if link.is_absolute() => target = link,
+                Ok(link) => {
+                    let folder = target.parent().unwrap_or(Path::new("")).to_owned();
+                    target = folder.join(link);
+                }
+                Err(_) => break,
+            },
+            _ => break,
+        }
+    }
+    target
 }
 
 /// Writes a result file whole or not at all (module comment): `write` fills
 /// a temporary file beside the target, which is renamed over it once
-/// written. A link is followed, and its file replaced, not the link; a
-/// device is written straight through, as `File::create` would (renaming
-/// onto it would replace the device). The file gets the permissions
-/// `File::create` gives (the umask applies), not a temporary file's
-/// owner-only ones.
+/// written, with the permissions of the file it replaces (a new file gets
+/// those `File::create` gives: 0o666 less the umask). Links are followed,
+/// and the file they name is written, not the link, even one that does not
+/// exist yet. Written in place instead, as `File::create` would: a device
+/// (renaming onto it would replace the device), a file with other hard
+/// links (a rename would part it from them), and an existing file in a
+/// folder that takes no new file.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
     if is_device(path) {
-        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-        write(&mut out)?;
-        return out.flush();
+        return write_in_place(path, write);
     }
-    let target = path.canonicalize().unwrap_or_else(|_| path.to_owned());
+    let target = link_target(path);
+    let existing = std::fs::metadata(&target).ok();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if existing.as_ref().is_some_and(|m| m.nlink() > 1) {
+            return write_in_place(&target, write);
+        }
+    }
     let folder = match target.parent() {
         Some(f) if !f.as_os_str().is_empty() => f,
         _ => Path::new("."),
@@ -95,11 +144,28 @@ pub fn write_atomically(
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let mut out = std::io::BufWriter::new(builder.tempfile_in(folder)?);
+    let temporary = match builder.tempfile_in(folder) {
+        Ok(file) => file,
+        Err(_) if existing.is_some() => return write_in_place(&target, write),
+        Err(e) => return Err(e),
+    };
+    let mut out = std::io::BufWriter::new(temporary);
     write(&mut out)?;
     let file = out.into_inner().map_err(|e| e.into_error())?;
+    if let Some(existing) = existing {
+        file.as_file().set_permissions(existing.permissions())?;
+    }
     file.persist(&target).map_err(|e| e.error)?;
     Ok(())
+}
+
+fn write_in_place(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    write(&mut out)?;
+    out.flush()
 }
 
 /// [`write_atomically`] of bytes already made.
@@ -181,9 +247,15 @@ mod tests {
         #[cfg(unix)]
         {
             use std::os::unix::fs::PermissionsExt;
-            // The umask's permissions, readable by others as File::create's.
-            let mode = std::fs::metadata(&path).unwrap().permissions().mode();
-            assert_ne!(mode & 0o044, 0, "{mode:o}");
+            // The replaced file's permissions are kept.
+            let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+            write_bytes(&path, b"newer\n").unwrap();
+            assert_eq!(mode(&path), 0o600);
+            std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o640)).unwrap();
+            write_bytes(&path, b"newest\n").unwrap();
+            assert_eq!(mode(&path), 0o640);
+            assert_eq!(std::fs::read_to_string(&path).unwrap(), "newest\n");
         }
     }
 
@@ -198,10 +270,54 @@ mod tests {
         write_bytes(&link, b"new\n").unwrap();
         assert!(std::fs::symlink_metadata(&link).unwrap().is_symlink());
         assert_eq!(std::fs::read_to_string(&file).unwrap(), "new\n");
+        // A dangling link names the file it creates.
+        let dangling = dir.path().join("dangling.csv");
+        std::os::unix::fs::symlink("made.csv", &dangling).unwrap();
+        assert_eq!(check_destination(&dangling), Ok(()));
+        write_bytes(&dangling, b"made\n").unwrap();
+        assert!(std::fs::symlink_metadata(&dangling).unwrap().is_symlink());
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("made.csv")).unwrap(),
+            "made\n"
+        );
+        // A file with another hard link is written in place: both names
+        // read the result.
+        let other = dir.path().join("other.csv");
+        std::fs::hard_link(&file, &other).unwrap();
+        write_bytes(&file, b"both\n").unwrap();
+        assert_eq!(std::fs::read_to_string(&other).unwrap(), "both\n");
         let null = Path::new("/dev/null");
         if null.exists() {
             write_bytes(null, b"nothing\n").unwrap();
             assert!(is_device(null));
+            assert_eq!(check_destination(null), Ok(()));
         }
+    }
+
+    /// A folder that takes no new file: an existing file in it is written
+    /// in place, a new one is refused before the work. (Root writes
+    /// anywhere; there the folder takes files and nothing is shown.)
+    #[cfg(unix)]
+    #[test]
+    fn a_folder_that_takes_no_new_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let folder = dir.path().join("closed");
+        std::fs::create_dir(&folder).unwrap();
+        let existing = folder.join("result.csv");
+        std::fs::write(&existing, "old\n").unwrap();
+        std::fs::set_permissions(&folder, std::fs::Permissions::from_mode(0o555)).unwrap();
+        let takes_files = tempfile::tempfile_in(&folder).is_ok();
+        let new = folder.join("new.csv");
+        if !takes_files {
+            assert!(matches!(
+                check_destination(&new),
+                Err(Unwritable::Denied(_))
+            ));
+            assert_eq!(check_destination(&existing), Ok(()));
+        }
+        write_bytes(&existing, b"new\n").unwrap();
+        assert_eq!(std::fs::read_to_string(&existing).unwrap(), "new\n");
+        std::fs::set_permissions(&folder, std::fs::Permissions::from_mode(0o755)).unwrap();
     }
 }

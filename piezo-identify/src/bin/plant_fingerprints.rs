@@ -118,9 +118,12 @@ fn main() -> ExitCode {
     let report = table(&args, &fingerprints, &checks);
     if let Some(out) = &args.out {
         let written = std::fs::create_dir_all(out)
-            .and_then(|()| std::fs::write(out.join("report.md"), &report))
+            .and_then(|()| result_files::write_bytes(&out.join("report.md"), report.as_bytes()))
             .and_then(|()| {
-                std::fs::write(out.join("fingerprints.json"), document.to_string() + "\n")
+                result_files::write_bytes(
+                    &out.join("fingerprints.json"),
+                    (document.to_string() + "\n").as_bytes(),
+                )
             });
         if let Err(e) = written {
             eprintln!("{}: {e}", out.display());

@@ -304,7 +304,8 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
         notes.smaller_loops("input", "V", &record.input, &fitted, &plan.scored());
         notes.faster_cycles(&plan, &record.input, dt, &plan.scored());
     }
-    notes.few_cycles(&plan);
+    notes.few_turns(&plan, &record.input);
+    notes.few_levels(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;
     if let (Some(v), Some((_, scored))) = (&validation, &validation_scored) {

@@ -6,9 +6,10 @@ use std::path::PathBuf;
 use clap::Args;
 
 use piezo_identify::protocol::{
-    InversePiErrors, InversePiIdentification, InversePiSettings, Plan, identify_inverse_pi,
+    Candidate, InversePiErrors, InversePiIdentification, InversePiSettings, Plan,
+    identify_inverse_pi,
 };
-use piezo_identify::validation::{Steps, inverse_model_input};
+use piezo_identify::validation::inverse_model_input;
 
 use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load, load_validation};
 use super::progress::Reporter;
@@ -137,13 +138,14 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     print_inverse_pi_errors("fit part", &fit.fit_errors);
     if let Some(unseen) = &fit.unseen {
         print_inverse_pi_errors("scored part (not seen by the fit)", unseen);
-        let y = inverse_model_input(&record.output, fit.smoothing, plan.steps());
+        let y = inverse_model_input(&record.output, fit.smoothing, plan.steps(&record.input));
         let fitted = pad(&plan.fitted(), plan.samples);
         notes.extrapolation("displacement", range_excess(&y, &fitted, &plan.scored()));
         notes.smaller_loops("displacement", "um", &y, &fitted, &plan.scored());
         notes.faster_cycles(&plan, &record.input, dt, &plan.scored());
     }
-    notes.few_cycles(&plan);
+    notes.few_turns(&plan, &record.input);
+    notes.few_levels(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;
     if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
@@ -152,10 +154,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
             .protocol
             .validation_output(&plan, &loaded, v, fit.stroke);
         zero_alignment = Some(zero);
-        let steps = Steps {
-            starts: &segments.steps,
-            settle: plan.settle_samples_at(v.record.sample_period),
-        };
+        let steps = plan.validation_steps(segments, &v.record.input, v.record.sample_period);
         let errors = fit.errors_on(
             &output,
             &v.record.input,
@@ -170,7 +169,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     say!("time: {:.2} s", fit.seconds);
 
     if let Some(path) = &args.protocol.predictions {
-        let predictions = fit.predictions_on(&record.output, dt, plan.steps());
+        let predictions = fit.predictions_on(&record.output, dt, plan.steps(&record.input));
         write_predictions(
             path,
             dt,
@@ -241,24 +240,41 @@ pub(crate) fn print_inverse_pi_choices(
     };
     let weights = |rate: bool| if rate { "rate-dependent" } else { "constant" };
     if let Some(cv) = &fit.cross_validation {
+        let ends: std::collections::BTreeSet<usize> =
+            cv.proposed.iter().filter_map(|c| c.start).collect();
         say!(
-            "\nvalidation inside the fit part: (c, w_s) searched on its first {} fitted samples (to {:.3} s), every candidate's linear part fitted there and scored on the last {} [V RMS]:",
+            "\nvalidation inside the fit part: (c, w_s) searched on its first {} fitted samples (to {:.3} s); with each of that search's {} best distinct ends, every candidate's linear part fitted there and scored on the last {} [V RMS; each candidate's best end shown, --report has all]:",
             cv.train_samples,
             cv.train_end as f64 * dt,
+            ends.len(),
             cv.validation_samples
         );
         say!(
-            "  {:<36} {:<16} {:>12}",
+            "  {:<36} {:<16} {:>12} {:>6}",
             "moving average",
             "backlash weights",
-            "RMS [V]"
+            "RMS [V]",
+            "start"
         );
+        // The best end for each (smoothing, weights), in the order tried.
+        let mut shown: Vec<&Candidate> = Vec::new();
         for c in &cv.proposed {
+            match shown
+                .iter_mut()
+                .find(|s| s.smoothing == c.smoothing && s.rate_dependent == c.rate_dependent)
+            {
+                Some(best) if c.validation_rms < best.validation_rms => *best = c,
+                Some(_) => {}
+                None => shown.push(c),
+            }
+        }
+        for c in shown {
             say!(
-                "  {:<36} {:<16} {:>12.6}",
+                "  {:<36} {:<16} {:>12.6} {:>6}",
                 smoothing(c.smoothing),
                 weights(c.rate_dependent),
-                c.validation_rms
+                c.validation_rms,
+                c.start.map_or(String::new(), |s| s.to_string())
             );
         }
         for c in &cv.classical {

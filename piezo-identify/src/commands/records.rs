@@ -26,10 +26,11 @@ pub(crate) struct LabRecordArgs {
     pub(crate) sweep: f64,
     /// Instead of a sine, a staircase through the command range and back,
     /// each stair held this many seconds (0: a sine).
-    #[arg(long, default_value_t = 0.0, value_parser = seconds)]
+    #[arg(long, default_value_t = 0.0, value_parser = seconds,
+          conflicts_with_all = ["sweep", "frequency"])]
     pub(crate) stairs: f64,
     /// Stairs from the lowest command to the highest (with --stairs).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, requires = "stairs")]
     pub(crate) levels: usize,
     /// Seconds at rest (0 V) before the step onto the excitation.
     #[arg(long, default_value_t = 2.0, value_parser = seconds)]
@@ -72,11 +73,6 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
             Drive::Unipolar
         },
         excitation: if args.stairs > 0.0 {
-            if args.sweep > 0.0 {
-                return Err(Failure::Input(
-                    "--stairs and --sweep are two excitations: give one".into(),
-                ));
-            }
             Excitation::Staircase {
                 levels: args.levels,
                 hold: args.stairs,

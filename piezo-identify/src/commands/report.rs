@@ -157,12 +157,18 @@ pub(crate) fn range_excess(values: &[f64], fitted: &[bool], scored: &[bool]) -> 
 /// more than this factor gets a note ([`Notes::faster_cycles`]).
 pub(crate) const FASTER_CYCLE_RATIO: f64 = 2.0;
 
-/// Fewer fitted cycles than this get a note ([`Notes::few_cycles`]): some
-/// stretch of the loop was then never fitted. On a 0.2 s staircase at
-/// 200 Hz with 0.94 of a cycle fitted, the proposed model scored 0.47-1.72 %
-/// of the input span by seed (classical P-I 1.2 %); with 5 cycles fitted,
-/// 0.24-0.25 % for every seed.
-pub(crate) const MIN_FITTED_CYCLES: f64 = 1.0;
+/// An input that stands at this many levels or fewer over the fitted
+/// samples gets a note ([`Notes::few_levels`]); a sine's fitted samples
+/// make about 500 (its span over the rest tolerance of 0.2 % of it).
+pub(crate) const MAX_NOTED_LEVELS: usize = 20;
+
+/// An input that turns fewer times than this over the fitted samples gets
+/// a note ([`Notes::few_turns`]): some branch of its loop was never fitted.
+/// On 16 s of a 0.2 s staircase at 200 Hz split in two, the warm-up (to the
+/// first loading's end, 5.6 s) leaves one turn to fit, and the proposed
+/// model scored 0.24-1.72 % of the input span by seed (classical P-I
+/// 1.2 %); on 40 s of it, 0.235 % for every seed.
+pub(crate) const MIN_FITTED_TURNS: usize = 2;
 
 /// The notes a fit prints after its errors, kept for `--report` too (a
 /// script reading the JSON sees what a reader of the summary sees).
@@ -187,15 +193,24 @@ impl Notes {
         }
     }
 
-    /// A note when the fitted samples span fewer than
-    /// [`MIN_FITTED_CYCLES`] of the input's fastest cycle.
-    pub(crate) fn few_cycles(&mut self, plan: &Plan) {
-        if let (Some(cycles), Some(cycle)) = (plan.fitted_cycles(), plan.fastest_cycle)
-            && cycles < MIN_FITTED_CYCLES
-        {
+    /// A note when the input turns fewer than [`MIN_FITTED_TURNS`] times
+    /// over the fitted samples (`u` the record's input).
+    pub(crate) fn few_turns(&mut self, plan: &Plan, u: &[f64]) {
+        let turns = plan.fitted_turns(u);
+        if turns < MIN_FITTED_TURNS {
             self.add(format!(
-                "the fitted samples amount to {cycles:.2} of the input's fastest cycle ({:.3} s) once the warm-up, rests and settling are left out: some of its loop was never fitted; a longer record or a larger --split fits all of it",
-                cycle * plan.sample_period,
+                "the input turns {turns} time(s) over the fitted samples (once the warm-up, rests and settling are left out): no whole loop, up and down, was fitted; a longer record or a larger --split fits one"
+            ));
+        }
+    }
+
+    /// A note when the input stands at few levels over the fitted samples
+    /// (at most [`MAX_NOTED_LEVELS`]: a staircase).
+    pub(crate) fn few_levels(&mut self, plan: &Plan) {
+        if plan.fitted_levels <= MAX_NOTED_LEVELS {
+            self.add(format!(
+                "the input stands at {} levels over the fitted samples (a staircase): the models are fitted, and a split record scored, at those levels; between them they interpolate",
+                plan.fitted_levels
             ));
         }
     }
