@@ -153,9 +153,14 @@ pub enum LabRecordError {
     #[error("{0} must be positive and finite")]
     Setting(&'static str),
     #[error(
-        "a staircase needs at least 2 levels and at most one per sample of the record, not {0}"
+        "a staircase of {levels} levels held {hold} s each must have 2 levels or more and climb its range within the {seconds} s of the record ({} s per climb)",
+        (*levels as f64 - 1.0) * hold
     )]
-    Levels(usize),
+    Levels {
+        levels: usize,
+        hold: f64,
+        seconds: f64,
+    },
     #[error(
         "{samples} samples asked (rate times rest and excitation), more than the {MAX_LAB_SAMPLES} a record is allowed here"
     )]
@@ -187,11 +192,18 @@ pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
         return Err(LabRecordError::TooLong { samples: asked });
     }
     if let Excitation::Staircase { levels, hold } = spec.excitation {
-        if levels < 2 || levels as f64 > asked {
-            return Err(LabRecordError::Levels(levels));
-        }
         if !(hold.is_finite() && hold > 0.0) {
             return Err(LabRecordError::Setting("hold"));
+        }
+        // One climb of the range at least: --levels 2000 at 0.2 s climbed
+        // 2 % of it in 20 s.
+        let climb = (levels as f64 - 1.0) * hold;
+        if levels < 2 || climb > spec.excitation_seconds {
+            return Err(LabRecordError::Levels {
+                levels,
+                hold,
+                seconds: spec.excitation_seconds,
+            });
         }
     }
     let mut params = FlexureStageParams::default();
@@ -304,16 +316,23 @@ mod tests {
         );
         // Refused before anything is held (it aborted the process).
         spec.rest_seconds = 1.0;
+        for levels in [1, 7, usize::MAX / 2 + 2, usize::MAX] {
+            // One climb of 0.2 s stairs fits 1 s for 6 levels, not 7.
+            spec.excitation = Excitation::Staircase { levels, hold: 0.2 };
+            assert_eq!(
+                lab_record(&spec),
+                Err(LabRecordError::Levels {
+                    levels,
+                    hold: 0.2,
+                    seconds: 1.0
+                })
+            );
+        }
         spec.excitation = Excitation::Staircase {
-            levels: 1,
+            levels: 6,
             hold: 0.2,
         };
-        assert_eq!(lab_record(&spec), Err(LabRecordError::Levels(1)));
-        // No more stairs than samples (2·(levels − 1) overflowed).
-        for levels in [201, usize::MAX / 2 + 2, usize::MAX] {
-            spec.excitation = Excitation::Staircase { levels, hold: 0.2 };
-            assert_eq!(lab_record(&spec), Err(LabRecordError::Levels(levels)));
-        }
+        assert!(lab_record(&spec).is_ok());
         spec.excitation = Excitation::Staircase {
             levels: 4,
             hold: f64::NAN,

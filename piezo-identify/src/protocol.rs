@@ -168,6 +168,44 @@ fn input_levels(u: &[f64], fitted: &[bool], tolerance: f64) -> usize {
     levels
 }
 
+/// The levels of a staircase over the `fitted` samples: when at least
+/// [`STAIRCASE_HELD_SHARE`] of them lie in holds (runs of at least
+/// `min_run` consecutive fitted samples within `tolerance` of the run's
+/// first), the levels of those holds grouped as [`input_levels`] groups
+/// values; None otherwise. A sine sampled a whole number of times per cycle
+/// takes few values (11 for 10 Hz at 200 Hz) but holds none of them.
+pub fn held_levels(u: &[f64], fitted: &[bool], tolerance: f64, min_run: usize) -> Option<usize> {
+    let mut held = Vec::new();
+    let mut run: Vec<f64> = Vec::new();
+    let close = |run: &mut Vec<f64>, held: &mut Vec<f64>| {
+        if run.len() >= min_run {
+            held.append(run);
+        }
+        run.clear();
+    };
+    for (&value, &fit) in u.iter().zip(fitted) {
+        if !fit
+            || run
+                .first()
+                .is_some_and(|first| (value - first).abs() > tolerance)
+        {
+            close(&mut run, &mut held);
+        }
+        if fit {
+            run.push(value);
+        }
+    }
+    close(&mut run, &mut held);
+    let total = fitted.iter().filter(|f| **f).count();
+    if total == 0 || (held.len() as f64) < STAIRCASE_HELD_SHARE * total as f64 {
+        return None;
+    }
+    Some(input_levels(&held, &vec![true; held.len()], tolerance))
+}
+
+/// Share of the fitted samples in holds that makes an input a staircase.
+pub const STAIRCASE_HELD_SHARE: f64 = 0.9;
+
 /// Why a validation file's zero was not aligned ([`Plan::zero_alignment`]).
 #[derive(Clone, Debug, PartialEq, Serialize, thiserror::Error)]
 pub enum NoZeroAlignment {
@@ -295,10 +333,12 @@ pub struct Plan {
     pub scored_excluded: Vec<Range<usize>>,
     /// Fastest cycle of the input over the fit part, rests aside [samples].
     pub fastest_cycle: Option<f64>,
-    /// The levels the input stands at over the fitted samples (a staircase's
-    /// stairs; as many as the span holds rest tolerances for an input that
-    /// moves through it).
+    /// The values the input takes over the fitted samples, grouped within
+    /// the rest tolerance ([`MIN_INPUT_LEVELS`]).
     pub fitted_levels: usize,
+    /// The levels a staircase holds over the fitted samples (None when the
+    /// input is no staircase: [`held_levels`]).
+    pub stairs: Option<usize>,
 }
 
 impl Plan {
@@ -385,6 +425,7 @@ impl Plan {
             scored_excluded,
             fastest_cycle: None,
             fitted_levels: 0,
+            stairs: None,
         };
         let fitted = plan.fitted();
         if !fitted.iter().any(|f| *f) {
@@ -412,10 +453,17 @@ impl Plan {
                 samples: u.len() - fit_end,
             });
         }
-        plan.fitted_levels = input_levels(&u[..fit_end], &plan.fitted(), thresholds.rest_tolerance);
+        let fitted = plan.fitted();
+        plan.fitted_levels = input_levels(&u[..fit_end], &fitted, thresholds.rest_tolerance);
         if plan.fitted_levels < MIN_INPUT_LEVELS {
             return Err(ProtocolError::TooFewLevels(plan.fitted_levels));
         }
+        plan.stairs = held_levels(
+            &u[..fit_end],
+            &fitted,
+            thresholds.rest_tolerance,
+            (thresholds.settle_samples / 2).max(3),
+        );
         // The excitation's cycle, over the whole fit part but its rests (the
         // first loading is excluded from the fit, not from the excitation).
         let moving = flags(fit_end, 0, &plan.segments.rests);
@@ -1574,17 +1622,24 @@ mod tests {
     /// A staircase stands at one level per stair, a sine at as many as its
     /// span holds tolerances; only the fitted samples count.
     #[test]
-    fn input_levels_count_stairs_and_tolerances() {
+    fn input_levels_count_values_and_staircases_their_holds() {
         let stairs: Vec<f64> = [0.0, 1.0, 2.0, 1.0, 0.0, 1.0]
             .iter()
-            .flat_map(|level| {
-                (0..10).map(move |n| level + if n % 2 == 0 { 0.001 } else { -0.001 })
-            })
+            .flat_map(|level| (0..10).map(move |n| level + if n % 2 == 0 { 0.001 } else { -0.001 }))
             .collect();
         let all = vec![true; stairs.len()];
         assert_eq!(input_levels(&stairs, &all, 0.01), 3);
         let first_two: Vec<bool> = (0..stairs.len()).map(|n| n < 20).collect();
         assert_eq!(input_levels(&stairs, &first_two, 0.01), 2);
+        assert_eq!(held_levels(&stairs, &all, 0.01, 5), Some(3));
+        assert_eq!(held_levels(&stairs, &first_two, 0.01, 5), Some(2));
+        // A sine of 20 samples a cycle takes 11 values and holds none.
+        let periodic: Vec<f64> = (0..400)
+            .map(|n| (std::f64::consts::TAU * n as f64 / 20.0).sin())
+            .collect();
+        let every = vec![true; 400];
+        assert!(input_levels(&periodic, &every, 0.004) <= 11);
+        assert_eq!(held_levels(&periodic, &every, 0.004, 5), None);
         let sine: Vec<f64> = (0..1000).map(|n| (n as f64 * 0.01).sin()).collect();
         let levels = input_levels(&sine, &vec![true; 1000], 0.004);
         // Far more than a staircase: 398 groups for 0.004 on a span of 2.

@@ -106,8 +106,10 @@ pub struct Steps<'a> {
 /// settling (cut short by the next step and by the record's end) the
 /// displacement is that of the first sample after the settling (the last
 /// before the next step or the end when the settling is cut short). A step
-/// onto an input that moves on during the settling (onto a sine) is left as
-/// measured: the actuator may turn there, and its turns are the model's.
+/// is onto a held input when the last three quarters of the window stay
+/// within twice `hold_tolerance` of the input's last value there; a step
+/// onto an input that moves on (onto a sine) is left as measured: the
+/// actuator may turn there, and its turns are the model's.
 ///
 /// A step moves the actuator's voltage once, one way, and its hysteresis
 /// with it; the stage's structural modes meanwhile ring in the measured
@@ -134,10 +136,16 @@ pub fn held_over_settling(y: &[f64], steps: Steps) -> Vec<f64> {
         let next = starts.get(k + 1).copied().unwrap_or(y.len());
         let end = (start + steps.settle).min(next);
         let window = &steps.input[start.min(steps.input.len())..end.min(steps.input.len())];
-        let onto_hold = window
+        let Some(last) = window.last() else {
+            continue;
+        };
+        // Held once the input itself has settled: its last three quarters
+        // within twice the rest tolerance of where it ends (a measured
+        // command lags and carries noise; a sine moves on by far more).
+        let onto_hold = window[window.len() / 4..]
             .iter()
-            .all(|u| (u - window[0]).abs() <= steps.hold_tolerance);
-        if window.is_empty() || !onto_hold {
+            .all(|u| (u - last).abs() <= 2.0 * steps.hold_tolerance);
+        if !onto_hold {
             continue;
         }
         let settled = if end < next { y[end] } else { y[end - 1] };
@@ -264,6 +272,18 @@ mod tests {
         assert_eq!(
             held_over_settling(&y, steps(&[2, 4], &u)),
             vec![0.0, 0.0, 12.0, 12.0, 4.0, 4.0, 4.0, 4.0, 1.0]
+        );
+        // A command that lags into its level is held once settled.
+        let lagging = [0.0, 0.0, 3.0, 5.0, 5.0, 5.0, 5.0, 1.0, 1.0];
+        assert_eq!(
+            held_over_settling(
+                &y,
+                Steps {
+                    settle: 4,
+                    ..steps(&[2, 7], &lagging)
+                }
+            ),
+            vec![0.0, 0.0, 10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0]
         );
         // Onto an input that moves on (a sine): as measured.
         let moving = [0.0, 0.0, 5.0, 6.0, 7.0, 6.0, 5.0, 1.0, 1.0];

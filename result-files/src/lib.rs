@@ -8,8 +8,11 @@
 //! name beside its file and renamed into place when whole
 //! ([`write_atomically`]), so that a run stopped while writing (Ctrl-C, a
 //! full disk) leaves no cut file under the name a reader takes as complete.
-//! Devices (`/dev/null`, a named pipe) are no files to lose and are written
-//! straight through ([`is_device`]).
+//! Where a rename would change what the file is (another owner, other hard
+//! links, a folder that takes no new file) the result is made in memory and
+//! written in place, as `File::create` would: a failure of the disk in that
+//! write can still cut it. Devices (`/dev/null`, a named pipe) are no files
+//! to lose and are written straight through ([`is_device`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -65,14 +68,16 @@ pub fn check_destination(path: &Path) -> Result<(), Unwritable> {
     if is_device(path) {
         return Ok(());
     }
-    let target = link_target(path);
+    // The error's kind alone: a temporary file's name means nothing to the
+    // user.
+    let denied = |e: std::io::Error| Unwritable::Denied(e.kind().to_string());
+    let target = link_target(path).map_err(denied)?;
     let folder = target.parent().filter(|f| !f.as_os_str().is_empty());
     if let Some(folder) = folder
         && !folder.is_dir()
     {
         return Err(Unwritable::NoFolder(folder.to_owned()));
     }
-    let denied = |e: std::io::Error| Unwritable::Denied(e.to_string());
     if target.exists() {
         std::fs::OpenOptions::new()
             .write(true)
@@ -88,24 +93,28 @@ pub fn check_destination(path: &Path) -> Result<(), Unwritable> {
 }
 
 /// The file a path names once its links are followed, whether that file
-/// exists yet or not (a dangling link names the file it will create).
-fn link_target(path: &Path) -> PathBuf {
+/// exists yet or not (a dangling link names the file it will create); a
+/// loop of links is an error, as for the kernel.
+fn link_target(path: &Path) -> std::io::Result<PathBuf> {
     let mut target = path.to_owned();
-    // Bounded, as the kernel bounds a chain of links (and ends a loop).
+    // The kernel's bound on a chain of links.
     for _ in 0..40 {
         match std::fs::symlink_metadata(&target) {
-            Ok(m) if m.file_type().is_symlink() => match std::fs::read_link(&target) {
-                Ok(link) if link.is_absolute() => target = link,
-                Ok(link) => {
-                    let folder = target.parent().unwrap_or(Path::new("")).to_owned();
-                    target = folder.join(link);
-                }
-                Err(_) => break,
-            },
-            _ => break,
+            Ok(m) if m.file_type().is_symlink() => {
+                let link = std::fs::read_link(&target)?;
+                target = if link.is_absolute() {
+                    link
+                } else {
+                    target.parent().unwrap_or(Path::new("")).join(link)
+                };
+            }
+            _ => return Ok(target),
         }
     }
-    target
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("{}: too many levels of links", path.display()),
+    ))
 }
 
 /// Writes a result file whole or not at all (module comment): `write` fills
@@ -113,25 +122,26 @@ fn link_target(path: &Path) -> PathBuf {
 /// written, with the permissions of the file it replaces (a new file gets
 /// those `File::create` gives: 0o666 less the umask). Links are followed,
 /// and the file they name is written, not the link, even one that does not
-/// exist yet. Written in place instead, as `File::create` would: a device
-/// (renaming onto it would replace the device), a file with other hard
-/// links (a rename would part it from them), and an existing file in a
-/// folder that takes no new file.
+/// exist yet. An existing file must be writable, as for `File::create`.
+/// Made in memory and written in place instead: a file with other hard
+/// links (a rename would part it from them), one owned by another user (a
+/// rename would make it the writer's), one in a folder that takes no new
+/// file or whose rename the folder refuses (a sticky folder). A device is
+/// written straight through.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
     if is_device(path) {
-        return write_in_place(path, write);
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        write(&mut out)?;
+        return out.flush();
     }
-    let target = link_target(path);
+    let target = link_target(path)?;
     let existing = std::fs::metadata(&target).ok();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        if existing.as_ref().is_some_and(|m| m.nlink() > 1) {
-            return write_in_place(&target, write);
-        }
+    if existing.is_some() {
+        // Write protection holds, as File::create would honour it.
+        std::fs::OpenOptions::new().write(true).open(&target)?;
     }
     let folder = match target.parent() {
         Some(f) if !f.as_os_str().is_empty() => f,
@@ -149,23 +159,47 @@ pub fn write_atomically(
         Err(_) if existing.is_some() => return write_in_place(&target, write),
         Err(e) => return Err(e),
     };
+    if let Some(existing) = &existing {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::MetadataExt;
+            let ours = temporary.as_file().metadata()?;
+            if existing.nlink() > 1 || existing.uid() != ours.uid() {
+                drop(temporary);
+                return write_in_place(&target, write);
+            }
+        }
+    }
     let mut out = std::io::BufWriter::new(temporary);
     write(&mut out)?;
     let file = out.into_inner().map_err(|e| e.into_error())?;
-    if let Some(existing) = existing {
+    if let Some(existing) = &existing {
         file.as_file().set_permissions(existing.permissions())?;
     }
-    file.persist(&target).map_err(|e| e.error)?;
-    Ok(())
+    match file.persist(&target) {
+        Ok(_) => Ok(()),
+        // A sticky folder refuses to rename over another user's file that
+        // the writer may still write.
+        Err(e) if e.error.kind() == std::io::ErrorKind::PermissionDenied => {
+            let mut bytes = Vec::new();
+            let mut made = e.file.reopen()?;
+            std::io::Read::read_to_end(&mut made, &mut bytes)?;
+            drop(e.file);
+            std::fs::write(&target, bytes)
+        }
+        Err(e) => Err(e.error),
+    }
 }
 
+/// The result made in memory, then written over the file: a failure of
+/// `write` leaves the file as it was.
 fn write_in_place(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
-    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-    write(&mut out)?;
-    out.flush()
+    let mut bytes = Vec::new();
+    write(&mut bytes)?;
+    std::fs::write(path, bytes)
 }
 
 /// [`write_atomically`] of bytes already made.
@@ -291,6 +325,36 @@ mod tests {
             write_bytes(null, b"nothing\n").unwrap();
             assert!(is_device(null));
             assert_eq!(check_destination(null), Ok(()));
+        }
+    }
+
+    /// A loop of links is refused, the link kept; a write-protected file
+    /// is refused as `File::create` refuses it (root may write it, as
+    /// there); a file owned by another user is written in place and keeps
+    /// its owner (shown where this test may give a file away: as root).
+    #[cfg(unix)]
+    #[test]
+    fn loops_write_protection_and_owners() {
+        use std::os::unix::fs::{MetadataExt, PermissionsExt};
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.csv"), dir.path().join("b.csv"));
+        std::os::unix::fs::symlink(&b, &a).unwrap();
+        std::os::unix::fs::symlink(&a, &b).unwrap();
+        assert!(matches!(check_destination(&a), Err(Unwritable::Denied(_))));
+        assert!(write_bytes(&a, b"x").is_err());
+        assert!(std::fs::symlink_metadata(&a).unwrap().is_symlink());
+        let file = dir.path().join("kept.csv");
+        std::fs::write(&file, "old\n").unwrap();
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o444)).unwrap();
+        let may_write = std::fs::OpenOptions::new().write(true).open(&file).is_ok();
+        assert_eq!(write_bytes(&file, b"new\n").is_ok(), may_write);
+        let expected = if may_write { "new\n" } else { "old\n" };
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), expected);
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o666)).unwrap();
+        if std::os::unix::fs::chown(&file, Some(65534), None).is_ok() {
+            write_bytes(&file, b"theirs\n").unwrap();
+            assert_eq!(std::fs::metadata(&file).unwrap().uid(), 65534);
+            assert_eq!(std::fs::read_to_string(&file).unwrap(), "theirs\n");
         }
     }
 

@@ -75,6 +75,14 @@ pub(crate) fn seconds(text: &str) -> Result<f64, String> {
     }
 }
 
+/// A positive, finite number of seconds.
+pub(crate) fn positive_seconds(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("give a number of seconds above 0 (got {text:?})")),
+    }
+}
+
 /// A fraction strictly between 0 and 1.
 pub(crate) fn fraction(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use super::Failure;
-use super::arguments::{check_destinations, seconds};
+use super::arguments::{check_destinations, positive_seconds, seconds};
 use super::report::{bouc_wen_parameters, write_json, write_result};
 
 #[derive(Args)]
@@ -25,10 +25,9 @@ pub(crate) struct LabRecordArgs {
     #[arg(long, default_value_t = 0.0, value_parser = seconds)]
     pub(crate) sweep: f64,
     /// Instead of a sine, a staircase through the command range and back,
-    /// each stair held this many seconds (0: a sine).
-    #[arg(long, default_value_t = 0.0, value_parser = seconds,
-          conflicts_with_all = ["sweep", "frequency"])]
-    pub(crate) stairs: f64,
+    /// each stair held this many seconds.
+    #[arg(long, value_parser = positive_seconds, conflicts_with_all = ["sweep", "frequency"])]
+    pub(crate) stairs: Option<f64>,
     /// Stairs from the lowest command to the highest (with --stairs).
     #[arg(long, default_value_t = 10, requires = "stairs")]
     pub(crate) levels: usize,
@@ -72,10 +71,10 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
         } else {
             Drive::Unipolar
         },
-        excitation: if args.stairs > 0.0 {
+        excitation: if let Some(hold) = args.stairs {
             Excitation::Staircase {
                 levels: args.levels,
-                hold: args.stairs,
+                hold,
             }
         } else if args.sweep > 0.0 {
             Excitation::SweptSine {

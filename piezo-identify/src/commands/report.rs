@@ -157,9 +157,8 @@ pub(crate) fn range_excess(values: &[f64], fitted: &[bool], scored: &[bool]) -> 
 /// more than this factor gets a note ([`Notes::faster_cycles`]).
 pub(crate) const FASTER_CYCLE_RATIO: f64 = 2.0;
 
-/// An input that stands at this many levels or fewer over the fitted
-/// samples gets a note ([`Notes::few_levels`]); a sine's fitted samples
-/// make about 500 (its span over the rest tolerance of 0.2 % of it).
+/// A staircase of this many levels or fewer over the fitted samples gets a
+/// note ([`Notes::few_levels`]).
 pub(crate) const MAX_NOTED_LEVELS: usize = 20;
 
 /// An input that turns fewer times than this over the fitted samples gets
@@ -167,7 +166,7 @@ pub(crate) const MAX_NOTED_LEVELS: usize = 20;
 /// On 16 s of a 0.2 s staircase at 200 Hz split in two, the warm-up (to the
 /// first loading's end, 5.6 s) leaves one turn to fit, and the proposed
 /// model scored 0.24-1.72 % of the input span by seed (classical P-I
-/// 1.2 %); on 40 s of it, 0.235 % for every seed.
+/// 1.2 %); on 40 s of it, 0.235-0.243 % for seeds 0-5.
 pub(crate) const MIN_FITTED_TURNS: usize = 2;
 
 /// The notes a fit prints after its errors, kept for `--report` too (a
@@ -204,13 +203,14 @@ impl Notes {
         }
     }
 
-    /// A note when the input stands at few levels over the fitted samples
-    /// (at most [`MAX_NOTED_LEVELS`]: a staircase).
+    /// A note when the input is a staircase of few levels over the fitted
+    /// samples (at most [`MAX_NOTED_LEVELS`]).
     pub(crate) fn few_levels(&mut self, plan: &Plan) {
-        if plan.fitted_levels <= MAX_NOTED_LEVELS {
+        if let Some(levels) = plan.stairs
+            && levels <= MAX_NOTED_LEVELS
+        {
             self.add(format!(
-                "the input stands at {} levels over the fitted samples (a staircase): the models are fitted, and a split record scored, at those levels; between them they interpolate",
-                plan.fitted_levels
+                "the input stands at {levels} levels over the fitted samples (a staircase): the models are fitted, and a split record scored, at those levels; between them they interpolate"
             ));
         }
     }
