@@ -1373,24 +1373,22 @@ fn a_closed_standard_output_does_not_lose_the_results() {
 #[test]
 fn a_fit_on_less_than_one_loop_on_few_levels_or_scored_on_faster_cycles_says_so() {
     let dir = tempfile::tempdir().unwrap();
-    let record = |name: &str, seconds: &str| {
+    // A lab record at 200 Hz: 0.2 s stairs unless `excitation` says else.
+    let record = |name: &str, seconds: &str, excitation: &[&str]| {
         let path = dir.path().join(name);
-        let output = run(&[
-            "lab-record",
-            "--rate",
-            "200",
-            "--stairs",
-            "0.2",
-            "--seconds",
-            seconds,
-            "--out",
-            path.to_str().unwrap(),
-        ]);
+        let mut args = vec!["lab-record", "--rate", "200", "--seconds", seconds];
+        args.extend_from_slice(if excitation.is_empty() {
+            &["--stairs", "0.2"]
+        } else {
+            excitation
+        });
+        args.extend_from_slice(&["--out", path.to_str().unwrap()]);
+        let output = run(&args);
         assert!(output.status.success(), "{}", stderr(&output));
         path.to_str().unwrap().to_owned()
     };
-    let short = record("short.csv", "16");
-    let long = record("long.csv", "40");
+    let short = record("short.csv", "16", &[]);
+    let long = record("long.csv", "40", &[]);
     let report = dir.path().join("report.json");
     for command in ["inverse-pi", "bouc-wen"] {
         for (file, noted) in [(&short, true), (&long, false)] {
@@ -1420,23 +1418,9 @@ fn a_fit_on_less_than_one_loop_on_few_levels_or_scored_on_faster_cycles_says_so(
             assert_eq!(in_report, noted, "{command} {file}: {written}");
         }
     }
-    let two = dir.path().join("two.csv");
-    let output = run(&[
-        "lab-record",
-        "--rate",
-        "200",
-        "--stairs",
-        "0.2",
-        "--levels",
-        "2",
-        "--seconds",
-        "20",
-        "--out",
-        two.to_str().unwrap(),
-    ]);
-    assert!(output.status.success(), "{}", stderr(&output));
+    let two = record("two.csv", "20", &["--stairs", "0.2", "--levels", "2"]);
     for command in ["inverse-pi", "bouc-wen"] {
-        let output = run(&[command, two.to_str().unwrap(), "--split", "0.5"]);
+        let output = run(&[command, &two, "--split", "0.5"]);
         refused_as_input(&output);
         assert!(
             stderr(&output).contains("the input stands at 2 level(s) over the fitted samples, and a loop needs at least 3"),
@@ -1446,21 +1430,9 @@ fn a_fit_on_less_than_one_loop_on_few_levels_or_scored_on_faster_cycles_says_so(
     }
     // A validation file whose fastest cycle (0.1 s) is 36 times shorter than
     // the fit part's (3.6 s).
-    let fast = dir.path().join("fast.csv");
-    let output = run(&[
-        "lab-record",
-        "--rate",
-        "200",
-        "--frequency",
-        "10",
-        "--seconds",
-        "3",
-        "--out",
-        fast.to_str().unwrap(),
-    ]);
-    assert!(output.status.success(), "{}", stderr(&output));
+    let fast = record("fast.csv", "3", &["--frequency", "10"]);
     for command in ["inverse-pi", "bouc-wen"] {
-        for (validate, noted) in [(fast.to_str().unwrap(), true), (long.as_str(), false)] {
+        for (validate, noted) in [(fast.as_str(), true), (long.as_str(), false)] {
             let output = run(&[command, &long, "--validate", validate]);
             assert!(output.status.success(), "{}", stderr(&output));
             let summary = stdout(&output);
