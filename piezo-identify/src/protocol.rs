@@ -150,12 +150,11 @@ pub struct ZeroAlignment {
 /// rate-dependent weights were chosen on rounding noise.
 pub const MIN_INPUT_LEVELS: usize = 3;
 
-/// The levels the input stands at over the `fitted` samples: its values
-/// sorted and grouped, a group spanning at most `tolerance` (the rest
-/// tolerance). An input that moves through its range (a sine) makes as many
-/// groups as its span holds tolerances; a staircase one per stair.
-fn input_levels(u: &[f64], fitted: &[bool], tolerance: f64) -> usize {
-    let mut values = selected(u, fitted);
+/// The levels among `values`: sorted and grouped, a group spanning at most
+/// `tolerance` (the rest tolerance). An input that moves through its range
+/// (a sine) makes as many groups as its span holds tolerances; a staircase
+/// one per stair.
+fn value_levels(mut values: Vec<f64>, tolerance: f64) -> usize {
     values.sort_by(f64::total_cmp);
     let mut levels = 0;
     let mut group_start = f64::NEG_INFINITY;
@@ -171,8 +170,8 @@ fn input_levels(u: &[f64], fitted: &[bool], tolerance: f64) -> usize {
 /// The levels of a staircase over the `fitted` samples: when at least
 /// [`STAIRCASE_HELD_SHARE`] of them lie in holds (runs of at least
 /// `min_run` consecutive fitted samples within `tolerance` of the run's
-/// first), the levels of those holds grouped as [`input_levels`] groups
-/// values; None otherwise. A sine sampled a whole number of times per cycle
+/// first), the levels of those holds grouped by [`value_levels`]; None
+/// otherwise. A sine sampled a whole number of times per cycle
 /// takes few values (11 for 10 Hz at 200 Hz) but holds none of them.
 pub fn held_levels(u: &[f64], fitted: &[bool], tolerance: f64, min_run: usize) -> Option<usize> {
     let mut held = Vec::new();
@@ -200,7 +199,7 @@ pub fn held_levels(u: &[f64], fitted: &[bool], tolerance: f64, min_run: usize) -
     if total == 0 || (held.len() as f64) < STAIRCASE_HELD_SHARE * total as f64 {
         return None;
     }
-    Some(input_levels(&held, &vec![true; held.len()], tolerance))
+    Some(value_levels(held, tolerance))
 }
 
 /// Share of the fitted samples in holds that makes an input a staircase.
@@ -333,9 +332,6 @@ pub struct Plan {
     pub scored_excluded: Vec<Range<usize>>,
     /// Fastest cycle of the input over the fit part, rests aside [samples].
     pub fastest_cycle: Option<f64>,
-    /// The values the input takes over the fitted samples, grouped within
-    /// the rest tolerance ([`MIN_INPUT_LEVELS`]).
-    pub fitted_levels: usize,
     /// The levels a staircase holds over the fitted samples (None when the
     /// input is no staircase: [`held_levels`]).
     pub stairs: Option<usize>,
@@ -424,7 +420,6 @@ impl Plan {
             fit_excluded,
             scored_excluded,
             fastest_cycle: None,
-            fitted_levels: 0,
             stairs: None,
         };
         let fitted = plan.fitted();
@@ -453,10 +448,9 @@ impl Plan {
                 samples: u.len() - fit_end,
             });
         }
-        let fitted = plan.fitted();
-        plan.fitted_levels = input_levels(&u[..fit_end], &fitted, thresholds.rest_tolerance);
-        if plan.fitted_levels < MIN_INPUT_LEVELS {
-            return Err(ProtocolError::TooFewLevels(plan.fitted_levels));
+        let levels = value_levels(selected(&u[..fit_end], &fitted), thresholds.rest_tolerance);
+        if levels < MIN_INPUT_LEVELS {
+            return Err(ProtocolError::TooFewLevels(levels));
         }
         plan.stairs = held_levels(
             &u[..fit_end],
@@ -1622,15 +1616,15 @@ mod tests {
     /// A staircase stands at one level per stair, a sine at as many as its
     /// span holds tolerances; only the fitted samples count.
     #[test]
-    fn input_levels_count_values_and_staircases_their_holds() {
+    fn value_levels_count_values_and_staircases_their_holds() {
         let stairs: Vec<f64> = [0.0, 1.0, 2.0, 1.0, 0.0, 1.0]
             .iter()
             .flat_map(|level| (0..10).map(move |n| level + if n % 2 == 0 { 0.001 } else { -0.001 }))
             .collect();
         let all = vec![true; stairs.len()];
-        assert_eq!(input_levels(&stairs, &all, 0.01), 3);
+        assert_eq!(value_levels(stairs.clone(), 0.01), 3);
         let first_two: Vec<bool> = (0..stairs.len()).map(|n| n < 20).collect();
-        assert_eq!(input_levels(&stairs, &first_two, 0.01), 2);
+        assert_eq!(value_levels(stairs[..20].to_vec(), 0.01), 2);
         assert_eq!(held_levels(&stairs, &all, 0.01, 5), Some(3));
         assert_eq!(held_levels(&stairs, &first_two, 0.01, 5), Some(2));
         // A sine of 20 samples a cycle takes 11 values and holds none.
@@ -1638,10 +1632,10 @@ mod tests {
             .map(|n| (std::f64::consts::TAU * n as f64 / 20.0).sin())
             .collect();
         let every = vec![true; 400];
-        assert!(input_levels(&periodic, &every, 0.004) <= 11);
+        assert!(value_levels(periodic.clone(), 0.004) <= 11);
         assert_eq!(held_levels(&periodic, &every, 0.004, 5), None);
         let sine: Vec<f64> = (0..1000).map(|n| (n as f64 * 0.01).sin()).collect();
-        let levels = input_levels(&sine, &vec![true; 1000], 0.004);
+        let levels = value_levels(sine, 0.004);
         // Far more than a staircase: 398 groups for 0.004 on a span of 2.
         assert!(levels > 300, "{levels}");
     }
