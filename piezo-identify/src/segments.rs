@@ -28,6 +28,8 @@
 //!   A sine sampled at only 20 points per cycle changes by at most 31 % of
 //!   its amplitude per sample, so the 99th percentile is about that, while a
 //!   step onto a sine from rest is typically its whole amplitude or more;
+//!   a change of more than 5 % of the span onto an input that then holds is
+//!   a step whatever the percentile ([`detect_segments`] says why);
 //! - after each step, [`SegmentOptions::settle_seconds`] are not fitted
 //!   (0.1 s by default: a flexure stage's modes of 100 Hz and more with
 //!   damping ratios of a few per cent ring down, and amplifiers settle, in a
@@ -240,16 +242,44 @@ pub fn thresholds(
 }
 
 /// Rests and steps of the input `u` under `thresholds`.
+///
+/// A change of more than [`STEP_SPAN_FRACTION`] of the span onto an input
+/// that is then held ([`settles_onto_hold`] over the settling) is a step
+/// too, whatever the percentile: a staircase of 0.2 s stairs at 200 Hz
+/// jumps on 2.5 % of its samples, so the 99th percentile of its changes is
+/// a jump and none of them passed (at 5 kHz, on 0.1 % of them, all did).
+/// No sampled sine holds after a change that large: one that changes by 5 %
+/// of its span in a sample has fewer than 63 samples per cycle.
 pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
     let rests = find_rests(u, thresholds.rest_tolerance, thresholds.min_rest_samples);
+    let settling = thresholds.settle_samples.max(2);
     let steps = (1..u.len())
-        .filter(|&n| (u[n] - u[n - 1]).abs() > thresholds.step)
+        .filter(|&n| {
+            let change = (u[n] - u[n - 1]).abs();
+            change > thresholds.step
+                || (change > STEP_SPAN_FRACTION * thresholds.span
+                    && n + settling <= u.len()
+                    && settles_onto_hold(&u[n..n + settling], thresholds.rest_tolerance))
+        })
         .collect();
     Segments {
         rests,
         steps,
         stairs: Vec::new(),
     }
+}
+
+/// Whether an input over `window` (the settling after a change) settles
+/// onto a hold: its last three quarters within twice `tolerance` (the rest
+/// tolerance) of its last value. A measured command lags into its level
+/// and carries noise; a sine moves on by far more.
+pub fn settles_onto_hold(window: &[f64], tolerance: f64) -> bool {
+    let Some(last) = window.last() else {
+        return false;
+    };
+    window[window.len() / 4..]
+        .iter()
+        .all(|u| (u - last).abs() <= 2.0 * tolerance)
 }
 
 /// Maximal runs of at least `min_samples` within `tolerance` of their first
@@ -456,6 +486,32 @@ mod tests {
         let segments = detect_segments(&u, &thresholds);
         assert_eq!(segments.steps, vec![100]);
         assert_eq!(segments.rests, vec![0..100]);
+    }
+
+    /// A staircase of 0.2 s stairs at 200 Hz jumps on one sample in 40, so
+    /// the 99th percentile of its changes is a jump and the percentile rule
+    /// alone found no step (at 5 kHz it found them all); a jump onto a hold
+    /// is a step at any rate. A noisy command that lags into its level, in
+    /// two jumps, steps at both.
+    #[test]
+    fn every_stair_of_a_staircase_is_a_step_at_any_rate() {
+        for (rate, lag) in [(200.0, false), (5000.0, false), (200.0, true)] {
+            let stair = (0.2 * rate) as usize;
+            let u: Vec<f64> = (0..20 * stair)
+                .map(|n| {
+                    let level = ((n / stair) % 10) as f64;
+                    let settling = n % stair == 0 && n > 0 && lag;
+                    let noise = 1e-4 * ((n * 7919) % 13) as f64;
+                    (if settling { level - 0.5 } else { level }) + noise
+                })
+                .collect();
+            let thresholds = thresholds(&u, 1.0 / rate, &SegmentOptions::default()).unwrap();
+            let segments = detect_segments(&u, &thresholds);
+            let jumps: Vec<usize> = (1..u.len())
+                .filter(|&n| (u[n] - u[n - 1]).abs() > 0.3)
+                .collect();
+            assert_eq!(segments.steps, jumps, "{rate} Hz, lagging {lag}");
+        }
     }
 
     #[test]

@@ -291,10 +291,10 @@ fn p885_test_record_split_in_two() {
 ///   against classical 1.65 %, Bouc-Wen 2.58 % against a best line of
 ///   5.81 % (2.2×, not 5×): the Test file reads about 1.1 µm below what the
 ///   identification file's sensor offset predicts, for every model;
-/// - the lab-like 5 kHz staircase, inverse-pi: 0.170, 0.176, 0.211 % for
-///   seeds 0, 1, 2, 24 % apart (every other bar met): each seed's search
-///   ends in another minimum, and the lowest on the fit part is not the
-///   best on the scored part.
+/// - the lab-like 200 Hz staircase, inverse-pi: 0.060, 0.058, 0.067 % for
+///   seeds 0, 1, 2, 16 % apart (every other bar met): each seed's search
+///   ends in another minimum, at errors set by the sensor noise over the
+///   0.1 s a stair is scored (4.5 nm, about 3.6 mV of command).
 #[test]
 #[ignore = "quality bars not met on these records; see the doc comment"]
 fn known_gaps_on_real_records() {
@@ -329,10 +329,10 @@ fn known_gaps_on_real_records() {
             bouc_wen_bars("pair", &forward_errors(&report["validation"]["errors"]));
         },
     );
-    check("lab_5kHz_unipolar_stairs inverse-pi, seeds 0-2", &|| {
+    check("lab_200Hz_unipolar_stairs inverse-pi, seeds 0-2", &|| {
         let (name, documented, spec) = lab_records()
             .into_iter()
-            .find(|r| r.1 == "lab_5kHz_unipolar_stairs")
+            .find(|r| r.1 == "lab_200Hz_unipolar_stairs")
             .unwrap();
         let results: Vec<f64> = (0..3)
             .map(|seed| lab_fit(name, documented, &spec, seed, false).0)
@@ -499,8 +499,20 @@ fn lab_fit(
 #[test]
 fn lab_records_meet_the_bars_for_any_seed() {
     let mut rows = Vec::new();
-    for (i, (name, documented, spec)) in lab_records().iter().enumerate() {
-        let seeds: &[u64] = if i == 0 || i == 3 { &[0, 1, 2] } else { &[0] };
+    // Seeds 1 and 2 too where the table's rows are measured again by seed;
+    // the 5 kHz staircase's seeds were 24 % apart until the settling, the
+    // first loading and the steps of staircases were mended.
+    let by_seed = [
+        "lab_200Hz_unipolar_1Hz",
+        "lab_5kHz_bipolar_1Hz",
+        "lab_5kHz_unipolar_stairs",
+    ];
+    for (name, documented, spec) in &lab_records() {
+        let seeds: &[u64] = if by_seed.contains(documented) {
+            &[0, 1, 2]
+        } else {
+            &[0]
+        };
         let results: Vec<(f64, f64)> = seeds
             .iter()
             .map(|&seed| {

@@ -58,20 +58,32 @@ pub(crate) fn describe_columns(columns: &ColumnsUsed) -> String {
     text
 }
 
-/// Sample ranges as times, at most six of them.
-pub(crate) fn describe_ranges(ranges: &[std::ops::Range<usize>], dt: f64) -> String {
-    if ranges.is_empty() {
+/// The first six of `items`, then how many more ("none" for none): a
+/// staircase of 0.2 s stairs has 200 steps in 40 s.
+fn at_most_six(items: impl ExactSizeIterator<Item = String>) -> String {
+    let total = items.len();
+    if total == 0 {
         return "none".to_owned();
     }
-    let mut parts: Vec<String> = ranges
-        .iter()
-        .take(6)
-        .map(|r| format!("{:.3}-{:.3} s", r.start as f64 * dt, r.end as f64 * dt))
-        .collect();
-    if ranges.len() > 6 {
-        parts.push(format!("and {} more", ranges.len() - 6));
+    let mut parts: Vec<String> = items.take(6).collect();
+    if total > 6 {
+        parts.push(format!("and {} more", total - 6));
     }
     parts.join(", ")
+}
+
+/// Sample ranges as times, at most six of them.
+pub(crate) fn describe_ranges(ranges: &[std::ops::Range<usize>], dt: f64) -> String {
+    at_most_six(
+        ranges
+            .iter()
+            .map(|r| format!("{:.3}-{:.3} s", r.start as f64 * dt, r.end as f64 * dt)),
+    )
+}
+
+/// Sample indices as times, at most six of them.
+pub(crate) fn describe_times(samples: &[usize], dt: f64) -> String {
+    at_most_six(samples.iter().map(|s| format!("{:.3} s", *s as f64 * dt)))
 }
 
 pub(crate) fn print_plan(plan: &Plan, name: &str) {
@@ -92,20 +104,10 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
             "fit part: the whole of {name} (give --split or --validate-from to score a part of it)"
         );
     }
-    let steps: Vec<String> = plan
-        .segments
-        .steps
-        .iter()
-        .map(|s| format!("{:.3} s", *s as f64 * dt))
-        .collect();
     say!(
         "rest segments: {}; voltage steps: {}",
         describe_ranges(&plan.segments.rests, dt),
-        if steps.is_empty() {
-            "none".to_owned()
-        } else {
-            steps.join(", ")
-        }
+        describe_times(&plan.segments.steps, dt)
     );
     if !plan.segments.stairs.is_empty() {
         say!(
@@ -164,9 +166,9 @@ pub(crate) const MAX_NOTED_LEVELS: usize = 20;
 /// An input that turns fewer times than this over the fitted samples gets
 /// a note ([`Notes::few_turns`]): some branch of its loop was never fitted.
 /// On 16 s of a 0.2 s staircase at 200 Hz split in two, the warm-up (to the
-/// first loading's end, 5.6 s) leaves one turn to fit, and the proposed
-/// model scored 0.24-1.72 % of the input span by seed (classical P-I
-/// 1.2 %); on 40 s of it, 0.235-0.243 % for seeds 0-5.
+/// first loading's end, 5.7 s) leaves one turn to fit, and the proposed
+/// model scored 0.091-0.251 % of the input span by seed 0-5 (classical P-I
+/// 1.058 %); on 40 s of it, 0.058-0.067 %.
 pub(crate) const MIN_FITTED_TURNS: usize = 2;
 
 /// The notes a fit prints after its errors, kept for `--report` too (a
@@ -355,4 +357,27 @@ pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(
 pub(crate) fn write_result(path: &Path, bytes: &[u8]) -> Result<(), Failure> {
     result_files::write_bytes(path, bytes)
         .map_err(|e| Failure::Run(format!("{}: {e}", path.display())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn long_lists_of_times_end_with_how_many_more() {
+        assert_eq!(describe_times(&[], 0.5), "none");
+        assert_eq!(describe_times(&[1, 4], 0.5), "0.500 s, 2.000 s");
+        let steps: Vec<usize> = (1..=200).collect();
+        assert_eq!(
+            describe_times(&steps, 0.2),
+            "0.200 s, 0.400 s, 0.600 s, 0.800 s, 1.000 s, 1.200 s, and 194 more"
+        );
+        assert_eq!(describe_ranges(&[], 0.5), "none");
+        let ranges: Vec<std::ops::Range<usize>> = (0..7).map(|k| 2 * k..2 * k + 1).collect();
+        assert_eq!(
+            describe_ranges(&ranges, 1.0),
+            "0.000-1.000 s, 2.000-3.000 s, 4.000-5.000 s, 6.000-7.000 s, 8.000-9.000 s, \
+             10.000-11.000 s, and 1 more"
+        );
+    }
 }
