@@ -304,6 +304,7 @@ fn nothing_to_fit(warm_up: usize, first_loading: usize, rests: usize, steps: usi
     }
     if steps > 0 {
         causes.push(format!("the settling (--settle) after {steps} step(s)"));
+        hints.push("a shorter --settle (a stair shorter than the settling is all settling)");
     }
     if rests > 0 || steps > 0 {
         hints.push("--keep-rest-and-steps to fit rests and steps too");
@@ -313,6 +314,35 @@ fn nothing_to_fit(warm_up: usize, first_loading: usize, rests: usize, steps: usi
         causes.join(", "),
         hints.join("; or ")
     )
+}
+
+/// The end of the first loading from a record's start (`segments::first_loading_end`),
+/// its settling included: the input's second turning point before the first
+/// step (an input that does not turn twice before it is a first loading all
+/// the way to it, from a state the record does not show), or later, when
+/// the input turns twice before `limit` only across steps. From the start
+/// the state is unknown until then, wherever steps fall: a staircase from a
+/// rest climbs its first stairs from whatever state the stage was left in,
+/// and each step carries that state on. The turning points are counted
+/// outside the settling after each step, where a command's overshoot is no
+/// turn of the loop.
+fn start_first_loading(
+    u: &[f64],
+    steps: &[usize],
+    thresholds: &SegmentThresholds,
+    limit: usize,
+) -> usize {
+    let settled = thresholds.settle_samples;
+    let first_step = steps.first().copied().unwrap_or(u.len());
+    let before_first_step = first_loading_end(u, settled, first_step, thresholds.span, &[])
+        .unwrap_or(first_step)
+        .max(settled);
+    let settlings: Vec<Range<usize>> = steps
+        .iter()
+        .map(|&s| s..s + thresholds.settle_samples)
+        .collect();
+    first_loading_end(u, settled, limit, thresholds.span, &settlings)
+        .map_or(before_first_step, |across| before_first_step.max(across))
 }
 
 /// Which samples of a record are fitted and which scored.
@@ -381,21 +411,13 @@ impl Plan {
                 // After a step the model ran through what came before, and a
                 // stair that never turns (a quasi-static staircase) is
                 // fitted once settled.
-                let never_turns = if start == 0 { next } else { settled };
-                let mut end = first_loading_end(u, settled, next, thresholds.span)
-                    .unwrap_or(never_turns)
-                    .max(settled);
-                // From the record's start the state is unknown until the
-                // input has turned twice, wherever steps fall: a staircase
-                // from a rest climbs its first stairs from whatever state
-                // the stage was left in, and each step only carries that
-                // unknown state on. Without a second turning point in the
-                // fit part the rule above stands.
-                if start == 0
-                    && let Some(across) = first_loading_end(u, settled, fit_end, thresholds.span)
-                {
-                    end = end.max(across);
-                }
+                let end = if start == 0 {
+                    start_first_loading(u, &segments.steps, &thresholds, fit_end)
+                } else {
+                    first_loading_end(u, settled, next, thresholds.span, &[])
+                        .unwrap_or(settled)
+                        .max(settled)
+                };
                 // Only the fit part: a step in the scored part is scored once
                 // settled (its state is the one the model computed).
                 if start < fit_end {
@@ -553,13 +575,8 @@ impl Plan {
         } else {
             Segments::default()
         };
-        let warm_up = warm_up_samples.unwrap_or_else(|| {
-            let settled = thresholds.settle_samples;
-            let next = segments.steps.first().copied().unwrap_or(u.len());
-            first_loading_end(u, settled, next, thresholds.span)
-                .unwrap_or(next)
-                .max(settled)
-        });
+        let warm_up = warm_up_samples
+            .unwrap_or_else(|| start_first_loading(u, &segments.steps, &thresholds, u.len()));
         let mut excluded = segments.excluded(thresholds.settle_samples, u.len());
         excluded.push(0..warm_up.min(u.len()));
         merge(&mut excluded);
@@ -1588,6 +1605,26 @@ mod tests {
         assert_eq!(settle, 20);
         let first_fitted = plan.fitted().iter().position(|f| *f).unwrap();
         assert_eq!(first_fitted, 1800 + settle);
+        // A validation file of the same staircase is scored from the same
+        // sample (it was scored from the first stair on, climb and all).
+        let (_, scored) = plan.validation_scored(&stairs, 0.005, None, true);
+        assert_eq!(scored.iter().position(|s| *s).unwrap(), 1800 + settle);
+        // A command that overshoots each stair by 1.2 % of the span on its
+        // first sample turns there by more than the 1 % a turning point
+        // needs; inside the settling that is no turn of the loop.
+        let mut overshooting = stairs.clone();
+        for n in (400..stairs.len()).step_by(200) {
+            overshooting[n] += 0.06 * (stairs[n] - stairs[n - 1]).signum();
+        }
+        let plan = Plan::new(&overshooting, 0.005, stairs.len(), &PlanOptions::default()).unwrap();
+        assert_eq!(
+            plan.segments.steps,
+            (200..stairs.len()).step_by(200).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            plan.fitted().iter().position(|f| *f).unwrap(),
+            1800 + settle
+        );
         // A record that starts on its stairs waits for the same turn.
         let without_rest = &stairs[200..];
         let plan = Plan::new(
@@ -1724,5 +1761,25 @@ mod tests {
             e.to_string().contains("the warm-up given (400 samples)"),
             "{e}"
         );
+        // Triangles of 1 V stairs held 0.075 s (15 samples at 200 Hz),
+        // shorter than the 0.1 s settling: every stair is a step, and all
+        // settling, at 200 Hz as at 5 kHz; the error says to settle shorter.
+        for rate in [200.0, 5000.0] {
+            let stair = (0.075 * rate) as usize;
+            let stairs: Vec<f64> = (0..40 * stair)
+                .map(|n| {
+                    let k = (n / stair) % 18;
+                    (if k < 10 { k } else { 18 - k }) as f64
+                })
+                .collect();
+            let e =
+                Plan::new(&stairs, 1.0 / rate, stairs.len(), &PlanOptions::default()).unwrap_err();
+            let message = e.to_string();
+            assert!(
+                message.contains("the settling (--settle) after 39 step(s)"),
+                "{message}"
+            );
+            assert!(message.contains("a shorter --settle"), "{message}");
+        }
     }
 }

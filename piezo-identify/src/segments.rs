@@ -139,11 +139,12 @@ impl Segments {
     /// the rests of `u[..fit_end]` stand at [`STAIRCASE_LEVELS`] or more
     /// levels at least [`STAIRCASE_LEVEL_SHARE`] of `span` apart, every rest
     /// becomes a stair, kept in the fit once settled: the start of each
-    /// stair is a step. Left out as rests, the stairs of a staircase held
-    /// longer than the shortest rest left nothing to fit; and its jumps,
-    /// the only changes left once the holds are set aside, are too common
-    /// to pass the step test (2.5 times the 99th percentile of the changes),
-    /// so without this no settling was left out after them.
+    /// stair is a step, unless a step was found since the stair before
+    /// (a command that overshoots or lags into its level holds from a few
+    /// samples after the step). Left out as rests, the stairs of a
+    /// staircase held longer than the shortest rest left nothing to fit;
+    /// and a jump onto a stair that is not a step (under 5 % of the span)
+    /// still moves the stage, whose settling is left out.
     pub fn staircase(mut self, u: &[f64], fit_end: usize, span: f64) -> Segments {
         let mut levels: Vec<f64> = self
             .rests
@@ -160,8 +161,16 @@ impl Segments {
             + usize::from(!levels.is_empty());
         if distinct >= STAIRCASE_LEVELS {
             self.stairs = std::mem::take(&mut self.rests);
-            self.steps
-                .extend(self.stairs.iter().map(|r| r.start).filter(|&s| s > 0));
+            let mut since = 0;
+            let mut starts = Vec::new();
+            for stair in &self.stairs {
+                let stepped = self.steps.iter().any(|&s| s >= since && s <= stair.start);
+                if stair.start > 0 && !stepped {
+                    starts.push(stair.start);
+                }
+                since = stair.end;
+            }
+            self.steps.extend(starts);
             self.steps.sort_unstable();
             self.steps.dedup();
         }
@@ -241,27 +250,84 @@ pub fn thresholds(
     })
 }
 
+/// Fewest samples over which an input must hold after a change for the
+/// change to be a step onto a hold (with `--settle 0` too): the last three
+/// of them within the hold test's tolerance of the last. A sampled sine that
+/// moves 5 % of its span towards a peak in a sample turns by 0.3 rad or more
+/// per sample, and three samples about its peak then differ by 2 % of the
+/// span.
+const MIN_HOLD_SAMPLES: usize = 6;
+
+/// A move onto a hold is a step when its first sample moves at least this
+/// share of it: a command that lags into its level with a time constant of
+/// up to two samples (1 - e^(-1/2) = 0.39), not a slow sine, which can hold
+/// at its peak over the last half of a settling after moving 5 % of its span
+/// towards it, but then only with 250 samples a cycle or more at the default
+/// settling (the first sample moves 11 % of that, at most), or 75 with
+/// `--settle 0` (36 %).
+const FIRST_SAMPLE_SHARE: f64 = 0.4;
+
 /// Rests and steps of the input `u` under `thresholds`.
 ///
-/// A change of more than [`STEP_SPAN_FRACTION`] of the span onto an input
-/// that is then held ([`settles_onto_hold`] over the settling) is a step
-/// too, whatever the percentile: a staircase of 0.2 s stairs at 200 Hz
-/// jumps on 2.5 % of its samples, so the 99th percentile of its changes is
-/// a jump and none of them passed (at 5 kHz, on 0.1 % of them, all did).
-/// No sampled sine holds after a change that large: one that changes by 5 %
-/// of its span in a sample has fewer than 63 samples per cycle.
+/// A move of more than [`STEP_SPAN_FRACTION`] of the span onto an input
+/// that then holds ([`settles_onto_hold`]) is a step too, whatever the
+/// percentile: a staircase of 0.2 s stairs at 200 Hz jumps on 2.5 % of its
+/// samples, so the 99th percentile of its changes is a jump and none of
+/// them passed (at 5 kHz, on 0.1 % of them, all did). The move is measured
+/// from the sample before it to the level held, so a measured command that
+/// lags into its level over a few samples steps once, at its first moving
+/// sample ([`FIRST_SAMPLE_SHARE`]); the hold is tested over the settling
+/// after it, cut short by the
+/// record's end and by the next change of more than 5 % of the span (a
+/// stair shorter than the settling is still a stair, and all of it
+/// settling). No sampled sine holds after a move that large
+/// ([`MIN_HOLD_SAMPLES`]).
 pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
     let rests = find_rests(u, thresholds.rest_tolerance, thresholds.min_rest_samples);
-    let settling = thresholds.settle_samples.max(2);
-    let steps = (1..u.len())
-        .filter(|&n| {
-            let change = (u[n] - u[n - 1]).abs();
-            change > thresholds.step
-                || (change > STEP_SPAN_FRACTION * thresholds.span
-                    && n + settling <= u.len()
-                    && settles_onto_hold(&u[n..n + settling], thresholds.rest_tolerance))
+    let tolerance = 2.0 * thresholds.rest_tolerance;
+    let jump = STEP_SPAN_FRACTION * thresholds.span;
+    let settling = thresholds.settle_samples.max(MIN_HOLD_SAMPLES);
+    // The sample after a move onto a hold that starts at `n` where the input
+    // has reached the level it holds, if it does.
+    let onto_hold = |n: usize| -> Option<usize> {
+        // The next stair's jump ends the window; a jump within its first
+        // half is this move's own lag.
+        let mut end = (n + settling).min(u.len());
+        if let Some(next) = (n + 1 + settling / 2..end).find(|&m| (u[m] - u[m - 1]).abs() > jump) {
+            end = next;
+        }
+        let window = &u[n..end];
+        if window.len() < MIN_HOLD_SAMPLES || !settles_onto_hold(window, thresholds.rest_tolerance)
+        {
+            return None;
+        }
+        let level = window[window.len() - 1];
+        let (moved, first) = (level - u[n - 1], u[n] - u[n - 1]);
+        let stepped = moved.abs() > jump && first * moved >= FIRST_SAMPLE_SHARE * moved * moved;
+        stepped.then(|| {
+            n + window
+                .iter()
+                .position(|v| (v - level).abs() <= tolerance)
+                .unwrap_or(window.len() - 1)
+                + 1
         })
-        .collect();
+    };
+    let mut steps = Vec::new();
+    let mut n = 1;
+    while n < u.len() {
+        let change = (u[n] - u[n - 1]).abs();
+        if change > tolerance
+            && let Some(settled) = onto_hold(n)
+        {
+            steps.push(n);
+            n = settled.max(n + 1);
+            continue;
+        }
+        if change > thresholds.step {
+            steps.push(n);
+        }
+        n += 1;
+    }
     Segments {
         rests,
         steps,
@@ -270,14 +336,16 @@ pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
 }
 
 /// Whether an input over `window` (the settling after a change) settles
-/// onto a hold: its last three quarters within twice `tolerance` (the rest
-/// tolerance) of its last value. A measured command lags into its level
-/// and carries noise; a sine moves on by far more.
+/// onto a hold: its last half within twice `tolerance` (the rest tolerance)
+/// of its last value. The first half may still move: a measured command
+/// lags into its level (over the default 0.1 s settling, to within 0.4 % of
+/// the span in its last 0.05 s: a lag of up to about 9 ms on a jump of the
+/// whole span) and carries noise; a sine moves on by far more.
 pub fn settles_onto_hold(window: &[f64], tolerance: f64) -> bool {
     let Some(last) = window.last() else {
         return false;
     };
-    window[window.len() / 4..]
+    window[window.len() / 2..]
         .iter()
         .all(|u| (u - last).abs() <= 2.0 * tolerance)
 }
@@ -394,13 +462,25 @@ pub fn smaller_loops(u: &[f64], fitted: &[bool], scored: &[bool]) -> Option<(f64
 /// and Prandtl-Ishlinskii models: each turning point erases the memory of
 /// smaller earlier ones), and operators that only move on that first
 /// loading are fitted to a transient. None with fewer than two turning
-/// points.
-pub fn first_loading_end(u: &[f64], from: usize, to: usize, span: f64) -> Option<usize> {
+/// points. Samples in `skipped` (the settling after steps, where a
+/// command's overshoot is no turn of the loop) are not looked at.
+pub fn first_loading_end(
+    u: &[f64],
+    from: usize,
+    to: usize,
+    span: f64,
+    skipped: &[Range<usize>],
+) -> Option<usize> {
     let to = to.min(u.len());
     if from >= to {
         return None;
     }
-    let flags = vec![true; to - from];
+    let mut flags = vec![true; to - from];
+    for range in skipped {
+        for n in range.start.max(from)..range.end.min(to) {
+            flags[n - from] = false;
+        }
+    }
     reversals(&u[from..to], &flags, REVERSAL_SPAN_FRACTION * span)
         .get(1)
         .map(|r| from + r)
@@ -451,10 +531,10 @@ mod tests {
         // From the step: the sine rises to its first maximum (25 samples
         // later) and falls to its first minimum (75 samples later).
         assert_eq!(
-            first_loading_end(&u, 200, u.len(), thresholds.span),
+            first_loading_end(&u, 200, u.len(), thresholds.span, &[]),
             Some(275)
         );
-        assert_eq!(first_loading_end(&u, 200, 260, thresholds.span), None);
+        assert_eq!(first_loading_end(&u, 200, 260, thresholds.span, &[]), None);
     }
 
     #[test]
@@ -490,27 +570,94 @@ mod tests {
 
     /// A staircase of 0.2 s stairs at 200 Hz jumps on one sample in 40, so
     /// the 99th percentile of its changes is a jump and the percentile rule
-    /// alone found no step (at 5 kHz it found them all); a jump onto a hold
-    /// is a step at any rate. A noisy command that lags into its level, in
-    /// two jumps, steps at both.
+    /// alone found no step (at 5 kHz it found them all); a move onto a hold
+    /// is a step at any rate: each stair steps once, at its first moving
+    /// sample, also when a noisy measured command lags into its level (in
+    /// two jumps, or through a first-order lag of 9 ms, whose every change
+    /// is under 5 % of the span), when the record's end cuts the last stair
+    /// short, and when the stairs are shorter than the settling.
     #[test]
     fn every_stair_of_a_staircase_is_a_step_at_any_rate() {
-        for (rate, lag) in [(200.0, false), (5000.0, false), (200.0, true)] {
-            let stair = (0.2 * rate) as usize;
-            let u: Vec<f64> = (0..20 * stair)
+        #[derive(Clone, Copy, Debug)]
+        enum Command {
+            Exact,
+            TwoJumps,
+            Lagging,
+        }
+        let cases: [(f64, f64, f64, Command); 8] = [
+            (200.0, 0.2, 20.0, Command::Exact),
+            (5000.0, 0.2, 20.0, Command::Exact),
+            (200.0, 0.2, 20.0, Command::TwoJumps),
+            (5000.0, 0.2, 20.0, Command::TwoJumps),
+            (200.0, 0.2, 20.0, Command::Lagging),
+            (200.0, 0.2, 19.95, Command::Exact),
+            (200.0, 0.075, 20.0, Command::Exact),
+            (5000.0, 0.075, 20.0, Command::Exact),
+        ];
+        for (rate, stair_seconds, stairs, command) in cases {
+            let stair = (stair_seconds * rate) as usize;
+            let samples = (stairs * stair as f64) as usize;
+            // Triangles of 1 V stairs, 0..9..1 V.
+            let levels: Vec<f64> = (0..samples)
                 .map(|n| {
-                    let level = ((n / stair) % 10) as f64;
-                    let settling = n % stair == 0 && n > 0 && lag;
-                    let noise = 1e-4 * ((n * 7919) % 13) as f64;
-                    (if settling { level - 0.5 } else { level }) + noise
+                    let k = (n / stair) % 18;
+                    (if k < 10 { k } else { 18 - k }) as f64
                 })
                 .collect();
+            let mut u = levels.clone();
+            match command {
+                Command::Exact => {}
+                Command::TwoJumps => {
+                    for n in (stair..samples).step_by(stair) {
+                        u[n] = (levels[n - 1] + levels[n]) / 2.0;
+                    }
+                }
+                Command::Lagging => {
+                    let kept = (-1.0 / (0.009 * rate)).exp();
+                    for n in 1..samples {
+                        u[n] = kept * u[n - 1] + (1.0 - kept) * levels[n];
+                    }
+                    assert!((1..samples).all(|n| (u[n] - u[n - 1]).abs() < 0.45));
+                }
+            }
+            for (n, v) in u.iter_mut().enumerate() {
+                *v += 1e-4 * ((n * 7919) % 13) as f64;
+            }
             let thresholds = thresholds(&u, 1.0 / rate, &SegmentOptions::default()).unwrap();
             let segments = detect_segments(&u, &thresholds);
-            let jumps: Vec<usize> = (1..u.len())
-                .filter(|&n| (u[n] - u[n - 1]).abs() > 0.3)
+            let stair_starts: Vec<usize> = (stair..samples).step_by(stair).collect();
+            assert_eq!(
+                segments.steps, stair_starts,
+                "{rate} Hz, {stair_seconds} s stairs, {command:?}"
+            );
+        }
+        // A sine holds at its peaks for a while, after moving towards them
+        // by more than 5 % of its span, but moves only a little of that in
+        // any one sample; a coarsely sampled one (16.3 Hz at 200 Hz: 12
+        // samples a cycle, up to 40 % of its span a sample) holds nowhere.
+        // No step in any, with the default settling or none.
+        for (frequency, rate) in [
+            (0.2, 200.0),
+            (1.0, 200.0),
+            (2.67, 200.0),
+            (16.3, 200.0),
+            (1.0, 5000.0),
+        ] {
+            let sine: Vec<f64> = (0..(10.0 * rate) as usize)
+                .map(|n| (std::f64::consts::TAU * frequency * n as f64 / rate).sin())
                 .collect();
-            assert_eq!(segments.steps, jumps, "{rate} Hz, lagging {lag}");
+            for settle_seconds in [0.1, 0.0] {
+                let options = SegmentOptions {
+                    settle_seconds,
+                    ..SegmentOptions::default()
+                };
+                let thresholds = thresholds(&sine, 1.0 / rate, &options).unwrap();
+                assert_eq!(
+                    detect_segments(&sine, &thresholds).steps,
+                    Vec::<usize>::new(),
+                    "{frequency} Hz at {rate} Hz, settling {settle_seconds} s"
+                );
+            }
         }
     }
 

@@ -105,12 +105,20 @@ pub struct Steps<'a> {
 /// The displacement with the settling of each step onto a held input held
 /// at its settled value: from the step's first sample to the end of its
 /// settling (cut short by the next step and by the record's end) the
-/// displacement is that of the first sample after the settling (the last
-/// before the next step or the end when the settling is cut short). A step
-/// is onto a held input when the last three quarters of the window stay
-/// within twice `hold_tolerance` of the input's last value there; a step
-/// onto an input that moves on (onto a sine) is left as measured: the
-/// actuator may turn there, and its turns are the model's.
+/// displacement is its mean over as long again after the settling, for as
+/// long as the input stays at the level it settled to (cut short by the
+/// next step, the record's end and the input leaving that level: a move
+/// too small to be a step is no part of the stair); the last sample of the
+/// settling when nothing of the stair is left after it. A step is onto a
+/// held input when the window's input settles onto a hold
+/// ([`settles_onto_hold`]: its last half within twice `hold_tolerance` of
+/// its last value); a step onto an input that moves on (onto a sine) is
+/// left as measured: the actuator may turn there, and its turns are the
+/// model's.
+///
+/// The mean, not one sample: one sample would carry its sensor noise into
+/// every operator the settling turns (a 3σ sample is a level 0.06 µm off on
+/// the lab-like records' 0.02 µm noise).
 ///
 /// A step moves the actuator's voltage once, one way, and its hysteresis
 /// with it; the stage's structural modes meanwhile ring in the measured
@@ -140,14 +148,18 @@ pub fn held_over_settling(y: &[f64], steps: Steps) -> Vec<f64> {
         if !settles_onto_hold(window, steps.hold_tolerance) {
             continue;
         }
-        // The settled level is the mean over as long a stretch after the
-        // settling as the settling itself (cut short by the next step): one
-        // sample would carry its sensor noise into every operator the
-        // settling turns, and a 3σ sample is a level 0.06 µm off on the
-        // lab-like records' 0.02 µm noise.
-        let settled = if end < next {
-            let after = &y[end..(end + steps.settle).min(next)];
-            after.iter().sum::<f64>() / after.len() as f64
+        let level = window[window.len() - 1];
+        let stair_end = (end + steps.settle).min(next);
+        let held_to = (end..stair_end)
+            .find(|&n| {
+                steps
+                    .input
+                    .get(n)
+                    .is_none_or(|u| (u - level).abs() > 2.0 * steps.hold_tolerance)
+            })
+            .unwrap_or(stair_end);
+        let settled = if held_to > end {
+            y[end..held_to].iter().sum::<f64>() / (held_to - end) as f64
         } else {
             y[end - 1]
         };
@@ -270,11 +282,27 @@ mod tests {
             vec![0.0, 0.0, 10.0, 10.0, 10.0, 10.0, 10.0, 1.0, 1.0]
         );
         // A step before the settling ends holds the last sample before it;
-        // the next step's settling (4..7) holds its own settled value, the
-        // mean of the samples after it (7..9, cut short by the end).
+        // so does the next step's settling (4..7), whose input leaves its
+        // level (5) at once after it, at 7, by a move too small to be a
+        // step here: nothing after the settling belongs to its stair.
         assert_eq!(
             held_over_settling(&y, steps(&[2, 4], &u)),
-            vec![0.0, 0.0, 12.0, 12.0, 2.5, 2.5, 2.5, 4.0, 1.0]
+            vec![0.0, 0.0, 12.0, 12.0, 10.0, 10.0, 10.0, 4.0, 1.0]
+        );
+        // The mean runs as long as the input stays at its level: from 5 to
+        // 6, where the input moves on by 0.3.
+        let moving_on = [0.0, 0.0, 5.0, 5.0, 5.0, 5.0, 5.3, 5.3, 5.3];
+        assert_eq!(
+            held_over_settling(&y, steps(&[2], &moving_on)),
+            vec![0.0, 0.0, 10.0, 10.0, 10.0, 10.0, 10.0, 4.0, 1.0]
+        );
+        let moving_on = [0.0, 0.0, 5.0, 5.0, 5.0, 5.0, 5.0, 5.3, 5.3];
+        assert_eq!(
+            held_over_settling(
+                &[0.0, 0.0, 9.0, 12.0, 7.0, 9.0, 11.0, 4.0, 1.0],
+                steps(&[2], &moving_on)
+            )[2..5],
+            [10.0; 3]
         );
         // The settled level is a mean, not the noise of one sample: a level
         // of 10 read with ±0.5 of noise is held at 10, whatever sample
