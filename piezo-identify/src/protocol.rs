@@ -334,14 +334,24 @@ fn start_first_loading(
 ) -> usize {
     let settled = thresholds.settle_samples;
     let first_step = steps.first().copied().unwrap_or(u.len());
-    let before_first_step = first_loading_end(u, settled, first_step, thresholds.span, &[])
-        .unwrap_or(first_step)
-        .max(settled);
+    let before_first_step =
+        match first_loading_end(u, settled, first_step, thresholds.least_turn(), &[]) {
+            Some(end) => end.max(settled),
+            // Never turned before the first step (a rest): on to that step's
+            // own second turning point (before the next step), as after any
+            // step of the fit part, so that a validation file waits as long.
+            None => {
+                let next = steps.get(1).copied().unwrap_or(u.len());
+                first_loading_end(u, first_step + settled, next, thresholds.least_turn(), &[])
+                    .unwrap_or(first_step)
+                    .max(first_step)
+            }
+        };
     let settlings: Vec<Range<usize>> = steps
         .iter()
         .map(|&s| s..s + thresholds.settle_samples)
         .collect();
-    first_loading_end(u, settled, limit, thresholds.span, &settlings)
+    first_loading_end(u, settled, limit, thresholds.least_turn(), &settlings)
         .map_or(before_first_step, |across| before_first_step.max(across))
 }
 
@@ -382,7 +392,7 @@ impl Plan {
         let thresholds = thresholds(&u[..fit_end], sample_period, &options.segments)
             .ok_or(ProtocolError::NoExcitation)?;
         let segments = if options.detect_segments {
-            detect_segments(u, &thresholds).staircase(u, fit_end, thresholds.span)
+            detect_segments(u, &thresholds).staircase(u, fit_end, &thresholds)
         } else {
             Segments::default()
         };
@@ -414,7 +424,7 @@ impl Plan {
                 let end = if start == 0 {
                     start_first_loading(u, &segments.steps, &thresholds, fit_end)
                 } else {
-                    first_loading_end(u, settled, next, thresholds.span, &[])
+                    first_loading_end(u, settled, next, thresholds.least_turn(), &[])
                         .unwrap_or(settled)
                         .max(settled)
                 };
@@ -571,7 +581,7 @@ impl Plan {
     ) -> (Segments, Vec<bool>) {
         let thresholds = self.thresholds.resampled(self.sample_period, sample_period);
         let segments = if detect {
-            detect_segments(u, &thresholds).staircase(u, u.len(), thresholds.span)
+            detect_segments(u, &thresholds).staircase(u, u.len(), &thresholds)
         } else {
             Segments::default()
         };
@@ -1625,6 +1635,32 @@ mod tests {
             plan.fitted().iter().position(|f| *f).unwrap(),
             1800 + settle
         );
+        // A measured command with noise of 0.3 % of the span: its noise turns
+        // by more than 1 % of the span now and then, but not by 10σ. The
+        // turning point is read at the bottom stair's lowest sample, so the
+        // fit starts within that stair.
+        let mut state = 7u64;
+        let noisy: Vec<f64> = stairs
+            .iter()
+            .map(|v| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                v + 0.015 * 3f64.sqrt() * (2.0 * (state >> 11) as f64 / (1u64 << 53) as f64 - 1.0)
+            })
+            .collect();
+        let plan = Plan::new(&noisy, 0.005, stairs.len(), &PlanOptions::default()).unwrap();
+        assert_eq!(
+            plan.segments.steps,
+            (200..stairs.len()).step_by(200).collect::<Vec<_>>()
+        );
+        let first_fitted = plan.fitted().iter().position(|f| *f).unwrap();
+        assert!(
+            (1800 + settle..2000).contains(&first_fitted),
+            "{first_fitted}"
+        );
+        let (_, scored) = plan.validation_scored(&noisy, 0.005, None, true);
+        assert_eq!(scored.iter().position(|s| *s).unwrap(), first_fitted);
         // A record that starts on its stairs waits for the same turn.
         let without_rest = &stairs[200..];
         let plan = Plan::new(

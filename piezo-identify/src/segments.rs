@@ -127,33 +127,45 @@ pub struct Segments {
     pub stairs: Vec<Range<usize>>,
 }
 
-/// Held levels, at least this many and this far apart (a share of the input
-/// span), make the holds a staircase: a record that rests waits at one level
+/// Held levels, at least this many, make the holds a staircase: a record
+/// that rests waits at one level
 /// or two (its rest, the middle of its range), a staircase climbs through
 /// many.
 pub const STAIRCASE_LEVELS: usize = 3;
+/// ... at least this share of the span apart, or [`SegmentThresholds::least_move`]
+/// when that is less (2 % of the span on a clean command: a staircase of 20
+/// levels is 5 % a stair).
 const STAIRCASE_LEVEL_SHARE: f64 = 0.05;
 
 impl Segments {
     /// Reads the holds of a quasi-static staircase as its excitation: when
     /// the rests of `u[..fit_end]` stand at [`STAIRCASE_LEVELS`] or more
-    /// levels at least [`STAIRCASE_LEVEL_SHARE`] of `span` apart, every rest
+    /// levels far enough apart ([`STAIRCASE_LEVEL_SHARE`]), every rest
     /// becomes a stair, kept in the fit once settled: the start of each
     /// stair is a step, unless a step was found since the stair before
     /// (a command that overshoots or lags into its level holds from a few
-    /// samples after the step). Left out as rests, the stairs of a
+    /// samples after the step) or the stair stands where the one before
+    /// stood (a hold that noise split in two). Left out as rests, the stairs of a
     /// staircase held longer than the shortest rest left nothing to fit;
     /// and a jump onto a stair that is not a step (under 5 % of the span)
     /// still moves the stage, whose settling is left out.
-    pub fn staircase(mut self, u: &[f64], fit_end: usize, span: f64) -> Segments {
+    pub fn staircase(
+        mut self,
+        u: &[f64],
+        fit_end: usize,
+        thresholds: &SegmentThresholds,
+    ) -> Segments {
+        let mean = |r: &Range<usize>| u[r.start..r.end].iter().sum::<f64>() / r.len() as f64;
         let mut levels: Vec<f64> = self
             .rests
             .iter()
             .filter(|r| r.start < fit_end)
-            .map(|r| u[r.start..r.end].iter().sum::<f64>() / r.len() as f64)
+            .map(mean)
             .collect();
         levels.sort_by(f64::total_cmp);
-        let apart = STAIRCASE_LEVEL_SHARE * span;
+        let apart = thresholds
+            .least_move()
+            .min(STAIRCASE_LEVEL_SHARE * thresholds.span);
         let distinct = levels
             .windows(2)
             .filter(|pair| pair[1] - pair[0] >= apart)
@@ -162,13 +174,19 @@ impl Segments {
         if distinct >= STAIRCASE_LEVELS {
             self.stairs = std::mem::take(&mut self.rests);
             let mut since = 0;
+            let mut previous: Option<f64> = None;
             let mut starts = Vec::new();
             for stair in &self.stairs {
+                let level = mean(stair);
                 let stepped = self.steps.iter().any(|&s| s >= since && s <= stair.start);
-                if stair.start > 0 && !stepped {
+                // A hold that noise split in two is one stair.
+                let moved =
+                    previous.is_none_or(|p| (level - p).abs() > 2.0 * thresholds.rest_tolerance);
+                if stair.start > 0 && !stepped && moved {
                     starts.push(stair.start);
                 }
                 since = stair.end;
+                previous = Some(level);
             }
             self.steps.extend(starts);
             self.steps.sort_unstable();
@@ -251,49 +269,62 @@ pub fn thresholds(
 }
 
 /// Fewest samples over which an input must hold after a change for the
-/// change to be a step onto a hold (with `--settle 0` too): the last three
-/// of them within the hold test's tolerance of the last. A sampled sine that
-/// moves 5 % of its span towards a peak in a sample turns by 0.3 rad or more
-/// per sample, and three samples about its peak then differ by 2 % of the
-/// span.
+/// change to be a step onto a hold (with `--settle 0` too).
 const MIN_HOLD_SAMPLES: usize = 6;
 
-/// A move onto a hold is a step when its first sample moves at least this
-/// share of it: a command that lags into its level with a time constant of
-/// up to two samples (1 - e^(-1/2) = 0.39), not a slow sine, which can hold
-/// at its peak over the last half of a settling after moving 5 % of its span
-/// towards it, but then only with 250 samples a cycle or more at the default
-/// settling (the first sample moves 11 % of that, at most), or 75 with
-/// `--settle 0` (36 %).
-const FIRST_SAMPLE_SHARE: f64 = 0.4;
+/// A move onto a hold is a step when it is this many rest tolerances or
+/// more (2 % of the span, or 50σ of a noisy command). A sampled sine holds
+/// at its peaks too, but no sine can both move that far within the first
+/// quarter of a window and then stay within twice the rest tolerance over
+/// the other three quarters: holding there keeps it within ±0.126 rad of
+/// its peak over three quarters of the window (at the 0.2 % tolerance of a
+/// clean command), so it turns by at most 0.084 rad over the first quarter,
+/// and moves there by at most 1.1 % of its span.
+const HOLD_MOVE_TOLERANCES: f64 = 10.0;
+
+impl SegmentThresholds {
+    /// The smallest move onto a hold that is a step, and the smallest gap
+    /// between a staircase's levels ([`HOLD_MOVE_TOLERANCES`]).
+    pub fn least_move(&self) -> f64 {
+        HOLD_MOVE_TOLERANCES * self.rest_tolerance
+    }
+
+    /// The smallest turn that counts as a turning point of the loop: 1 % of
+    /// the span, or twice the rest tolerance on a noisy command (10σ), so
+    /// that its noise turns nothing.
+    pub fn least_turn(&self) -> f64 {
+        (REVERSAL_SPAN_FRACTION * self.span).max(2.0 * self.rest_tolerance)
+    }
+}
 
 /// Rests and steps of the input `u` under `thresholds`.
 ///
-/// A move of more than [`STEP_SPAN_FRACTION`] of the span onto an input
-/// that then holds ([`settles_onto_hold`]) is a step too, whatever the
-/// percentile: a staircase of 0.2 s stairs at 200 Hz jumps on 2.5 % of its
-/// samples, so the 99th percentile of its changes is a jump and none of
-/// them passed (at 5 kHz, on 0.1 % of them, all did). The move is measured
-/// from the sample before it to the level held, so a measured command that
-/// lags into its level over a few samples steps once, at its first moving
-/// sample ([`FIRST_SAMPLE_SHARE`]); the hold is tested over the settling
-/// after it, cut short by the
-/// record's end and by the next change of more than 5 % of the span (a
+/// A move of [`SegmentThresholds::least_move`] or more onto an input that
+/// then holds is a step too, whatever the percentile: a staircase of 0.2 s
+/// stairs at 200 Hz jumps on 2.5 % of its samples, so the 99th percentile
+/// of its changes is a jump and none of them passed (at 5 kHz, on 0.1 % of
+/// them, all did). The move starts at a sample that moves by more than
+/// twice the rest tolerance and is measured from the sample before it to
+/// the level held, so a measured command that lags into its level over a
+/// few samples steps once, at its first moving sample. The hold is tested
+/// over the settling after it ([`settles_onto_hold`]), cut short by the
+/// record's end and by the next jump (a change of `least_move` or more,
+/// twice the change before it or more: a lag's changes only shrink), so a
 /// stair shorter than the settling is still a stair, and all of it
-/// settling). No sampled sine holds after a move that large
-/// ([`MIN_HOLD_SAMPLES`]).
+/// settling.
 pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
     let rests = find_rests(u, thresholds.rest_tolerance, thresholds.min_rest_samples);
-    let tolerance = 2.0 * thresholds.rest_tolerance;
-    let jump = STEP_SPAN_FRACTION * thresholds.span;
+    let moving = 2.0 * thresholds.rest_tolerance;
+    let least_move = thresholds.least_move();
     let settling = thresholds.settle_samples.max(MIN_HOLD_SAMPLES);
-    // The sample after a move onto a hold that starts at `n` where the input
-    // has reached the level it holds, if it does.
+    let change = |m: usize| (u[m] - u[m - 1]).abs();
+    // The first sample of the hold that a move starting at `n` settles onto,
+    // if it does.
     let onto_hold = |n: usize| -> Option<usize> {
-        // The next stair's jump ends the window; a jump within its first
-        // half is this move's own lag.
         let mut end = (n + settling).min(u.len());
-        if let Some(next) = (n + 1 + settling / 2..end).find(|&m| (u[m] - u[m - 1]).abs() > jump) {
+        if let Some(next) =
+            (n + 1..end).find(|&m| change(m) > least_move && change(m) > 2.0 * change(m - 1))
+        {
             end = next;
         }
         let window = &u[n..end];
@@ -302,28 +333,24 @@ pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
             return None;
         }
         let level = window[window.len() - 1];
-        let (moved, first) = (level - u[n - 1], u[n] - u[n - 1]);
-        let stepped = moved.abs() > jump && first * moved >= FIRST_SAMPLE_SHARE * moved * moved;
-        stepped.then(|| {
-            n + window
-                .iter()
-                .position(|v| (v - level).abs() <= tolerance)
-                .unwrap_or(window.len() - 1)
-                + 1
-        })
+        let held_from = window
+            .iter()
+            .rposition(|v| (v - level).abs() > moving)
+            .map_or(0, |last_off| last_off + 1);
+        ((level - u[n - 1]).abs() >= least_move).then_some(n + held_from)
     };
     let mut steps = Vec::new();
     let mut n = 1;
     while n < u.len() {
-        let change = (u[n] - u[n - 1]).abs();
-        if change > tolerance
-            && let Some(settled) = onto_hold(n)
+        if change(n) > moving
+            && let Some(held) = onto_hold(n)
         {
+            // The change into the first held sample is the move's too.
             steps.push(n);
-            n = settled.max(n + 1);
+            n = held.max(n) + 1;
             continue;
         }
-        if change > thresholds.step {
+        if change(n) > thresholds.step {
             steps.push(n);
         }
         n += 1;
@@ -336,16 +363,17 @@ pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
 }
 
 /// Whether an input over `window` (the settling after a change) settles
-/// onto a hold: its last half within twice `tolerance` (the rest tolerance)
-/// of its last value. The first half may still move: a measured command
-/// lags into its level (over the default 0.1 s settling, to within 0.4 % of
-/// the span in its last 0.05 s: a lag of up to about 9 ms on a jump of the
-/// whole span) and carries noise; a sine moves on by far more.
+/// onto a hold: its last three quarters within twice `tolerance` (the rest
+/// tolerance) of its last value. The first quarter may still move: a
+/// measured command lags into its level (over the default 0.1 s settling,
+/// to within 0.4 % of the span in 25 ms: a lag of up to about 7 ms on a
+/// jump of a tenth of the span) and carries noise; a sine moves on by far
+/// more.
 pub fn settles_onto_hold(window: &[f64], tolerance: f64) -> bool {
     let Some(last) = window.last() else {
         return false;
     };
-    window[window.len() / 2..]
+    window[window.len() / 4..]
         .iter()
         .all(|u| (u - last).abs() <= 2.0 * tolerance)
 }
@@ -456,7 +484,8 @@ pub fn smaller_loops(u: &[f64], fitted: &[bool], scored: &[bool]) -> Option<(f64
 }
 
 /// The end of the first loading of `u` from sample `from` (before `to`):
-/// the second turning point of at least 1 % of `span`. Until the input has
+/// the second turning point of at least `least_turn`
+/// ([`SegmentThresholds::least_turn`]). Until the input has
 /// turned at both ends of a cycle, a hysteresis model's state still depends
 /// on the state assumed before `from` (the wiping-out property of Preisach
 /// and Prandtl-Ishlinskii models: each turning point erases the memory of
@@ -468,7 +497,7 @@ pub fn first_loading_end(
     u: &[f64],
     from: usize,
     to: usize,
-    span: f64,
+    least_turn: f64,
     skipped: &[Range<usize>],
 ) -> Option<usize> {
     let to = to.min(u.len());
@@ -481,7 +510,7 @@ pub fn first_loading_end(
             flags[n - from] = false;
         }
     }
-    reversals(&u[from..to], &flags, REVERSAL_SPAN_FRACTION * span)
+    reversals(&u[from..to], &flags, least_turn)
         .get(1)
         .map(|r| from + r)
 }
@@ -531,10 +560,13 @@ mod tests {
         // From the step: the sine rises to its first maximum (25 samples
         // later) and falls to its first minimum (75 samples later).
         assert_eq!(
-            first_loading_end(&u, 200, u.len(), thresholds.span, &[]),
+            first_loading_end(&u, 200, u.len(), thresholds.least_turn(), &[]),
             Some(275)
         );
-        assert_eq!(first_loading_end(&u, 200, 260, thresholds.span, &[]), None);
+        assert_eq!(
+            first_loading_end(&u, 200, 260, thresholds.least_turn(), &[]),
+            None
+        );
     }
 
     #[test]
@@ -573,35 +605,45 @@ mod tests {
     /// alone found no step (at 5 kHz it found them all); a move onto a hold
     /// is a step at any rate: each stair steps once, at its first moving
     /// sample, also when a noisy measured command lags into its level (in
-    /// two jumps, or through a first-order lag of 9 ms, whose every change
-    /// is under 5 % of the span), when the record's end cuts the last stair
-    /// short, and when the stairs are shorter than the settling.
+    /// two jumps, or through a first-order lag: 6 ms at 200 Hz, 2 ms at
+    /// 5 kHz, where no change is 5 % of the span), when the record's end
+    /// cuts the last stair short, and when the stairs are shorter than the
+    /// settling (15 and 10 samples at 200 Hz, 375 and 100 at 5 kHz; with
+    /// fewer than about 10 samples a stair, the command's noise, read from
+    /// its fourth differences, is read from the jumps), or a twentieth of
+    /// the span high.
     #[test]
     fn every_stair_of_a_staircase_is_a_step_at_any_rate() {
         #[derive(Clone, Copy, Debug)]
         enum Command {
             Exact,
             TwoJumps,
-            Lagging,
+            Lagging(f64),
         }
-        let cases: [(f64, f64, f64, Command); 8] = [
-            (200.0, 0.2, 20.0, Command::Exact),
-            (5000.0, 0.2, 20.0, Command::Exact),
-            (200.0, 0.2, 20.0, Command::TwoJumps),
-            (5000.0, 0.2, 20.0, Command::TwoJumps),
-            (200.0, 0.2, 20.0, Command::Lagging),
-            (200.0, 0.2, 19.95, Command::Exact),
-            (200.0, 0.075, 20.0, Command::Exact),
-            (5000.0, 0.075, 20.0, Command::Exact),
+        let cases: [(f64, f64, f64, usize, Command); 13] = [
+            (200.0, 0.2, 20.0, 10, Command::Exact),
+            (5000.0, 0.2, 20.0, 10, Command::Exact),
+            (200.0, 0.2, 20.0, 10, Command::TwoJumps),
+            (5000.0, 0.2, 20.0, 10, Command::TwoJumps),
+            (200.0, 0.2, 20.0, 10, Command::Lagging(0.006)),
+            (5000.0, 0.2, 20.0, 10, Command::Lagging(0.002)),
+            (200.0, 0.2, 19.95, 10, Command::Exact),
+            (200.0, 0.075, 20.0, 10, Command::Exact),
+            (5000.0, 0.075, 20.0, 10, Command::Exact),
+            (200.0, 0.05, 40.0, 10, Command::Exact),
+            (5000.0, 0.02, 40.0, 10, Command::Exact),
+            (200.0, 0.2, 60.0, 21, Command::Exact),
+            (5000.0, 0.2, 60.0, 21, Command::Exact),
         ];
-        for (rate, stair_seconds, stairs, command) in cases {
-            let stair = (stair_seconds * rate) as usize;
+        for (rate, stair_seconds, stairs, levels, command) in cases {
+            let stair = (stair_seconds * rate).round() as usize;
             let samples = (stairs * stair as f64) as usize;
-            // Triangles of 1 V stairs, 0..9..1 V.
+            // Triangles of 1 V stairs, 0..levels-1..1 V.
+            let top = levels - 1;
             let levels: Vec<f64> = (0..samples)
                 .map(|n| {
-                    let k = (n / stair) % 18;
-                    (if k < 10 { k } else { 18 - k }) as f64
+                    let k = (n / stair) % (2 * top);
+                    (if k <= top { k } else { 2 * top - k }) as f64
                 })
                 .collect();
             let mut u = levels.clone();
@@ -612,12 +654,11 @@ mod tests {
                         u[n] = (levels[n - 1] + levels[n]) / 2.0;
                     }
                 }
-                Command::Lagging => {
-                    let kept = (-1.0 / (0.009 * rate)).exp();
+                Command::Lagging(seconds) => {
+                    let kept = (-1.0 / (seconds * rate)).exp();
                     for n in 1..samples {
                         u[n] = kept * u[n - 1] + (1.0 - kept) * levels[n];
                     }
-                    assert!((1..samples).all(|n| (u[n] - u[n - 1]).abs() < 0.45));
                 }
             }
             for (n, v) in u.iter_mut().enumerate() {
@@ -635,18 +676,34 @@ mod tests {
         // by more than 5 % of its span, but moves only a little of that in
         // any one sample; a coarsely sampled one (16.3 Hz at 200 Hz: 12
         // samples a cycle, up to 40 % of its span a sample) holds nowhere.
-        // No step in any, with the default settling or none.
-        for (frequency, rate) in [
-            (0.2, 200.0),
-            (1.0, 200.0),
-            (2.67, 200.0),
-            (16.3, 200.0),
-            (1.0, 5000.0),
+        // No step in any, with the default settling, none or 0.5 s, and none
+        // on a command with noise of 0.5 % of its span (the tolerances grow
+        // with it).
+        let mut state = 12345u64;
+        let mut noise = || {
+            // Uniform on ±√3·σ, σ = 0.01 (0.5 % of the span 2), from an LCG.
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            0.01 * 3f64.sqrt() * (2.0 * (state >> 11) as f64 / (1u64 << 53) as f64 - 1.0)
+        };
+        for (frequency, rate, noisy) in [
+            (0.2, 200.0, false),
+            (1.0, 200.0, false),
+            (2.67, 200.0, false),
+            (16.3, 200.0, false),
+            (1.0, 5000.0, false),
+            (5.0, 200.0, true),
+            (8.0, 200.0, true),
+            (1.0, 5000.0, true),
         ] {
             let sine: Vec<f64> = (0..(10.0 * rate) as usize)
-                .map(|n| (std::f64::consts::TAU * frequency * n as f64 / rate).sin())
+                .map(|n| {
+                    (std::f64::consts::TAU * frequency * n as f64 / rate).sin()
+                        + if noisy { noise() } else { 0.0 }
+                })
                 .collect();
-            for settle_seconds in [0.1, 0.0] {
+            for settle_seconds in [0.1, 0.0, 0.5] {
                 let options = SegmentOptions {
                     settle_seconds,
                     ..SegmentOptions::default()
@@ -655,7 +712,7 @@ mod tests {
                 assert_eq!(
                     detect_segments(&sine, &thresholds).steps,
                     Vec::<usize>::new(),
-                    "{frequency} Hz at {rate} Hz, settling {settle_seconds} s"
+                    "{frequency} Hz at {rate} Hz, settling {settle_seconds} s, noisy {noisy}"
                 );
             }
         }
