@@ -178,7 +178,11 @@ impl Segments {
             let mut starts = Vec::new();
             for stair in &self.stairs {
                 let level = mean(stair);
-                let stepped = self.steps.iter().any(|&s| s >= since && s <= stair.start);
+                // The steps are sorted: the first at or after `since`.
+                let stepped = self
+                    .steps
+                    .get(self.steps.partition_point(|&s| s < since))
+                    .is_some_and(|&s| s <= stair.start);
                 // A hold that noise split in two is one stair.
                 let moved =
                     previous.is_none_or(|p| (level - p).abs() > 2.0 * thresholds.rest_tolerance);
