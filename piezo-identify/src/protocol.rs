@@ -35,7 +35,8 @@
 //! - **Cost**: the (c, w_s) searches run on every m-th sample, m such that
 //!   at most about 3000 samples are searched and at least 100 per fastest
 //!   cycle remain; 30 starts are screened for 60 Nelder-Mead iterations and
-//!   the best 5 run on to convergence ([`crate::fit::Screening`]). The
+//!   the best 5 run on to convergence, restarted from their end until a
+//!   restart no longer lowers F ([`crate::fit::Screening`]). The
 //!   linear part and every error use all samples.
 //! - **What the fit may use**: c, the scale of the dead-zone thresholds,
 //!   stays within [`DEAD_ZONE_SCALE_RANGE`] of the fitted working range,

@@ -291,10 +291,14 @@ fn p885_test_record_split_in_two() {
 ///   against classical 1.65 %, Bouc-Wen 2.58 % against a best line of
 ///   5.81 % (2.2×, not 5×): the Test file reads about 1.1 µm below what the
 ///   identification file's sensor offset predicts, for every model;
-/// - the lab-like 200 Hz staircase, inverse-pi: 0.060, 0.058, 0.067 % for
-///   seeds 0, 1, 2, 16 % apart (every other bar met): each seed's search
-///   ends in another minimum, at errors set by the sensor noise over the
-///   0.1 s a stair is scored (4.5 nm, about 3.6 mV of command).
+/// - the lab-like staircases, inverse-pi, over seeds 0-5 (seeds 0-2 meet
+///   every bar, `lab_records_meet_the_bars_for_any_seed`): 0.054-0.060 % at
+///   200 Hz, 10.7 % apart, and 0.0128-0.0149 % at 5 kHz, 16 % apart. Each
+///   seed's search ends in another minimum; their F differ by up to 30 % and
+///   their scored errors by less, set by the sensor noise over the 0.1 s a
+///   stair is scored (4.5 nm, about 3.6 mV of command) and by the ±2 mV
+///   their models err at each stair's level, about the noise of the fit
+///   part's own means there.
 #[test]
 #[ignore = "quality bars not met on these records; see the doc comment"]
 fn known_gaps_on_real_records() {
@@ -329,16 +333,18 @@ fn known_gaps_on_real_records() {
             bouc_wen_bars("pair", &forward_errors(&report["validation"]["errors"]));
         },
     );
-    check("lab_200Hz_unipolar_stairs inverse-pi, seeds 0-2", &|| {
-        let (name, documented, spec) = lab_records()
-            .into_iter()
-            .find(|r| r.1 == "lab_200Hz_unipolar_stairs")
-            .unwrap();
-        let results: Vec<f64> = (0..3)
-            .map(|seed| lab_fit(name, documented, &spec, seed, false).0)
-            .collect();
-        within_ten_percent(name, &results);
-    });
+    for staircase in ["lab_200Hz_unipolar_stairs", "lab_5kHz_unipolar_stairs"] {
+        check(&format!("{staircase} inverse-pi, seeds 0-5"), &|| {
+            let (name, documented, spec) = lab_records()
+                .into_iter()
+                .find(|r| r.1 == staircase)
+                .unwrap();
+            let results: Vec<f64> = (0..6)
+                .map(|seed| lab_fit(name, documented, &spec, seed, false).0)
+                .collect();
+            within_ten_percent(name, &results);
+        });
+    }
     assert!(failures.is_empty(), "bars not met: {failures:?}");
 }
 
@@ -501,10 +507,12 @@ fn lab_records_meet_the_bars_for_any_seed() {
     let mut rows = Vec::new();
     // Seeds 1 and 2 too where the table's rows are measured again by seed;
     // the 5 kHz staircase's seeds were 24 % apart until the settling, the
-    // first loading and the steps of staircases were mended.
+    // first loading and the steps of staircases were mended, the 200 Hz
+    // one's 16 % until runs to convergence were restarted at their end.
     let by_seed = [
         "lab_200Hz_unipolar_1Hz",
         "lab_5kHz_bipolar_1Hz",
+        "lab_200Hz_unipolar_stairs",
         "lab_5kHz_unipolar_stairs",
     ];
     for (name, documented, spec) in &lab_records() {
