@@ -122,6 +122,11 @@ pub struct FitOptions {
     /// Successive halving of the starts (None: every start runs to
     /// convergence, seed 000's best of N).
     pub screening: Option<Screening>,
+    /// Runs to convergence are restarted from their end while a restart
+    /// lowers F (`SeparableProblem::run_to_rest` says why); false: each runs
+    /// once, as seed 000's procedure does (the `stage` presets and the model
+    /// comparison reproduce it).
+    pub restarts: bool,
     /// The final linear solve is regularised, allowing F to grow by this
     /// fraction (`least_squares::solve_least_squares_regularized`; 0: plain
     /// least squares).
@@ -141,7 +146,7 @@ pub struct FitOptions {
 /// Every start first runs `iterations` Nelder-Mead iterations; only the
 /// `kept` best then continue, from a fresh simplex about their point, up to
 /// `FitOptions::max_iterations` (restarted at their end as every run to
-/// convergence is: `SeparableProblem::run_to_rest`). The starts that lead after a short run are
+/// convergence is when `FitOptions::restarts` is set). The starts that lead after a short run are
 /// nearly always those that end best (the basins of F in c are set early),
 /// and most of a start's iterations are spent creeping along a valley it
 /// will not leave: screening spends them only where they can matter.
@@ -168,6 +173,7 @@ impl Default for FitOptions {
             excluded: Vec::new(),
             rate_dependent: true,
             screening: None,
+            restarts: false,
             rss_increase: 0.0,
             reversing_operators_only: false,
             c_range: None,
@@ -647,7 +653,8 @@ fn run_starts(
             .into_par_iter()
             .map(|start| {
                 let initial = search.initial_point(start, options.starts, options.seed);
-                let result = search.run_to_rest(
+                let result = search.converge(
+                    options.restarts,
                     start,
                     &initial,
                     SIMPLEX_STEP,
@@ -699,7 +706,14 @@ fn run_starts(
             let tolerance = (screening.relative_tolerance * screened.objective / search.reference)
                 .max(SIMPLEX_COST_TOLERANCE);
             let mut result = if remaining > 0 {
-                search.run_to_rest(start, &point, POLISH_SIMPLEX_STEP, remaining, tolerance)?
+                search.converge(
+                    options.restarts,
+                    start,
+                    &point,
+                    POLISH_SIMPLEX_STEP,
+                    remaining,
+                    tolerance,
+                )?
             } else {
                 screened.clone()
             };
@@ -1068,6 +1082,23 @@ impl<'a> SeparableProblem<'a> {
             }
         }
         Ok(result)
+    }
+
+    /// [`Self::run_to_rest`] when `restarts`, else [`Self::run`].
+    fn converge(
+        &self,
+        restarts: bool,
+        start: usize,
+        initial: &[f64],
+        step: f64,
+        max_iterations: u64,
+        tolerance: f64,
+    ) -> Result<StartResult, FitError> {
+        if restarts {
+            self.run_to_rest(start, initial, step, max_iterations, tolerance)
+        } else {
+            self.run(start, initial, step, max_iterations, tolerance)
+        }
     }
 }
 

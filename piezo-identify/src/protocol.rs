@@ -1086,6 +1086,7 @@ pub fn identify_inverse_pi(
         excluded: unset_ranges(flags),
         rate_dependent,
         screening: settings.screening,
+        restarts: true,
         rss_increase: LINEAR_RSS_INCREASE,
         reversing_operators_only: true,
         c_range: Some(DEAD_ZONE_SCALE_RANGE),
