@@ -526,7 +526,7 @@ impl Plan {
             starts: &self.segments.steps,
             settle: self.thresholds.settle_samples,
             input,
-            hold_tolerance: self.thresholds.rest_tolerance,
+            hold_band: self.thresholds.hold_band(),
         }
     }
 
@@ -544,7 +544,7 @@ impl Plan {
             starts: &segments.steps,
             settle: thresholds.settle_samples,
             input,
-            hold_tolerance: thresholds.rest_tolerance,
+            hold_band: thresholds.hold_band(),
         }
     }
 

@@ -184,8 +184,7 @@ impl Segments {
                     .get(self.steps.partition_point(|&s| s < since))
                     .is_some_and(|&s| s <= stair.start);
                 // A hold that noise split in two is one stair.
-                let moved =
-                    previous.is_none_or(|p| (level - p).abs() > 2.0 * thresholds.rest_tolerance);
+                let moved = previous.is_none_or(|p| (level - p).abs() > thresholds.hold_band());
                 if stair.start > 0 && !stepped && moved {
                     starts.push(stair.start);
                 }
@@ -286,7 +285,19 @@ const MIN_HOLD_SAMPLES: usize = 6;
 /// and moves there by at most 1.1 % of its span.
 const HOLD_MOVE_TOLERANCES: f64 = 10.0;
 
+/// An input within this many rest tolerances of a level holds there (0.4 %
+/// of the span on a clean command, 10σ of a noisy one's noise): a stair's
+/// samples, a settling's last three quarters, and a turn of the loop must
+/// move further.
+const HOLD_BAND_TOLERANCES: f64 = 2.0;
+
 impl SegmentThresholds {
+    /// How far an input may stray from a level and still hold there
+    /// ([`HOLD_BAND_TOLERANCES`]).
+    pub fn hold_band(&self) -> f64 {
+        HOLD_BAND_TOLERANCES * self.rest_tolerance
+    }
+
     /// The smallest move onto a hold that is a step, and the smallest gap
     /// between a staircase's levels ([`HOLD_MOVE_TOLERANCES`]).
     pub fn least_move(&self) -> f64 {
@@ -294,10 +305,10 @@ impl SegmentThresholds {
     }
 
     /// The smallest turn that counts as a turning point of the loop: 1 % of
-    /// the span, or twice the rest tolerance on a noisy command (10σ), so
-    /// that its noise turns nothing.
+    /// the span, or the hold band on a noisy command (10σ), so that its
+    /// noise turns nothing.
     pub fn least_turn(&self) -> f64 {
-        (REVERSAL_SPAN_FRACTION * self.span).max(2.0 * self.rest_tolerance)
+        (REVERSAL_SPAN_FRACTION * self.span).max(self.hold_band())
     }
 }
 
@@ -318,7 +329,7 @@ impl SegmentThresholds {
 /// settling.
 pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
     let rests = find_rests(u, thresholds.rest_tolerance, thresholds.min_rest_samples);
-    let moving = 2.0 * thresholds.rest_tolerance;
+    let moving = thresholds.hold_band();
     let least_move = thresholds.least_move();
     let settling = thresholds.settle_samples.max(MIN_HOLD_SAMPLES);
     let change = |m: usize| (u[m] - u[m - 1]).abs();
@@ -332,8 +343,7 @@ pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
             end = next;
         }
         let window = &u[n..end];
-        if window.len() < MIN_HOLD_SAMPLES || !settles_onto_hold(window, thresholds.rest_tolerance)
-        {
+        if window.len() < MIN_HOLD_SAMPLES || !settles_onto_hold(window, thresholds.hold_band()) {
             return None;
         }
         let level = window[window.len() - 1];
@@ -367,19 +377,19 @@ pub fn detect_segments(u: &[f64], thresholds: &SegmentThresholds) -> Segments {
 }
 
 /// Whether an input over `window` (the settling after a change) settles
-/// onto a hold: its last three quarters within twice `tolerance` (the rest
-/// tolerance) of its last value. The first quarter may still move: a
+/// onto a hold: its last three quarters within `band`
+/// ([`SegmentThresholds::hold_band`]) of its last value. The first quarter may still move: a
 /// measured command lags into its level (over the default 0.1 s settling,
 /// to within 0.4 % of the span in 25 ms: a lag of up to about 7 ms on a
 /// jump of a tenth of the span) and carries noise; a sine moves on by far
 /// more.
-pub fn settles_onto_hold(window: &[f64], tolerance: f64) -> bool {
+pub fn settles_onto_hold(window: &[f64], band: f64) -> bool {
     let Some(last) = window.last() else {
         return false;
     };
     window[window.len() / 4..]
         .iter()
-        .all(|u| (u - last).abs() <= 2.0 * tolerance)
+        .all(|u| (u - last).abs() <= band)
 }
 
 /// Maximal runs of at least `min_samples` within `tolerance` of their first

@@ -95,11 +95,11 @@ pub struct Steps<'a> {
     pub starts: &'a [usize],
     /// Samples of settling after each step.
     pub settle: usize,
-    /// The record's input, and the largest change of it that is still a
-    /// hold: only the settling of a step onto a held input is held
-    /// ([`held_over_settling`]).
+    /// The record's input, and how far it may stray from a level and still
+    /// hold there (`SegmentThresholds::hold_band`): only the settling of a
+    /// step onto a held input is held ([`held_over_settling`]).
     pub input: &'a [f64],
-    pub hold_tolerance: f64,
+    pub hold_band: f64,
 }
 
 /// The displacement with the settling of each step onto a held input held
@@ -111,7 +111,7 @@ pub struct Steps<'a> {
 /// too small to be a step is no part of the stair); the last sample of the
 /// settling when nothing of the stair is left after it. A step is onto a
 /// held input when the window's input settles onto a hold
-/// ([`settles_onto_hold`]: its last half within twice `hold_tolerance` of
+/// ([`settles_onto_hold`]: its last three quarters within `hold_band` of
 /// its last value); a step onto an input that moves on (onto a sine) is
 /// left as measured: the actuator may turn there, and its turns are the
 /// model's.
@@ -145,7 +145,7 @@ pub fn held_over_settling(y: &[f64], steps: Steps) -> Vec<f64> {
         let next = starts.get(k + 1).copied().unwrap_or(y.len());
         let end = (start + steps.settle).min(next);
         let window = &steps.input[start.min(steps.input.len())..end.min(steps.input.len())];
-        if !settles_onto_hold(window, steps.hold_tolerance) {
+        if !settles_onto_hold(window, steps.hold_band) {
             continue;
         }
         let level = window[window.len() - 1];
@@ -155,7 +155,7 @@ pub fn held_over_settling(y: &[f64], steps: Steps) -> Vec<f64> {
                 steps
                     .input
                     .get(n)
-                    .is_none_or(|u| (u - level).abs() > 2.0 * steps.hold_tolerance)
+                    .is_none_or(|u| (u - level).abs() > steps.hold_band)
             })
             .unwrap_or(stair_end);
         let settled = if held_to > end {
@@ -275,7 +275,7 @@ mod tests {
             starts,
             settle: 3,
             input,
-            hold_tolerance: 0.01,
+            hold_band: 0.02,
         };
         assert_eq!(
             held_over_settling(&y, steps(&[2, 7], &u)),
