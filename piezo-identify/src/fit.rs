@@ -286,7 +286,8 @@ pub struct StartResult {
     pub ws: Vec<f64>,
     /// F on the samples the search used (decimated, after warm-up) [V²].
     pub objective: f64,
-    /// Iterations and cost evaluations of all its runs.
+    /// Iterations and cost evaluations of all its runs (screening, polish
+    /// and restarts; a restart that gains without iterating counts one).
     pub iterations: u64,
     pub cost_evaluations: u64,
     /// Whether it survived screening and ran to convergence (always, without
@@ -1048,9 +1049,9 @@ impl<'a> SeparableProblem<'a> {
     /// `max_iterations` in all. Nelder-Mead's simplex flattens across a
     /// curved valley and stops short of its bottom (McKinnon, SIAM J. Optim.
     /// 9 (1998) 148-158); Numerical Recipes (§10.5) restarts at the claimed
-    /// minimum for that reason. On the 200 Hz lab staircase, runs that had
-    /// converged at F 0.0326 went on to 0.0245 when restarted
-    /// (docs/identification.md).
+    /// minimum for that reason. On the 200 Hz lab staircase, seeds 0 and 2
+    /// had converged at F 0.0326 and 0.0327; restarted, they went on to
+    /// 0.0321 and 0.0245 (docs/identification.md).
     fn run_to_rest(
         &self,
         start: usize,
@@ -1069,7 +1070,9 @@ impl<'a> SeparableProblem<'a> {
                 max_iterations - result.iterations,
                 tolerance,
             )?;
-            result.iterations += again.iterations;
+            // At least one, so that restarts that gain without iterating
+            // (a vertex of the fresh simplex below its centre) still end.
+            result.iterations += again.iterations.max(1);
             result.cost_evaluations += again.cost_evaluations;
             let gain = result.objective - again.objective;
             if gain > 0.0 {

@@ -758,6 +758,8 @@ pub struct InversePiSettings {
     pub seed: u64,
     pub max_iterations: u64,
     pub screening: Option<Screening>,
+    /// Runs to convergence restarted at their end (`FitOptions::restarts`).
+    pub restarts: bool,
     pub decimation: Option<usize>,
     /// Half width of the displacement's moving average [samples].
     pub smoothing: Option<usize>,
@@ -777,6 +779,7 @@ impl Default for InversePiSettings {
                 kept: 5,
                 relative_tolerance: 1e-6,
             }),
+            restarts: true,
             decimation: None,
             smoothing: None,
             rate_dependent: None,
@@ -1086,7 +1089,7 @@ pub fn identify_inverse_pi(
         excluded: unset_ranges(flags),
         rate_dependent,
         screening: settings.screening,
-        restarts: true,
+        restarts: settings.restarts,
         rss_increase: LINEAR_RSS_INCREASE,
         reversing_operators_only: true,
         c_range: Some(DEAD_ZONE_SCALE_RANGE),

@@ -293,8 +293,8 @@ fn p885_test_record_split_in_two() {
 ///   identification file's sensor offset predicts, for every model;
 /// - the lab-like staircases, inverse-pi, over seeds 0-5 (seeds 0-2 meet
 ///   every bar, `lab_records_meet_the_bars_for_any_seed`): 0.054-0.060 % at
-///   200 Hz, 10.7 % apart, and 0.0128-0.0149 % at 5 kHz, 16 % apart. Each
-///   seed's search ends in another minimum; their F differ by up to 30 % and
+///   200 Hz, 10.9 % apart, and 0.0128-0.0149 % at 5 kHz, 16 % apart. Each
+///   seed's search ends in another minimum; their F differ by up to 33 % and
 ///   their scored errors by less, set by the sensor noise over the 0.1 s a
 ///   stair is scored (4.5 nm, about 3.6 mV of command) and by the ±2 mV
 ///   their models err at each stair's level, about the noise of the fit

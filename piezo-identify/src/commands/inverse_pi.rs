@@ -36,8 +36,9 @@ pub(crate) struct InversePiArgs {
     /// Nelder-Mead iterations per start at most.
     #[arg(long, default_value_t = 2000)]
     pub(crate) max_iterations: u64,
-    /// Run every start to convergence (seed 000's best of N) instead of
-    /// screening them for 60 iterations and running on the best 5.
+    /// Run every start to convergence, restarted at its end, instead of
+    /// screening them for 60 iterations and running on the best 5 (`compare`
+    /// runs seed 000's plain best of N).
     #[arg(long)]
     pub(crate) no_screening: bool,
     /// The search uses every N-th sample, or "auto": at most about 3000
@@ -92,6 +93,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
         } else {
             InversePiSettings::default().screening
         },
+        restarts: InversePiSettings::default().restarts,
         decimation: auto_or(
             &args.decimation,
             |t| t.parse::<usize>().ok().filter(|m| *m >= 1),
@@ -316,11 +318,11 @@ pub(crate) fn print_inverse_pi_choices(
         settings.starts,
         match settings.screening {
             Some(s) => format!(
-                "{} iterations each, the best {} run on to convergence",
+                "{} iterations each, the best {} run on to convergence, restarted at their end",
                 s.iterations,
                 polished.min(s.kept)
             ),
-            None => "each to convergence".to_owned(),
+            None => "each to convergence, restarted at its end".to_owned(),
         },
         settings.seed,
         fit.best_start.unwrap_or(0),

@@ -168,7 +168,7 @@ pub(crate) const MAX_NOTED_LEVELS: usize = 20;
 /// On 16 s of a 0.2 s staircase at 200 Hz split in two, the warm-up (to the
 /// first loading's end, 5.7 s) leaves one turn to fit, and the proposed
 /// model scored 0.091-0.251 % of the input span by seed 0-5 (classical P-I
-/// 1.058 %); on 40 s of it, 0.058-0.067 %.
+/// 1.058 %); on 40 s of it, 0.054-0.060 %.
 pub(crate) const MIN_FITTED_TURNS: usize = 2;
 
 /// The notes a fit prints after its errors, kept for `--report` too (a
