@@ -612,6 +612,7 @@ fn fit_rate_dependent(
     );
     search.reversing_only = options.reversing_operators_only;
     search.c_range = options.c_range;
+    search.restarts = options.restarts;
 
     let starts = run_starts(&search, options, progress)?;
     // Lowest F, ties to the lowest start index (`min_by` keeps the first).
@@ -654,8 +655,7 @@ fn run_starts(
             .into_par_iter()
             .map(|start| {
                 let initial = search.initial_point(start, options.starts, options.seed);
-                let result = search.converge(
-                    options.restarts,
+                let result = search.run_to_rest(
                     start,
                     &initial,
                     SIMPLEX_STEP,
@@ -707,14 +707,7 @@ fn run_starts(
             let tolerance = (screening.relative_tolerance * screened.objective / search.reference)
                 .max(SIMPLEX_COST_TOLERANCE);
             let mut result = if remaining > 0 {
-                search.converge(
-                    options.restarts,
-                    start,
-                    &point,
-                    POLISH_SIMPLEX_STEP,
-                    remaining,
-                    tolerance,
-                )?
+                search.run_to_rest(start, &point, POLISH_SIMPLEX_STEP, remaining, tolerance)?
             } else {
                 screened.clone()
             };
@@ -820,6 +813,8 @@ struct SeparableProblem<'a> {
     reversing_only: bool,
     /// Bounds on c in units of y_max (`FitOptions::c_range`).
     c_range: Option<(f64, f64)>,
+    /// Runs to convergence are restarted (`FitOptions::restarts`).
+    restarts: bool,
 }
 
 impl<'a> SeparableProblem<'a> {
@@ -847,6 +842,7 @@ impl<'a> SeparableProblem<'a> {
             rows: targets.len(),
             reversing_only: false,
             c_range: None,
+            restarts: false,
         }
     }
 
@@ -1043,9 +1039,10 @@ impl<'a> SeparableProblem<'a> {
         })
     }
 
-    /// [`Self::run`], then restarted from its best point with a fresh
-    /// simplex of the first edge ([`SIMPLEX_STEP`]) for as long as a restart
-    /// lowers F by more than [`RESTART_LEAST_GAIN`] of it, within
+    /// [`Self::run`], then, when `restarts` is set (else that run alone),
+    /// restarted from its best point with a fresh simplex of the first edge
+    /// ([`SIMPLEX_STEP`]) for as long as a restart lowers F by more than
+    /// [`RESTART_LEAST_GAIN`] of it, within
     /// `max_iterations` in all. Nelder-Mead's simplex flattens across a
     /// curved valley and stops short of its bottom (McKinnon, SIAM J. Optim.
     /// 9 (1998) 148-158); Numerical Recipes (§10.5) restarts at the claimed
@@ -1061,7 +1058,7 @@ impl<'a> SeparableProblem<'a> {
         tolerance: f64,
     ) -> Result<StartResult, FitError> {
         let mut result = self.run(start, initial, step, max_iterations, tolerance)?;
-        while result.iterations < max_iterations {
+        while self.restarts && result.iterations < max_iterations {
             let point = self.encode(result.c, &result.ws);
             let again = self.run(
                 start,
@@ -1085,23 +1082,6 @@ impl<'a> SeparableProblem<'a> {
             }
         }
         Ok(result)
-    }
-
-    /// [`Self::run_to_rest`] when `restarts`, else [`Self::run`].
-    fn converge(
-        &self,
-        restarts: bool,
-        start: usize,
-        initial: &[f64],
-        step: f64,
-        max_iterations: u64,
-        tolerance: f64,
-    ) -> Result<StartResult, FitError> {
-        if restarts {
-            self.run_to_rest(start, initial, step, max_iterations, tolerance)
-        } else {
-            self.run(start, initial, step, max_iterations, tolerance)
-        }
     }
 }
 
@@ -1170,7 +1150,8 @@ mod tests {
             })
             .collect();
         let fitted = vec![true; y.len()];
-        let problem = SeparableProblem::new(PROPOSED, &y, &u, &fitted, sample_period, 9.5);
+        let mut problem = SeparableProblem::new(PROPOSED, &y, &u, &fitted, sample_period, 9.5);
+        problem.restarts = true;
         let budget = 2000;
         let mut gains = 0;
         for start in 0..30 {
