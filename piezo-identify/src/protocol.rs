@@ -338,15 +338,15 @@ fn start_first_loading(
     let before_first_step =
         match first_loading_end(u, settled, first_step, thresholds.least_turn(), &[]) {
             Some(end) => end.max(settled),
-            // Never turned before the first step (a rest): on to that step's
-            // own second turning point (before the next step), as after any
-            // step of the fit part, so that a validation file waits as long.
-            None => {
-                let next = steps.get(1).copied().unwrap_or(u.len());
-                first_loading_end(u, first_step + settled, next, thresholds.least_turn(), &[])
-                    .unwrap_or(first_step)
-                    .max(first_step)
-            }
+            // Never turned before the first step (a rest): on to the end of
+            // that step's first loading, as after any step of the fit part,
+            // so that a validation file waits as long.
+            None => after_step_first_loading(
+                u,
+                first_step,
+                steps.get(1).copied().unwrap_or(u.len()),
+                thresholds,
+            ),
         };
     let settlings: Vec<Range<usize>> = steps
         .iter()
@@ -354,6 +354,24 @@ fn start_first_loading(
         .collect();
     first_loading_end(u, settled, limit, thresholds.least_turn(), &settlings)
         .map_or(before_first_step, |across| before_first_step.max(across))
+}
+
+/// The end of the first loading after the step at `step` (before the next
+/// step, `next`): its second turning point once settled
+/// (`segments::first_loading_end`), or the end of its settling when it
+/// does not turn twice (a quasi-static stair). After a step the model has
+/// run through what came before, so a stair that never turns is fitted
+/// once settled.
+fn after_step_first_loading(
+    u: &[f64],
+    step: usize,
+    next: usize,
+    thresholds: &SegmentThresholds,
+) -> usize {
+    let settled = step + thresholds.settle_samples;
+    first_loading_end(u, settled, next, thresholds.least_turn(), &[])
+        .unwrap_or(settled)
+        .max(settled)
 }
 
 /// Which samples of a record are fitted and which scored.
@@ -379,6 +397,17 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The steps in the fit part.
+    pub fn fit_steps(&self) -> Vec<usize> {
+        let fit_end = self.fit_end;
+        self.segments
+            .steps
+            .iter()
+            .copied()
+            .filter(|&s| s < fit_end)
+            .collect()
+    }
+
     /// The plan of a record of input `u`, fitted on 0..fit_end.
     pub fn new(
         u: &[f64],
@@ -415,19 +444,13 @@ impl Plan {
             all.push(0..warm_up_samples.min(u.len()));
             for (i, &start) in starts.iter().enumerate() {
                 let next = starts.get(i + 1).copied().unwrap_or(u.len());
-                let settled = start + thresholds.settle_samples;
                 // At the record's start, an input that does not turn twice
                 // before the first step is a first loading all the way, from
                 // a state the record does not show: none of it is fitted.
-                // After a step the model ran through what came before, and a
-                // stair that never turns (a quasi-static staircase) is
-                // fitted once settled.
                 let end = if start == 0 {
                     start_first_loading(u, &segments.steps, &thresholds, fit_end)
                 } else {
-                    first_loading_end(u, settled, next, thresholds.least_turn(), &[])
-                        .unwrap_or(settled)
-                        .max(settled)
+                    after_step_first_loading(u, start, next, &thresholds)
                 };
                 // Only the fit part: a step in the scored part is scored once
                 // settled (its state is the one the model computed).
@@ -1058,13 +1081,7 @@ pub fn identify_inverse_pi(
     let y_fit = &record.output[..fit_end];
     let u_fit = &record.input[..fit_end];
     let fitted = plan.fitted();
-    let fit_steps: Vec<usize> = plan
-        .segments
-        .steps
-        .iter()
-        .copied()
-        .filter(|&s| s < fit_end)
-        .collect();
+    let fit_steps = plan.fit_steps();
     let fit_settling = Steps {
         starts: &fit_steps,
         ..plan.steps(u_fit)
@@ -1404,13 +1421,7 @@ pub fn identify_bouc_wen_protocol(
     let u_fit = &record.input[..fit_end];
     let y_fit = &record.output[..fit_end];
     let fitted = plan.fitted();
-    let fit_steps: Vec<usize> = plan
-        .segments
-        .steps
-        .iter()
-        .copied()
-        .filter(|&s| s < fit_end)
-        .collect();
+    let fit_steps = plan.fit_steps();
     let target = smoothed_between_steps(y_fit, settings.smoothing, &fit_steps);
     let mut options = BoucWenFitOptions {
         gapso: settings.gapso.clone(),
@@ -1496,6 +1507,9 @@ pub fn identify_bouc_wen_protocol(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Uniform};
+    use rand_xoshiro::Xoshiro256PlusPlus;
 
     #[test]
     fn unset_ranges_and_flags_are_inverse() {
@@ -1644,16 +1658,18 @@ mod tests {
         // by more than 1 % of the span now and then, but not by 10σ. The
         // turning point is read at the bottom stair's lowest sample, so the
         // fit starts within that stair.
-        let mut state = 7u64;
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(7);
+        let uniform = Uniform::new_inclusive(-0.015 * 3f64.sqrt(), 0.015 * 3f64.sqrt()).unwrap();
         let noisy: Vec<f64> = stairs
             .iter()
-            .map(|v| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                v + 0.015 * 3f64.sqrt() * (2.0 * (state >> 11) as f64 / (1u64 << 53) as f64 - 1.0)
-            })
+            .map(|v| v + uniform.sample(&mut rng))
             .collect();
+        // Within a stair, some sample moves by more than 1 % of the 5 V span.
+        assert!(
+            noisy
+                .windows(2)
+                .any(|w| (0.05..0.5).contains(&(w[1] - w[0]).abs()))
+        );
         let plan = Plan::new(&noisy, 0.005, stairs.len(), &PlanOptions::default()).unwrap();
         assert_eq!(
             plan.segments.steps,

@@ -543,6 +543,9 @@ pub fn fastest_cycle(u: &[f64], flags: &[bool], span: f64) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Uniform};
+    use rand_xoshiro::Xoshiro256PlusPlus;
 
     /// 1 s of rest at 0, then a step onto a 2 Hz sine about 5 (amplitude 4),
     /// at 200 Hz.
@@ -693,14 +696,10 @@ mod tests {
         // No step in any, with the default settling, none or 0.5 s, and none
         // on a command with noise of 0.5 % of its span (the tolerances grow
         // with it).
-        let mut state = 12345u64;
-        let mut noise = || {
-            // Uniform on ±√3·σ, σ = 0.01 (0.5 % of the span 2), from an LCG.
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            0.01 * 3f64.sqrt() * (2.0 * (state >> 11) as f64 / (1u64 << 53) as f64 - 1.0)
-        };
+        // Uniform on ±√3·σ, σ = 0.01 (0.5 % of the span 2).
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(12345);
+        let uniform = Uniform::new_inclusive(-0.01 * 3f64.sqrt(), 0.01 * 3f64.sqrt()).unwrap();
+        let mut noise = || uniform.sample(&mut rng);
         for (frequency, rate, noisy) in [
             (0.2, 200.0, false),
             (1.0, 200.0, false),
