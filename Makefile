@@ -32,6 +32,11 @@ all: fmus
 
 # fmi-sys generates its FMI 2.0 bindings with bindgen, which needs libclang.
 system-deps:
+	@# rustc links through the C compiler, which the C importer tests use too.
+	@if ! command -v cc >/dev/null; then \
+	  packaging/apt-install.sh "rustc links with it, the C importer tests compile with it" \
+	    gcc libc6-dev || exit 1; \
+	fi
 	@if ! ldconfig -p | grep -q 'libclang[-0-9.]*\.so'; then \
 	  packaging/apt-install.sh "bindgen needs libclang" libclang-dev || exit 1; \
 	fi
@@ -50,6 +55,10 @@ wine:
 	fi
 
 $(VENV)/.installed: tests/requirements.txt
+	@# Debian's python3 leaves ensurepip, which venv needs, to python3-venv.
+	@if ! $(PYTHON3) -c 'import ensurepip' 2>/dev/null; then \
+	  packaging/apt-install.sh "python3 -m venv needs ensurepip" python3-venv || exit 1; \
+	fi
 	$(PYTHON3) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -r tests/requirements.txt
 	touch $@
@@ -181,6 +190,12 @@ identify: system-deps
 	mkdir -p out/identify
 	$(RELEASE)/piezo-identify compare --synthetic | tee out/identify/compare.txt
 	piezo-identify/benches/figures.sh $(RELEASE)/piezo-identify | tee out/identify/figures.md
+
+# The identification CLI alone, target/release/piezo-identify (README:
+# fitting the models to your stage's data), with what its build needs.
+.PHONY: identify-tool
+identify-tool: system-deps
+	$(CARGO) build --release --locked -p piezo-identify --bin piezo-identify
 
 # The plant's calibration fingerprints measured through its FMU (procedures
 # and targets: piezo-models/src/fingerprint.rs); make demo and

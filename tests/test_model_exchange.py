@@ -83,12 +83,21 @@ def on_output_grid(result: np.ndarray, grid: np.ndarray) -> np.ndarray:
     return result[index]
 
 
+def half_spacing_um() -> float:
+    """L/2, the sensors' distance from the stage's centre [um] (L in mm)."""
+    spacing = next(v for v in fmpy.read_model_description(require(PLANT)).modelVariables
+                   if v.name == "L")
+    assert spacing.unit == "mm", spacing.unit
+    return float(spacing.start) * 1e3 / 2
+
+
 def largest_difference(a: np.ndarray, b: np.ndarray) -> float:
     b = on_output_grid(b, a["time"])
     # theta_z in rad is compared as the displacement it makes at the sensors
-    # (L/2 = 5 mm), like the other signals in um.
+    # (s2 = x + theta_z L/2), like the other signals in um.
+    theta_scale = half_spacing_um()
     return max(
-        float(np.max(np.abs(a[name] - b[name]) * (5e3 if name == "theta_z" else 1.0)))
+        float(np.max(np.abs(a[name] - b[name]) * (theta_scale if name == "theta_z" else 1.0)))
         for name in SENSORS
     )
 
