@@ -53,12 +53,13 @@ class LogRecord:
     instance_name: str
     status: int
     category: str
-    raw: str  # the message as the FMU passed it (a printf format: '%' doubled)
+    raw: str  # the message as the FMU passed it (a printf format: '%' doubled, '#' too)
 
     @property
     def text(self) -> str:
-        """The message as a printf-style importer shows it ('%%' -> '%')."""
-        return self.raw.replace("%%", "%")
+        """The message as an importer shows it: '%%' -> '%' (printf) and '##' -> '#'
+        (FMI 2.0.4 §2.1.5: '#' opens a variable reference, which these FMUs never send)."""
+        return self.raw.replace("%%", "%").replace("##", "#")
 
     def __str__(self) -> str:
         return (

@@ -510,7 +510,7 @@ def test_values_of_another_kind_are_refused_not_converted():
 
 
 # --------------------------------------------------------------------------
-# 10. '%' in log messages
+# 10. '%' and '#' in log messages
 # --------------------------------------------------------------------------
 
 LONE_PERCENT = re.compile(r"%(?!%)")
@@ -522,8 +522,8 @@ def _has_lone_percent(raw: str) -> bool:
 
 def test_percent_in_messages_is_doubled(env):
     s = env.instantiate("probe%s", logging_on=True, resource_location="http://example.org/a%20b")
-    cats = (fmi2.fmi2String * 1)(b"log%s%d")
-    status = s.fmu.fmi2SetDebugLogging(s.fmu.component, fmi2.fmi2True, 1, cats)
+    cats = (fmi2.fmi2String * 2)(b"log%s%d", b"tag#r1#")
+    status = s.fmu.fmi2SetDebugLogging(s.fmu.component, fmi2.fmi2True, 2, cats)
     assert status == fmi2.fmi2Warning, f"an unknown category should give fmi2Warning, got {status}"
     s.initialize()
     s.step_n(3)
@@ -531,6 +531,9 @@ def test_percent_in_messages_is_doubled(env):
     unknown = s.log.matching('unknown log category "log%s%d"', status=fmi2.fmi2Warning)
     assert unknown, f"no warning quoting the unknown category:\n{s.log.dump()}"
     assert '"log%%s%%d"' in unknown[0].raw, f"'%' must be doubled in the raw message: {unknown[0].raw}"
+    # '#' opens a variable reference that FMI importers expand (#r1# -> a name).
+    tagged = s.log.matching('unknown log category "tag#r1#"', status=fmi2.fmi2Warning)
+    assert tagged and '"tag##r1##"' in tagged[0].raw, f"'#' must be doubled: {s.log.dump()}"
     location = s.log.matching("http://example.org/a%20b", status=fmi2.fmi2Warning)
     assert location and "a%%20b" in location[0].raw, f"resource warning: {s.log.dump()}"
     lone = [r for r in s.log.records if _has_lone_percent(r.raw)]

@@ -863,17 +863,30 @@ unsafe fn free_snapshot<M: CoSimModel>(state: sys::fmi2FMUstate) {
     drop(boxed);
 }
 
+/// What [`store_snapshot`] may read of the `*FMUstate` it is given.
+#[derive(Clone, Copy, PartialEq)]
+enum Slot {
+    /// `fmi2GetFMUstate`: *FMUstate is NULL or a state the importer got from
+    /// this FMU and has not freed (FMI 2.0.4 §2.1.8), which is reused.
+    InOut,
+    /// `fmi2DeSerializeFMUstate`: FMUstate is output only (§2.1.8: it
+    /// "returns FMUstate"), so the importer may pass an uninitialized
+    /// variable. Only a state that this instance made and lists is reused;
+    /// anything else is overwritten with a new state without being read.
+    Out,
+}
+
 /// Stores `data` in `*slot`, reusing the snapshot already there if there is
-/// one (`*slot` is NULL, or a state the importer got from this FMU and has
-/// not freed, as the standard requires).
+/// one ([`Slot`] says which), else in a new one.
 fn store_snapshot<M: CoSimModel>(
     inst: &mut Instance<M>,
     function: FmiFunction,
     slot: &mut sys::fmi2FMUstate,
+    slot_kind: Slot,
     data: fmu_state::SnapshotData<M>,
 ) -> Status {
     let current = *slot;
-    if current.is_null() {
+    if current.is_null() || (slot_kind == Slot::Out && !inst.fmu_states.contains(&current)) {
         let owner: *mut Instance<M> = inst;
         let boxed = Box::new(Snapshot::new(data, owner.cast()));
         let state: sys::fmi2FMUstate = Box::into_raw(boxed).cast();
@@ -881,8 +894,9 @@ fn store_snapshot<M: CoSimModel>(
         *slot = state;
         return Status::Ok;
     }
-    // SAFETY: `*slot` is non-NULL: a state the importer got from this FMU
-    // and has not freed, or the importer broke the standard (FMI 2.0.4
+    // SAFETY: `*slot` is non-NULL: with `Slot::Out` a live snapshot this
+    // instance lists; with `Slot::InOut` a state the importer got from this
+    // FMU and has not freed, or the importer broke the standard (FMI 2.0.4
     // §2.1.8: *FMUstate is NULL or a state of this FMU); any of our objects
     // has the eight readable bytes the magic check needs.
     match unsafe { snapshot::<M>(current) } {
@@ -913,7 +927,7 @@ pub unsafe fn get_fmu_state<M: CoSimModel>(
             Err(status) => return status,
         };
         let data = inst.snapshot();
-        store_snapshot(inst, function, slot, data)
+        store_snapshot(inst, function, slot, Slot::InOut, data)
     };
     // SAFETY: `c` as for every FMI function (this function's contract).
     unsafe { call::<M, _, _>(c, function, |f| write!(f, "FMUstate = {state:?}"), body) }
@@ -1113,8 +1127,9 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
 ) -> sys::fmi2Status {
     let function = FmiFunction::DeSerializeFmuState;
     let body = |inst: &mut Instance<M>| {
-        // SAFETY: `state` is the importer's initialized `fmi2FMUstate`
-        // variable when non-NULL (this function's contract).
+        // SAFETY: `state` is the importer's `fmi2FMUstate` variable when
+        // non-NULL (this function's contract); its value may be anything,
+        // and `store_snapshot` reads through it only if this instance made it.
         let slot = match unsafe { value_in_out(inst, function, state, "FMUstate") } {
             Ok(slot) => slot,
             Err(status) => return status,
@@ -1135,7 +1150,7 @@ pub unsafe fn deserialize_fmu_state<M: CoSimModel>(
         };
         match fmu_state::decode::<M>(bytes, &inst.guid) {
             Ok(mut data) => match inst.validate_foreign_state(function, &mut data) {
-                Ok(()) => store_snapshot(inst, function, slot, data),
+                Ok(()) => store_snapshot(inst, function, slot, Slot::Out, data),
                 Err(status) => status,
             },
             Err(reason) => inst.error(function, format_args!("refused: {reason}")),

@@ -2,7 +2,8 @@
 //!
 //! Messages are formatted into a fixed stack buffer (no allocation, so models may
 //! log from `fmi2DoStep`), `%` is doubled because importers pass the message to a
-//! printf-style formatter, and every message names the FMI function it comes from.
+//! printf-style formatter, `#` because they expand `#r12#` into a variable's name
+//! (FMI 2.0.4 §2.1.5), and every message names the FMI function it comes from.
 //! Errors and fatal errors always reach the importer; every other category obeys
 //! `fmi2SetDebugLogging`.
 
@@ -212,6 +213,9 @@ impl Write for StackMessage {
             let mut utf8 = [0u8; 4];
             let encoded: &[u8] = match ch {
                 '%' => b"%%",
+                // '#' opens a variable reference (#r12#) for the importer
+                // to expand (FMI 2.0.4 §2.1.5): a literal one is written ##.
+                '#' => b"##",
                 // An interior NUL would cut the message short.
                 '\0' => b"?",
                 _ => ch.encode_utf8(&mut utf8).as_bytes(),
@@ -245,6 +249,14 @@ mod tests {
         assert_eq!(
             render(format_args!("duty 50% of {}", "100%")),
             "duty 50%% of 100%%"
+        );
+    }
+
+    #[test]
+    fn hash_is_doubled_so_importers_expand_no_variable_reference() {
+        assert_eq!(
+            render(format_args!("unknown category {:?}", "bogus#r1#")),
+            "unknown category \"bogus##r1##\""
         );
     }
 

@@ -6,6 +6,8 @@
 
 mod common;
 
+use std::ptr;
+
 use common::{DISCARD, ERROR, OK};
 use fmi2_cosim::abi;
 use fmi2_cosim::fmi_sys::fmi2 as sys;
@@ -245,6 +247,42 @@ fn a_terminate_request_is_a_discard_with_fmi2_terminated_true() {
     assert_eq!(status, OK);
     let other = Slave::initialized();
     assert_eq!(other.terminated(), (OK, 0));
+}
+
+/// fmi2DeSerializeFMUstate's FMUstate is output only (FMI 2.0.4 §2.1.8), so
+/// an importer may hand it an uninitialized variable: the layer writes a new
+/// state there without reading what it held (an unmapped address here, which
+/// a read would crash on), reuses a state this instance made, and leaves a
+/// state of another instance to that instance.
+#[test]
+fn deserialize_writes_its_state_over_whatever_the_variable_held() {
+    let slave = Slave::initialized();
+    assert_eq!(slave.step(0.0, 0.1), OK);
+    let bytes = slave.serialize(slave.get_state());
+    let deserialize = |slave: &Slave, slot: &mut sys::fmi2FMUstate| {
+        // SAFETY: `bytes` is a live slice and `slot` a live variable; what
+        // it holds is the importer's business.
+        unsafe {
+            abi::deserialize_fmu_state::<Stepper>(slave.0, bytes.as_ptr().cast(), bytes.len(), slot)
+        }
+    };
+    let mut slot: sys::fmi2FMUstate = ptr::without_provenance_mut(8);
+    assert_eq!(deserialize(&slave, &mut slot), OK);
+    assert_ne!(slot, ptr::without_provenance_mut(8));
+    assert_eq!(slave.step(0.1, 0.1), OK);
+    assert_eq!(slave.set_state(slot), OK, "the new state restores");
+    let restored = slot;
+    assert_eq!(deserialize(&slave, &mut slot), OK);
+    assert_eq!(slot, restored, "a state of this instance is reused");
+    let other = Slave::initialized();
+    let mut others = other.get_state();
+    let kept = others;
+    assert_eq!(deserialize(&slave, &mut others), OK);
+    assert_ne!(
+        others, kept,
+        "a state of another instance is not overwritten"
+    );
+    assert_eq!(other.set_state(kept), OK);
 }
 
 #[test]

@@ -414,16 +414,24 @@ impl Fuzzer<'_> {
                 )
             }
         };
+        // FMUstate is output only (FMI 2.0.4 §2.1.8): a state this instance
+        // made is reused; whatever else *FMUstate holds (a state of another
+        // instance, a foreign object) is overwritten with a new state, and
+        // left as it was.
         enum Out {
             Fresh,
             Reuse(usize),
             Null,
             Foreign,
         }
+        let own: Vec<usize> = (0..self.handles.len())
+            .filter(|i| self.handles[*i].owner == slot)
+            .collect();
         let out = match self.rng.random_range(0..20) {
-            _ if self.handles.len() >= MAX_HANDLES => {
-                Out::Reuse(self.rng.random_range(0..self.handles.len()))
-            }
+            _ if self.handles.len() >= MAX_HANDLES => match own.is_empty() {
+                false => Out::Reuse(own[self.rng.random_range(0..own.len())]),
+                true => Out::Null,
+            },
             _ if benign => Out::Fresh,
             0..15 => Out::Fresh,
             15..17 if !self.handles.is_empty() => {
@@ -439,10 +447,10 @@ impl Fuzzer<'_> {
             _ => ptr::null_mut(),
         };
         let before = state_slot;
-        let out_valid = match out {
-            Out::Fresh | Out::Reuse(_) => true,
-            Out::Foreign => before.is_null(),
-            Out::Null => false,
+        let out_valid = !matches!(out, Out::Null);
+        let reused = match out {
+            Out::Reuse(i) => own.contains(&i).then_some(i),
+            _ => None,
         };
         let (data, size): (*const sys::fmi2Byte, usize) = match source {
             Source::NullWithSize => (ptr::null(), self.rng.random_range(1..1000)),
@@ -512,8 +520,8 @@ impl Fuzzer<'_> {
             self.report.forged_states_accepted += 1;
             model.tainted = true;
         }
-        match out {
-            Out::Reuse(i) => {
+        match reused {
+            Some(i) => {
                 if state_slot != before {
                     self.fail(
                         "fmi2DeSerializeFMUstate did not reuse the state it was given".to_owned(),
@@ -521,9 +529,14 @@ impl Fuzzer<'_> {
                 }
                 self.handles[i].model = model;
             }
-            _ => {
+            None => {
                 if state_slot.is_null() {
                     self.fail("fmi2DeSerializeFMUstate returned OK and no state".to_owned());
+                }
+                if !before.is_null() && state_slot == before {
+                    self.fail(format!(
+                        "fmi2DeSerializeFMUstate wrote into {before:?}, not a state of its instance"
+                    ));
                 }
                 self.handles.push(Handle {
                     ptr: state_slot,
