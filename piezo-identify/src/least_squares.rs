@@ -75,13 +75,18 @@ fn solve_scaled(mut x: DMatrix<f64>, u: &[f64], rss_increase: f64) -> LinearSolu
     assert_eq!(rows, u.len(), "one target per regressor row");
     assert!(rows >= columns, "least squares needs rows >= columns");
 
-    let mut scales = vec![1.0; columns];
+    // A zero column (an operator left out, a centred constant) keeps scale
+    // None and gets a coefficient of exactly 0: rounding in the SVD mixes
+    // ~1e-16 of it into the kept directions, which, unscaled, would not
+    // shrink with the data's units (a displacement in pm gave such a column
+    // a weight that moved the model by volts).
+    let mut scales: Vec<Option<f64>> = vec![None; columns];
     for (j, scale) in scales.iter_mut().enumerate() {
         let mut column = x.column_mut(j);
         let norm = column.norm();
         if norm > 0.0 && norm.is_finite() {
             column /= norm;
-            *scale = norm;
+            *scale = Some(norm);
         }
     }
 
@@ -146,11 +151,17 @@ fn solve_scaled(mut x: DMatrix<f64>, u: &[f64], rss_increase: f64) -> LinearSolu
             .expect("U and V were computed, so the SVD can solve")
     };
 
+    let mut scaled_theta = scaled_theta;
+    for (theta, scale) in scaled_theta.iter_mut().zip(&scales) {
+        if scale.is_none() {
+            *theta = 0.0;
+        }
+    }
     let head_miss = (&head - &r * &scaled_theta).norm_squared();
     let coefficients = scaled_theta
         .iter()
         .zip(&scales)
-        .map(|(theta, scale)| theta / scale)
+        .map(|(theta, scale)| scale.map_or(0.0, |scale| theta / scale))
         .collect();
     LinearSolution {
         coefficients,
@@ -452,6 +463,48 @@ mod tests {
         assert!((centred.coefficients[1] - 0.3).abs() < 1e-12);
         assert!(centred.residual_sum_of_squares < 1e-20);
         assert!((plain.residual_sum_of_squares - centred.residual_sum_of_squares).abs() < 1e-20);
+    }
+
+    #[test]
+    fn a_zero_column_gets_exactly_zero_at_any_scale() {
+        // Ill-conditioned live columns beside a zero one: the zero one's
+        // weight is 0, not rounding, and the others scale with the units.
+        let n = 300;
+        let column = |i: usize, j: usize, scale: f64| {
+            let t = i as f64 / n as f64;
+            scale
+                * match j {
+                    0 => t,
+                    1 => t + 1e-6 * (37.0 * t).sin(),
+                    2 => 0.0,
+                    _ => t * t,
+                }
+        };
+        let u: Vec<f64> = (0..n)
+            .map(|i| {
+                let t = i as f64 / n as f64;
+                1.0 + 2.0 * t + 0.5 * t * t + 1e-4 * (91.0 * t).sin()
+            })
+            .collect();
+        for (rss_increase, scale) in [(0.0, 1.0), (0.0, 1e6), (1e-3, 1.0), (1e-3, 1e6)] {
+            let x = DMatrix::from_fn(n, 5, |i, j| if j == 4 { 1.0 } else { column(i, j, scale) });
+            let solution = solve_least_squares_with_intercept_regularized(x, &u, 4, rss_increase);
+            assert_eq!(solution.coefficients[2], 0.0, "{solution:?}");
+            let unit = solve_least_squares_with_intercept_regularized(
+                DMatrix::from_fn(n, 5, |i, j| if j == 4 { 1.0 } else { column(i, j, 1.0) }),
+                &u,
+                4,
+                rss_increase,
+            );
+            for j in [0, 1, 3] {
+                let expected = unit.coefficients[j] / scale;
+                assert!(
+                    (solution.coefficients[j] - expected).abs()
+                        <= 1e-6 * expected.abs().max(1e-12 / scale),
+                    "column {j}, scale {scale}: {solution:?} against {unit:?}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -487,6 +487,71 @@ fn a_decimal_comma_export_fits_as_its_decimal_point_twin() {
     assert_eq!(rms_lines(&point), rms_lines(&comma));
 }
 
+/// The P-885 record with its displacement in pm instead of µm (a sensor's
+/// raw counts are as large) fits to the same errors in V: least squares is
+/// scale-free. A weight the data never determined (an operator left out, its
+/// column zero) took ~1e-13 from rounding whatever the units, and in pm that
+/// moved the proposed model by 37 V (1024 % of the input span).
+#[test]
+fn a_displacement_in_picometres_fits_as_in_micrometres() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat"),
+    )
+    .unwrap();
+    let picometres: String = record
+        .lines()
+        .map(|line| {
+            let fields: Vec<&str> = line.split_whitespace().collect();
+            let y: f64 = fields[4].parse().unwrap();
+            format!("{}\t{}\n", fields[0], y * 1e6)
+        })
+        .collect();
+    let path = dir.path().join("pm.dat");
+    std::fs::write(&path, picometres).unwrap();
+    let fit = |file: &Path, output: &str| {
+        let done = run(&[
+            "inverse-pi",
+            file.to_str().unwrap(),
+            "--input",
+            "0",
+            "--output",
+            output,
+            "--rate",
+            "200",
+            "--split",
+            "0.5",
+            "--starts",
+            "2",
+            "--max-iterations",
+            "40",
+        ]);
+        assert!(done.status.success(), "{}", stderr(&done));
+        let summary = stdout(&done);
+        let volts: Vec<f64> = rms_lines(&summary)
+            .iter()
+            .filter(|line| line.contains(" V ("))
+            .map(|line| {
+                let rms = line.split(" RMS ").nth(1).unwrap();
+                rms.split_whitespace().next().unwrap().parse().unwrap()
+            })
+            .collect();
+        assert_eq!(volts.len(), 6, "{summary}");
+        volts
+    };
+    let micrometres = fit(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat"),
+        "4",
+    );
+    let picometres = fit(&path, "1");
+    for (um, pm) in micrometres.iter().zip(&picometres) {
+        assert!(
+            (um - pm).abs() <= 1e-4 * um,
+            "{micrometres:?} against {picometres:?}"
+        );
+    }
+}
+
 /// A PicoScope-style export (a units row below the header, a blank line,
 /// time in ms) fits to the same figures as the same record in seconds, and
 /// the summary names the units it read; so does a Windows export in Latin-1
