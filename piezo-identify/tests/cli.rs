@@ -487,6 +487,62 @@ fn a_decimal_comma_export_fits_as_its_decimal_point_twin() {
     assert_eq!(rms_lines(&point), rms_lines(&comma));
 }
 
+/// A result file that cannot be written after the fit (a full disk) does
+/// not lose the others: both subcommands write --out and --report, then exit
+/// 1 naming the option whose file failed.
+#[test]
+fn a_result_file_that_cannot_be_written_does_not_lose_the_others() {
+    if !Path::new("/dev/full").exists() {
+        return; // Linux's always-full device is what fails the write here.
+    }
+    let record =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat");
+    for subcommand in ["inverse-pi", "bouc-wen"] {
+        let dir = tempfile::tempdir().unwrap();
+        let (out, report) = (
+            dir.path().join("model.json"),
+            dir.path().join("report.json"),
+        );
+        let mut args = vec![
+            subcommand,
+            record.to_str().unwrap(),
+            "--input",
+            "0",
+            "--output",
+            "4",
+            "--rate",
+            "200",
+            "--split",
+            "0.5",
+            "--predictions",
+            "/dev/full",
+            "--out",
+            out.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ];
+        if subcommand == "inverse-pi" {
+            args.extend(["--starts", "2", "--max-iterations", "40"]);
+        } else {
+            args.extend(["--population", "10", "--generations", "5"]);
+        }
+        let done = run(&args);
+        assert_eq!(
+            done.status.code(),
+            Some(1),
+            "{subcommand}: {}",
+            stderr(&done)
+        );
+        assert!(
+            stderr(&done).contains("--predictions: /dev/full"),
+            "{subcommand}: {}",
+            stderr(&done)
+        );
+        assert!(out.is_file() && report.is_file(), "{subcommand}");
+        assert!(stdout(&done).contains("report written to"), "{subcommand}");
+    }
+}
+
 /// The P-885 record with its displacement in pm instead of µm (a sensor's
 /// raw counts are as large) fits to the same errors in V: least squares is
 /// scale-free. A weight the data never determined (an operator left out, its

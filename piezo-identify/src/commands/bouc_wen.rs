@@ -15,8 +15,8 @@ use piezo_identify::protocol::{
 use super::arguments::{ColumnArgs, Loaded, ProtocolArgs, load, load_validation, open_plant};
 use super::progress::Reporter;
 use super::report::{
-    Notes, bouc_wen_parameters, describe, describe_columns, pad, print_figure, print_plan,
-    range_excess, write_json, write_predictions,
+    Notes, ResultFiles, bouc_wen_parameters, describe, describe_columns, pad, print_figure,
+    print_plan, range_excess, write_json, write_predictions,
 };
 use super::{Failure, plant_failure, protocol_failure};
 
@@ -326,9 +326,10 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     }
     say!("time: {:.2} s", fit.seconds);
 
+    let mut files = ResultFiles::default();
     if let Some(path) = &args.protocol.predictions {
         let predictions = fit.predictions_on(&record.input, dt);
-        write_predictions(
+        let outcome = write_predictions(
             path,
             dt,
             &[
@@ -339,12 +340,12 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
                 ("line_um", &predictions.line),
             ],
             &plan,
-        )?;
-        say!("predictions written to {}", path.display());
+        );
+        files.written("--predictions", "predictions", path, outcome);
     }
     let best = fit.identification.best();
     if let Some(out) = &args.out {
-        write_json(
+        let outcome = write_json(
             out,
             &serde_json::json!({
                 "model": "asymmetric Bouc-Wen (seed 001 eq. 3-4): displacement from voltage, plus the sensor offset",
@@ -353,11 +354,11 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
                 "sample_period_s": dt,
                 "columns": loaded.columns,
             }),
-        )?;
-        say!("model written to {}", out.display());
+        );
+        files.written("--out", "model", out, outcome);
     }
     if let Some(path) = &args.protocol.report {
-        write_json(
+        let outcome = write_json(
             path,
             &serde_json::json!({
                 "record": loaded.name,
@@ -380,10 +381,10 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
                 })),
                 "seconds": fit.seconds,
             }),
-        )?;
-        say!("report written to {}", path.display());
+        );
+        files.written("--report", "report", path, outcome);
     }
-    Ok(())
+    files.finish()
 }
 
 pub(crate) fn print_bouc_wen_fit(

@@ -14,8 +14,8 @@ use piezo_identify::validation::inverse_model_input;
 use super::arguments::{ColumnArgs, ProtocolArgs, auto_or, load, load_validation};
 use super::progress::Reporter;
 use super::report::{
-    Notes, describe, describe_columns, pad, print_figure, print_plan, range_excess, write_json,
-    write_predictions,
+    Notes, ResultFiles, describe, describe_columns, pad, print_figure, print_plan, range_excess,
+    write_json, write_predictions,
 };
 use super::{Failure, protocol_failure};
 
@@ -170,9 +170,10 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     }
     say!("time: {:.2} s", fit.seconds);
 
+    let mut files = ResultFiles::default();
     if let Some(path) = &args.protocol.predictions {
         let predictions = fit.predictions_on(&record.output, dt, plan.steps(&record.input));
-        write_predictions(
+        let outcome = write_predictions(
             path,
             dt,
             &[
@@ -183,11 +184,11 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
                 ("line_v", &predictions.line),
             ],
             &plan,
-        )?;
-        say!("predictions written to {}", path.display());
+        );
+        files.written("--predictions", "predictions", path, outcome);
     }
     if let Some(out) = &args.out {
-        write_json(
+        let outcome = write_json(
             out,
             &serde_json::json!({
                 "model": "modified inverse Prandtl-Ishlinskii (seed 000 eq. 3-5): voltage from displacement",
@@ -197,11 +198,11 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
                 "sample_period_s": dt,
                 "columns": loaded.columns,
             }),
-        )?;
-        say!("model written to {}", out.display());
+        );
+        files.written("--out", "model", out, outcome);
     }
     if let Some(path) = &args.protocol.report {
-        write_json(
+        let outcome = write_json(
             path,
             &serde_json::json!({
                 "record": loaded.name,
@@ -216,10 +217,10 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
                     "errors": validation_errors,
                 })),
             }),
-        )?;
-        say!("report written to {}", path.display());
+        );
+        files.written("--report", "report", path, outcome);
     }
-    Ok(())
+    files.finish()
 }
 
 pub(crate) fn print_inverse_pi_choices(

@@ -343,6 +343,43 @@ pub(crate) fn write_predictions(
     write_result(path, text.as_bytes())
 }
 
+/// The result files of one run (`--predictions`, `--out`, `--report`),
+/// written one after the other: a file that cannot be written (a full disk)
+/// does not keep the others from being written, so the fit is not lost, and
+/// the run fails at the end naming each option whose file was not written.
+#[derive(Default)]
+pub(crate) struct ResultFiles {
+    failed: Vec<String>,
+}
+
+impl ResultFiles {
+    /// Records the outcome of writing `what` for `option` to `path`.
+    pub(crate) fn written(
+        &mut self,
+        option: &str,
+        what: &str,
+        path: &Path,
+        outcome: Result<(), Failure>,
+    ) {
+        match outcome {
+            Ok(()) => say!("{what} written to {}", path.display()),
+            Err(failure) => self.failed.push(format!("{option}: {}", failure.message())),
+        }
+    }
+
+    /// Ok when every file was written.
+    pub(crate) fn finish(self) -> Result<(), Failure> {
+        if self.failed.is_empty() {
+            Ok(())
+        } else {
+            Err(Failure::Run(format!(
+                "the fit ran, but not every result file was written: {}",
+                self.failed.join("; ")
+            )))
+        }
+    }
+}
+
 /// Writes `value` as JSON; a failure here comes after the work was done
 /// (the paths were checked before it), so it is the run's.
 pub(crate) fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<(), Failure> {
