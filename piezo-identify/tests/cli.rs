@@ -487,6 +487,62 @@ fn a_decimal_comma_export_fits_as_its_decimal_point_twin() {
     assert_eq!(rms_lines(&point), rms_lines(&comma));
 }
 
+/// A --validate file is read by the fit file's columns: the same names in
+/// another order score as the same file does; without those names it is
+/// refused (a second guess had read its displacement as the input and scored
+/// a 1500 % error, exit 0).
+#[test]
+fn the_validation_file_is_read_by_the_fit_files_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("record.csv");
+    write_good_record(&data);
+    let text = std::fs::read_to_string(&data).unwrap();
+    let reorder = |head: &str| {
+        let mut out = format!("{head}\n");
+        for line in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
+            let f: Vec<&str> = line.split(',').collect();
+            out.push_str(&format!("{},{},{}\n", f[2], f[0], f[1]));
+        }
+        out
+    };
+    let (reordered, unnamed) = (
+        dir.path().join("reordered.csv"),
+        dir.path().join("unnamed.csv"),
+    );
+    std::fs::write(&reordered, reorder("microns,time,volts")).unwrap();
+    std::fs::write(&unnamed, reorder("y,t,u")).unwrap();
+    let validate = |file: &Path| {
+        run(&[
+            "inverse-pi",
+            data.to_str().unwrap(),
+            "--starts",
+            "2",
+            "--max-iterations",
+            "40",
+            "--validate",
+            file.to_str().unwrap(),
+        ])
+    };
+    let (same, other) = (validate(&data), validate(&reordered));
+    assert!(other.status.success(), "{}", stderr(&other));
+    let validation = |summary: String| summary.split("validation file").nth(1).map(rms_lines);
+    let scored = validation(stdout(&same));
+    assert!(scored.as_ref().is_some_and(|lines| lines.len() == 3), "{scored:?}");
+    assert_eq!(scored, validation(stdout(&other)));
+    assert!(
+        stdout(&other).contains("columns: input column 2 \"volts\", output column 0 \"microns\""),
+        "{}",
+        stdout(&other)
+    );
+    let refused = validate(&unnamed);
+    assert_eq!(refused.status.code(), Some(2), "{}", stdout(&refused));
+    assert!(
+        stderr(&refused).contains("the --validate file is read by the fit file's columns"),
+        "{}",
+        stderr(&refused)
+    );
+}
+
 /// A result file that cannot be written after the fit (a full disk) does
 /// not lose the others: both subcommands write --out and --report, then exit
 /// 1 naming the option whose file failed.
@@ -1440,7 +1496,7 @@ fn outputs_are_checked_before_the_work_and_never_overwrite_an_input() {
                 .lines()
                 .last()
                 .unwrap()
-                .starts_with("/dev/full: "),
+                .ends_with("--out: /dev/full: No space left on device (os error 28)"),
             "{}",
             stderr(&output)
         );

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 
 use piezo_identify::data::{
-    ColumnsUsed, Short, UNIFORM_SAMPLING_TOLERANCE, read_record_with_columns,
+    ColumnsUsed, Short, UNIFORM_SAMPLING_TOLERANCE, UsedColumn, read_record_with_columns,
 };
 use piezo_identify::plant::{PlantFmu, read_parameter_set};
 use piezo_identify::protocol::{Plan, PlanOptions, ZeroAlignment};
@@ -108,7 +108,7 @@ pub(crate) fn auto_or<T>(
     }
 }
 
-#[derive(Args)]
+#[derive(Args, Clone)]
 pub(crate) struct ColumnArgs {
     /// Input (command voltage) column: 0-based index or header name [default: the one column in a
     /// voltage unit where the header marks the output by a length unit, else the first column
@@ -233,15 +233,46 @@ pub(crate) fn load(path: &Path, columns: &ColumnArgs) -> Result<Loaded, String> 
     })
 }
 
-/// Loads the `--validate` file of `fitted`, refusing one sampled at another
-/// rate: the rate-dependent weights, the smoothing and the settling times
-/// count samples, so they would mean other times there.
+impl ColumnArgs {
+    /// The columns a `--validate` file is read by: those given, and for each
+    /// role left to the default the column `fitted` was read from, by its
+    /// header name when it has one, else by its index. Guessed again in the
+    /// second file, a role could land on another column (its header in
+    /// another order, or no header), and the models would be scored on the
+    /// wrong signal.
+    fn as_read_from(&self, fitted: &Loaded) -> ColumnArgs {
+        let Some(used) = &fitted.columns else {
+            return self.clone();
+        };
+        let same = |given: &Option<String>, column: Option<&UsedColumn>| {
+            given
+                .clone()
+                .or_else(|| column.map(|c| c.name.clone().unwrap_or_else(|| c.index.to_string())))
+        };
+        ColumnArgs {
+            input: same(&self.input, Some(&used.input)),
+            output: same(&self.output, Some(&used.output)),
+            rate: self.rate,
+            time: if self.rate.is_some() {
+                None
+            } else {
+                same(&self.time, used.time.as_ref())
+            },
+        }
+    }
+}
+
+/// Loads the `--validate` file of `fitted` by `fitted`'s columns
+/// ([`ColumnArgs::as_read_from`]), refusing one sampled at another rate: the
+/// rate-dependent weights, the smoothing and the settling times count
+/// samples, so they would mean other times there.
 pub(crate) fn load_validation(
     path: &Path,
     columns: &ColumnArgs,
     fitted: &Loaded,
 ) -> Result<Loaded, String> {
-    let validation = load(path, columns)?;
+    let validation = load(path, &columns.as_read_from(fitted))
+        .map_err(|e| format!("{e} (the --validate file is read by the fit file's columns)"))?;
     let (fit_period, period) = (fitted.record.sample_period, validation.record.sample_period);
     if (period - fit_period).abs() > UNIFORM_SAMPLING_TOLERANCE * fit_period {
         return Err(format!(

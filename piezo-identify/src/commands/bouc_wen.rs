@@ -310,6 +310,9 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     let mut zero_alignment = None;
     if let (Some(v), Some((_, scored))) = (&validation, &validation_scored) {
         say!("\n{}", describe(&v.record, &v.name));
+        if let Some(columns) = &v.columns {
+            say!("columns: {}", describe_columns(columns));
+        }
         let (output, zero) = args
             .protocol
             .validation_output(&plan, &loaded, v, fit.stroke);
@@ -376,6 +379,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
                 "unseen": fit.unseen,
                 "validation": validation.as_ref().map(|v| serde_json::json!({
                     "file": v.name,
+                    "columns": v.columns,
                     "zero": zero_alignment,
                     "errors": validation_errors,
                 })),

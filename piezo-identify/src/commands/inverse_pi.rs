@@ -152,6 +152,9 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     let mut zero_alignment = None;
     if let (Some(v), Some((segments, scored))) = (&validation, &validation_scored) {
         say!("\n{}", describe(&v.record, &v.name));
+        if let Some(columns) = &v.columns {
+            say!("columns: {}", describe_columns(columns));
+        }
         let (output, zero) = args
             .protocol
             .validation_output(&plan, &loaded, v, fit.stroke);
@@ -213,6 +216,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
                 "identification": fit,
                 "validation": validation.as_ref().map(|v| serde_json::json!({
                     "file": v.name,
+                    "columns": v.columns,
                     "zero": zero_alignment,
                     "errors": validation_errors,
                 })),
