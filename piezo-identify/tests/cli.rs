@@ -527,7 +527,10 @@ fn the_validation_file_is_read_by_the_fit_files_columns() {
     assert!(other.status.success(), "{}", stderr(&other));
     let validation = |summary: String| summary.split("validation file").nth(1).map(rms_lines);
     let scored = validation(stdout(&same));
-    assert!(scored.as_ref().is_some_and(|lines| lines.len() == 3), "{scored:?}");
+    assert!(
+        scored.as_ref().is_some_and(|lines| lines.len() == 3),
+        "{scored:?}"
+    );
     assert_eq!(scored, validation(stdout(&other)));
     assert!(
         stdout(&other).contains("columns: input column 2 \"volts\", output column 0 \"microns\""),
@@ -541,6 +544,42 @@ fn the_validation_file_is_read_by_the_fit_files_columns() {
         "{}",
         stderr(&refused)
     );
+}
+
+/// A split that leaves less than one cycle to score says so (--split 0.999
+/// scored 8 samples of a 200-sample cycle, and said nothing).
+#[test]
+fn a_scored_part_shorter_than_a_cycle_is_noted() {
+    let record =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat");
+    for split in ["0.999", "0.5"] {
+        let done = run(&[
+            "inverse-pi",
+            record.to_str().unwrap(),
+            "--input",
+            "0",
+            "--output",
+            "4",
+            "--rate",
+            "200",
+            "--split",
+            split,
+            "--starts",
+            "2",
+            "--max-iterations",
+            "40",
+        ]);
+        assert!(done.status.success(), "{}", stderr(&done));
+        let noted = stdout(&done).contains(
+            "note: the scored part holds 8 samples, less than one cycle of the input (200 samples)",
+        );
+        assert_eq!(
+            noted,
+            split == "0.999",
+            "--split {split}: {}",
+            stdout(&done)
+        );
+    }
 }
 
 /// A result file that cannot be written after the fit (a full disk) does

@@ -305,6 +305,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
         notes.faster_cycles(&plan, &record.input, dt, &plan.scored());
     }
     notes.few_turns(&plan, &record.input);
+    notes.short_score(&plan);
     notes.few_levels(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;

@@ -147,6 +147,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
         notes.faster_cycles(&plan, &record.input, dt, &plan.scored());
     }
     notes.few_turns(&plan, &record.input);
+    notes.short_score(&plan);
     notes.few_levels(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;

@@ -205,6 +205,22 @@ impl Notes {
         }
     }
 
+    /// A note when the scored part holds fewer samples than one cycle of the
+    /// fitted input's fastest ([`Plan::fastest_cycle`]): its error then
+    /// scores part of a loop (`--split 0.999` scored 5 samples, 1 % of a
+    /// cycle, and said nothing of it).
+    pub(crate) fn short_score(&mut self, plan: &Plan) {
+        let scored = plan.scored().iter().filter(|s| **s).count();
+        if let Some(cycle) = plan.fastest_cycle
+            && plan.has_scored_part()
+            && (scored as f64) < cycle
+        {
+            self.add(format!(
+                "the scored part holds {scored} samples, less than one cycle of the input ({cycle:.0} samples): its error covers part of a loop; a smaller --split scores more"
+            ));
+        }
+    }
+
     /// A note when the input is a staircase of few levels over the fitted
     /// samples (at most [`MAX_NOTED_LEVELS`]).
     pub(crate) fn few_levels(&mut self, plan: &Plan) {
