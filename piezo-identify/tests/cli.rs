@@ -688,6 +688,12 @@ fn a_displacement_in_picometres_fits_as_in_micrometres() {
             })
             .collect();
         assert_eq!(volts.len(), 6, "{summary}");
+        // A stroke of metres of "µm" is noted as likely in another unit.
+        assert_eq!(
+            summary.contains("if it is in nm, pm or sensor counts"),
+            output == "1",
+            "{summary}"
+        );
         volts
     };
     let micrometres = fit(

@@ -306,6 +306,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     }
     notes.few_turns(&plan, &record.input);
     notes.short_score(&plan);
+    notes.implausible_stroke(fit.stroke);
     notes.few_levels(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;

@@ -148,6 +148,7 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
     }
     notes.few_turns(&plan, &record.input);
     notes.short_score(&plan);
+    notes.implausible_stroke(fit.stroke);
     notes.few_levels(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;

@@ -176,6 +176,12 @@ pub(crate) const MIN_FITTED_TURNS: usize = 2;
 #[derive(Default)]
 pub(crate) struct Notes(pub(crate) Vec<String>);
 
+/// Strokes [µm] outside these are noted ([`Notes::implausible_stroke`]):
+/// piezo stacks and flexure stages travel from a few tenths of a µm to a
+/// few mm; 1 nm and 10 cm are a decade and more beyond either end.
+const SMALLEST_PLAUSIBLE_STROKE_UM: f64 = 1e-3;
+const LARGEST_PLAUSIBLE_STROKE_UM: f64 = 1e5;
+
 impl Notes {
     /// Prints `note` as "note: …" and keeps it.
     pub(crate) fn add(&mut self, note: String) {
@@ -201,6 +207,21 @@ impl Notes {
         if turns < MIN_FITTED_TURNS {
             self.add(format!(
                 "the input turns {turns} time(s) over the fitted samples (once the warm-up, rests and settling are left out): no whole loop, up and down, was fitted; a longer record or a larger --split fits one"
+            ));
+        }
+    }
+
+    /// A note when the fit part's stroke (µm) is out of any piezo stage's
+    /// scale: a displacement in metres (a last word `_m` is not read as a
+    /// unit, since `y_m` is as often "y measured") or in pm or counts.
+    pub(crate) fn implausible_stroke(&mut self, stroke: f64) {
+        if stroke < SMALLEST_PLAUSIBLE_STROKE_UM {
+            self.add(format!(
+                "the displacement spans {stroke:.3e} um over the fit part: if it is in metres or millimetres, name its unit (`Displacement [m]`, a units row) and it is read in um"
+            ));
+        } else if stroke > LARGEST_PLAUSIBLE_STROKE_UM {
+            self.add(format!(
+                "the displacement spans {stroke:.3e} um over the fit part: if it is in nm, pm or sensor counts, name its unit (`Displacement [nm]`, a units row) or scale it to um"
             ));
         }
     }
