@@ -582,6 +582,31 @@ fn a_scored_part_shorter_than_a_cycle_is_noted() {
     }
 }
 
+/// A refusal of a record whose time unit was assumed says at what rate that
+/// reading put it: a time in ms read as seconds made a 20 kHz record a 20 Hz
+/// one, and the refusal spoke only of rests and settling.
+#[test]
+fn a_refusal_names_the_rate_an_assumed_time_unit_gave() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ramp.csv");
+    let mut text = String::from("time,volts,microns\n");
+    for n in 0..400 {
+        let u = n as f64 * 0.01;
+        text.push_str(&format!("{},{u},{}\n", n as f64 * 0.05, 1.3 * u));
+    }
+    std::fs::write(&path, text).unwrap();
+    let done = run(&["inverse-pi", path.to_str().unwrap(), "--split", "0.5"]);
+    assert_eq!(done.status.code(), Some(2), "{}", stdout(&done));
+    assert!(
+        stderr(&done).contains(
+            "(the time column was read in seconds, assumed: no time unit given: 20 Hz; if it is \
+             in ms or us, name its unit, `time [ms]`)"
+        ),
+        "{}",
+        stderr(&done)
+    );
+}
+
 /// A result file that cannot be written after the fit (a full disk) does
 /// not lose the others: both subcommands write --out and --report, then exit
 /// 1 naming the option whose file failed.

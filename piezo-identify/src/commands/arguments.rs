@@ -288,6 +288,21 @@ pub(crate) fn load_validation(
     Ok(validation)
 }
 
+/// What a refusal adds when the time column's unit was assumed: the rate
+/// that reading gave, since a time in ms read as seconds makes a 20 kHz
+/// record a 20 Hz one, whose every sample then looks like a rest.
+fn assumed_seconds(loaded: &Loaded) -> String {
+    match loaded.columns.as_ref().and_then(|c| c.time_unit.as_ref()) {
+        Some(unit) if unit.source.starts_with("assumed") => format!(
+            " (the time column was read in seconds, {}: {} Hz; if it is in ms or us, name its \
+             unit, `time [ms]`)",
+            unit.source,
+            Short(1.0 / loaded.record.sample_period)
+        ),
+        _ => String::new(),
+    }
+}
+
 impl ProtocolArgs {
     /// [`check_destinations`] for a fit's outputs: its model (`--out`), the
     /// report and the predictions.
@@ -371,7 +386,7 @@ impl ProtocolArgs {
             self.fit_end(record)?,
             &self.plan_options(default_warm_up),
         )
-        .map_err(|e| format!("{}: {e}", loaded.name))
+        .map_err(|e| format!("{}: {e}{}", loaded.name, assumed_seconds(loaded)))
     }
 
     /// The validation file's rests and steps and its scored samples,
