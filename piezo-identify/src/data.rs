@@ -204,6 +204,13 @@ pub struct Record {
     pub sample_period: f64,
 }
 
+/// The largest magnitude of an input or output value that is read: the
+/// inverse model's cubic terms are squared in its normal equations (a value
+/// to the sixth power), which overflow a double beyond about 1e51; 1e30 µm or
+/// V leaves a margin and is no measurement in any unit (raw sensor counts
+/// stay below 1e20).
+pub const MAX_MEASURED_MAGNITUDE: f64 = 1e30;
+
 /// What is wrong with a line (or, for [`Problem::TooFewRows`], the file).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Problem {
@@ -261,6 +268,12 @@ pub enum Problem {
     },
     #[error("field {field} is {value}, not a finite number")]
     NotFinite { field: usize, value: f64 },
+    #[error(
+        "field {field} is {value:e}, beyond ±{MAX_MEASURED_MAGNITUDE:e}: no displacement or \
+         voltage is that large in any unit, and the fits' sums of powers of it would overflow; \
+         scale the column"
+    )]
+    TooLarge { field: usize, value: f64 },
     #[error("field {field} is empty, and it is the {role} column")]
     EmptySelected { field: usize, role: &'static str },
     #[error("row has {found} columns, column {needed} (0-based) is needed")]
@@ -1351,6 +1364,12 @@ pub fn parse_record_with_columns(
             }
             values[field] = value;
         }
+        for field in [columns.input, columns.output] {
+            let value = values[field];
+            if value.abs() > MAX_MEASURED_MAGNITUDE {
+                return Err(malformed(line, Problem::TooLarge { field, value }));
+            }
+        }
         input.push(values[columns.input]);
         output.push(values[columns.output]);
         if let Some((column, _)) = rate_against {
@@ -2346,6 +2365,12 @@ mod tests {
         assert_eq!(
             message(&text, &by_index()),
             "data.txt:4: field 0 is NaN, not a finite number"
+        );
+        let text = rows("", 2) + "1 -2e31\n";
+        assert_eq!(
+            message(&text, &by_index()),
+            "data.txt:3: field 1 is -2e31, beyond ±1e30: no displacement or voltage is that \
+             large in any unit, and the fits' sums of powers of it would overflow; scale the column"
         );
         let text = rows("", 2) + "1 -inf\n";
         assert_eq!(
