@@ -1169,6 +1169,18 @@ pub fn parse_record_with_columns(
     // LabVIEW's X_Value columns are times in seconds.
     let x_is_time = labview.as_ref().is_some_and(|layout| layout.x_is_time);
 
+    // The last line with anything but separators and spaces on it.
+    let last_filled_line = text
+        .lines()
+        .map(content_of)
+        .enumerate()
+        .filter(|(_, content)| {
+            content
+                .chars()
+                .any(|c| !(c.is_whitespace() || c == ',' || c == ';'))
+        })
+        .last()
+        .map_or(0, |(index, _)| index + 1);
     for (index, raw) in text.lines().enumerate() {
         let line = index + 1;
         last_line = line;
@@ -1184,11 +1196,22 @@ pub fn parse_record_with_columns(
             return Err(malformed(line, Problem::LabviewSegment));
         }
         let first_content_row = separator.is_none();
-        let separator = *separator.get_or_insert_with(|| match stated {
+        let row_separator = separator.unwrap_or_else(|| match stated {
             Some((_, stated)) => stated,
             None => Separator::detect(first.as_deref().unwrap_or(content), &next),
         });
-        let fields = separator.split(content);
+        let fields = row_separator.split(content);
+        // A row of separators alone before the first data row or after the
+        // last (`;;`: Excel writes one for each row whose cells were
+        // cleared) is a blank line. Between data rows it is a sample with
+        // missing values, refused below: skipped, it would shift every later
+        // sample's time by one period under --rate.
+        if fields.iter().all(|f| f.trim().is_empty())
+            && (resolved.is_none() || line > last_filled_line)
+        {
+            continue;
+        }
+        let separator = *separator.get_or_insert(row_separator);
         if first_content_row {
             let numeric = fields.iter().filter(|f| separator.value_like(f)).count();
             if numeric == 0 {
@@ -2297,17 +2320,30 @@ mod tests {
             message(&samples, &by_index),
             "data.txt:2: field 0, the time column, is in \"sample\"; give it in s, ms, us or ns, or give --rate instead"
         );
-        // A row of typos, of missing values, or of nothing below the header
-        // is a bad data row, not units, even when no time column is read.
+        // A row of typos or of missing values below the header is a bad
+        // data row, not units, even when no time column is read; one of
+        // separators alone there, before any data, is blank (Excel's cleared
+        // row), and between data rows a sample with missing values.
         let by_rate = options(Column::Index(1), Column::Index(2), Sampling::Rate(200.0));
         for (row, problem) in [
             ("O.OO5,l.2,-4Z.7", "field 0 (\"O.OO5\") is not a number"),
             ("NA,NA,NA", "field 0 (\"NA\") is not a number"),
-            (",,", "field 1 is empty, and it is the input column"),
         ] {
             let text = format!("Time,Channel A,Channel B\n{row}\n") + &rows(1.0, ",");
             assert_eq!(message(&text, &by_rate), format!("data.txt:2: {problem}"));
         }
+        let plain = "Time,Channel A,Channel B\n".to_owned() + &rows(1.0, ",");
+        let cleared = "Time,Channel A,Channel B\n,,\n".to_owned() + &rows(1.0, ",");
+        let read_by_rate = |text: &str| parse_record(text, Path::new("data.txt"), &by_rate);
+        assert_eq!(
+            read_by_rate(&cleared).unwrap(),
+            read_by_rate(&plain).unwrap()
+        );
+        let (head, tail) = plain.split_at(plain.find("0.05,").unwrap());
+        assert_eq!(
+            message(&format!("{head},,\n{tail}"), &by_rate),
+            "data.txt:12: field 1 is empty, and it is the input column"
+        );
     }
 
     /// A comma beside decimal points is a thousands separator (a US export
@@ -2852,7 +2888,8 @@ mod tests {
     }
 
     /// A byte-order mark, UTF-16, lone-CR line ends, % comments, Excel's
-    /// sep= line and quoted fields all read as the plain file does.
+    /// sep= line and cleared rows and quoted fields all read as the plain
+    /// file does.
     #[test]
     fn lab_export_variants_read_as_the_plain_file() {
         let plain = time_u_y_rows("time,u,y", 0.005, ",");
@@ -2883,6 +2920,9 @@ mod tests {
                 format!("% Lab C, fs = 200 Hz\n%\tcolumns: t u y\n{plain}"),
             ),
             ("sep", format!("sep=,\n{plain}")),
+            // Rows of separators alone: Excel's cleared rows, before the
+            // header and at the end.
+            ("cleared rows", format!(",,\n{plain},,\r\n,,\n")),
             ("quoted", quoted),
             (
                 "quoted name",
