@@ -24,7 +24,8 @@ pub(crate) struct ProtocolArgs {
     /// models' state carried over from the fit part.
     #[arg(long, allow_negative_numbers = true, value_parser = fraction, conflicts_with = "validate_from")]
     pub(crate) split: Option<f64>,
-    /// Fit on FILE before this time [s] and score the rest (as --split).
+    /// Fit on FILE before this time [s, counted from its first sample,
+    /// whatever its time column starts at] and score the rest (as --split).
     #[arg(long, allow_negative_numbers = true, value_parser = seconds)]
     pub(crate) validate_from: Option<f64>,
     /// Also score on this file (same columns and sampling), the models run

@@ -73,7 +73,8 @@ pub(crate) struct BoucWenArgs {
     /// displacement (0: none); the errors are always against the measured one.
     #[arg(long, default_value_t = 0)]
     pub(crate) smooth: usize,
-    /// Take the output as zero at rest instead of fitting a sensor offset.
+    /// Fit no sensor offset: the output is taken as recorded, so it must
+    /// read 0 with the stage at rest (de-energized); nothing is subtracted.
     #[arg(long)]
     pub(crate) no_offset: bool,
     /// Accept only models whose every branch rises with the input on the

@@ -325,11 +325,16 @@ pub(crate) fn print_inverse_pi_choices(
         settings.starts,
         match settings.screening {
             Some(s) => format!(
-                "{} iterations each, the best {} run on to convergence, restarted at their end",
-                s.iterations,
-                polished.min(s.kept)
+                "{} iterations each, the best {} run on to convergence, restarted at their end, \
+                 {} iterations at most",
+                s.iterations.min(settings.max_iterations),
+                polished.min(s.kept),
+                settings.max_iterations
             ),
-            None => "each to convergence, restarted at its end".to_owned(),
+            None => format!(
+                "each to convergence, restarted at its end, {} iterations at most",
+                settings.max_iterations
+            ),
         },
         settings.seed,
         fit.best_start.unwrap_or(0),
