@@ -53,6 +53,35 @@ fn quick_split_fit(path: &Path, time: &str, input: &str, output: &str) -> String
     stdout(&done)
 }
 
+/// The P-885 model record (200 Hz, no header).
+fn p885_record() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat")
+}
+
+/// A quick fit (`inverse-pi`: 2 starts of 40 iterations; `bouc-wen`: 10
+/// particles for 5 generations) of a headerless 200 Hz record like
+/// [`p885_record`], command in column 0 and displacement in `output`, with
+/// `extra` options: for tests of the protocol and the command line, not of
+/// the fit.
+fn quick_headerless_fit(subcommand: &str, file: &Path, output: &str, extra: &[&str]) -> Output {
+    let mut args = vec![
+        subcommand,
+        file.to_str().unwrap(),
+        "--input",
+        "0",
+        "--output",
+        output,
+        "--rate",
+        "200",
+    ];
+    args.extend(match subcommand {
+        "inverse-pi" => ["--starts", "2", "--max-iterations", "40"],
+        _ => ["--population", "10", "--generations", "5"],
+    });
+    args.extend(extra);
+    run(&args)
+}
+
 /// The lines of a summary that give an RMS error: what two readings of one
 /// record must print alike.
 fn rms_lines(summary: &str) -> Vec<String> {
@@ -550,25 +579,8 @@ fn the_validation_file_is_read_by_the_fit_files_columns() {
 /// scored 8 samples of a 200-sample cycle, and said nothing).
 #[test]
 fn a_scored_part_shorter_than_a_cycle_is_noted() {
-    let record =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat");
     for split in ["0.999", "0.5"] {
-        let done = run(&[
-            "inverse-pi",
-            record.to_str().unwrap(),
-            "--input",
-            "0",
-            "--output",
-            "4",
-            "--rate",
-            "200",
-            "--split",
-            split,
-            "--starts",
-            "2",
-            "--max-iterations",
-            "40",
-        ]);
+        let done = quick_headerless_fit("inverse-pi", &p885_record(), "4", &["--split", split]);
         assert!(done.status.success(), "{}", stderr(&done));
         let noted = stdout(&done).contains(
             "note: the scored part holds 8 samples, less than one cycle of the input (200 samples)",
@@ -615,38 +627,27 @@ fn a_result_file_that_cannot_be_written_does_not_lose_the_others() {
     if !Path::new("/dev/full").exists() {
         return; // Linux's always-full device is what fails the write here.
     }
-    let record =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat");
     for subcommand in ["inverse-pi", "bouc-wen"] {
         let dir = tempfile::tempdir().unwrap();
         let (out, report) = (
             dir.path().join("model.json"),
             dir.path().join("report.json"),
         );
-        let mut args = vec![
+        let done = quick_headerless_fit(
             subcommand,
-            record.to_str().unwrap(),
-            "--input",
-            "0",
-            "--output",
+            &p885_record(),
             "4",
-            "--rate",
-            "200",
-            "--split",
-            "0.5",
-            "--predictions",
-            "/dev/full",
-            "--out",
-            out.to_str().unwrap(),
-            "--report",
-            report.to_str().unwrap(),
-        ];
-        if subcommand == "inverse-pi" {
-            args.extend(["--starts", "2", "--max-iterations", "40"]);
-        } else {
-            args.extend(["--population", "10", "--generations", "5"]);
-        }
-        let done = run(&args);
+            &[
+                "--split",
+                "0.5",
+                "--predictions",
+                "/dev/full",
+                "--out",
+                out.to_str().unwrap(),
+                "--report",
+                report.to_str().unwrap(),
+            ],
+        );
         assert_eq!(
             done.status.code(),
             Some(1),
@@ -671,10 +672,7 @@ fn a_result_file_that_cannot_be_written_does_not_lose_the_others() {
 #[test]
 fn a_displacement_in_picometres_fits_as_in_micrometres() {
     let dir = tempfile::tempdir().unwrap();
-    let record = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat"),
-    )
-    .unwrap();
+    let record = std::fs::read_to_string(p885_record()).unwrap();
     let picometres: String = record
         .lines()
         .map(|line| {
@@ -686,22 +684,7 @@ fn a_displacement_in_picometres_fits_as_in_micrometres() {
     let path = dir.path().join("pm.dat");
     std::fs::write(&path, picometres).unwrap();
     let fit = |file: &Path, output: &str| {
-        let done = run(&[
-            "inverse-pi",
-            file.to_str().unwrap(),
-            "--input",
-            "0",
-            "--output",
-            output,
-            "--rate",
-            "200",
-            "--split",
-            "0.5",
-            "--starts",
-            "2",
-            "--max-iterations",
-            "40",
-        ]);
+        let done = quick_headerless_fit("inverse-pi", file, output, &["--split", "0.5"]);
         assert!(done.status.success(), "{}", stderr(&done));
         let summary = stdout(&done);
         let volts: Vec<f64> = rms_lines(&summary)
@@ -721,10 +704,7 @@ fn a_displacement_in_picometres_fits_as_in_micrometres() {
         );
         volts
     };
-    let micrometres = fit(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat"),
-        "4",
-    );
+    let micrometres = fit(&p885_record(), "4");
     let picometres = fit(&path, "1");
     for (um, pm) in micrometres.iter().zip(&picometres) {
         assert!(

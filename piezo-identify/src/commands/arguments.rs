@@ -147,6 +147,33 @@ impl ColumnArgs {
             roles: Roles::INPUT_OUTPUT,
         })
     }
+
+    /// The columns a `--validate` file is read by: those given, and for each
+    /// role left to the default the column `fitted` was read from, by its
+    /// header name when it has one, else by its index. Guessed again in the
+    /// second file, a role could land on another column (its header in
+    /// another order, or no header), and the models would be scored on the
+    /// wrong signal.
+    fn as_read_from(&self, fitted: &Loaded) -> ColumnArgs {
+        let Some(used) = &fitted.columns else {
+            return self.clone();
+        };
+        let same = |given: &Option<String>, column: Option<&UsedColumn>| {
+            given
+                .clone()
+                .or_else(|| column.map(|c| c.name.clone().unwrap_or_else(|| c.index.to_string())))
+        };
+        ColumnArgs {
+            input: same(&self.input, Some(&used.input)),
+            output: same(&self.output, Some(&used.output)),
+            rate: self.rate,
+            time: if self.rate.is_some() {
+                None
+            } else {
+                same(&self.time, used.time.as_ref())
+            },
+        }
+    }
 }
 
 #[derive(Args)]
@@ -232,35 +259,6 @@ pub(crate) fn load(path: &Path, columns: &ColumnArgs) -> Result<Loaded, String> 
         record,
         columns: Some(used),
     })
-}
-
-impl ColumnArgs {
-    /// The columns a `--validate` file is read by: those given, and for each
-    /// role left to the default the column `fitted` was read from, by its
-    /// header name when it has one, else by its index. Guessed again in the
-    /// second file, a role could land on another column (its header in
-    /// another order, or no header), and the models would be scored on the
-    /// wrong signal.
-    fn as_read_from(&self, fitted: &Loaded) -> ColumnArgs {
-        let Some(used) = &fitted.columns else {
-            return self.clone();
-        };
-        let same = |given: &Option<String>, column: Option<&UsedColumn>| {
-            given
-                .clone()
-                .or_else(|| column.map(|c| c.name.clone().unwrap_or_else(|| c.index.to_string())))
-        };
-        ColumnArgs {
-            input: same(&self.input, Some(&used.input)),
-            output: same(&self.output, Some(&used.output)),
-            rate: self.rate,
-            time: if self.rate.is_some() {
-                None
-            } else {
-                same(&self.time, used.time.as_ref())
-            },
-        }
-    }
 }
 
 /// Loads the `--validate` file of `fitted` by `fitted`'s columns
