@@ -73,7 +73,8 @@ pub fn centred_moving_average(y: &[f64], half_width: usize) -> Vec<f64> {
 
 /// [`centred_moving_average`] of each stretch between voltage steps
 /// (`steps`: the first sample after each, sorted): a window never averages
-/// across a step, where the displacement jumps.
+/// across a step, where the displacement jumps; at the data's first and last
+/// samples it shrinks on both sides and stays centred.
 pub fn smoothed_between_steps(y: &[f64], half_width: usize, steps: &[usize]) -> Vec<f64> {
     if half_width == 0 {
         return y.to_vec();
@@ -85,6 +86,29 @@ pub fn smoothed_between_steps(y: &[f64], half_width: usize, steps: &[usize]) -> 
         start = step;
     }
     smoothed.extend(centred_moving_average(&y[start..], half_width));
+    // At the two ends of the data (not at a step, where the input holds
+    // after the settling) the signal moves on, and a window cut on one side
+    // lags it: the window shrinks on both sides there instead, down to the
+    // sample itself, so the average stays centred.
+    let first_step = steps.iter().copied().find(|&s| s > 0).unwrap_or(y.len());
+    let last_step = steps
+        .iter()
+        .copied()
+        .rev()
+        .find(|&s| s < y.len())
+        .unwrap_or(0);
+    let centred_at = |n: usize, low: usize, high: usize| {
+        let reach = half_width.min(n - low).min(high - 1 - n);
+        y[n - reach..=n + reach].iter().sum::<f64>() / (2 * reach + 1) as f64
+    };
+    let head = half_width.min(first_step);
+    for (n, value) in smoothed[..head].iter_mut().enumerate() {
+        *value = centred_at(n, 0, first_step);
+    }
+    let tail = y.len().saturating_sub(half_width).max(last_step);
+    for (n, value) in smoothed.iter_mut().enumerate().skip(tail) {
+        *value = centred_at(n, last_step, y.len());
+    }
     smoothed
 }
 
@@ -263,6 +287,22 @@ mod tests {
             centred_moving_average(&y, 1)
         );
         assert_eq!(centred_moving_average(&y, 1)[2], 3.0);
+    }
+
+    /// At the data's two ends the window shrinks on both sides, so a ramp
+    /// (a moving input) is passed unlagged to its first and last samples,
+    /// where a window cut on one side lagged it by up to half its width; at
+    /// a step the window stays cut on one side (the input holds there).
+    #[test]
+    fn smoothing_stays_centred_at_the_ends_of_the_data() {
+        let ramp: Vec<f64> = (0..10).map(|n| n as f64).collect();
+        assert_eq!(smoothed_between_steps(&ramp, 3, &[]), ramp);
+        assert_eq!(centred_moving_average(&ramp, 3)[9], 7.5, "one-sided");
+        let smoothed = smoothed_between_steps(&ramp, 2, &[5]);
+        assert_eq!(&smoothed[..2], &ramp[..2]);
+        assert_eq!(smoothed[4], 3.0, "cut on one side before the step");
+        assert_eq!(smoothed[5], 6.0, "cut on one side after it");
+        assert_eq!(&smoothed[8..], &ramp[8..]);
     }
 
     #[test]
