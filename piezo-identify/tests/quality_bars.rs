@@ -281,27 +281,26 @@ fn p885_test_record_split_in_two() {
 
 /// The bars not met on the real records (docs/identification.md, "Where
 /// the bars are not met"): measured with the defaults, seed 0,
-/// - Test_Vi_Do_Di.dat split in two, inverse-pi: proposed 0.556 % (below
+/// - Test_Vi_Do_Di.dat split in two, inverse-pi: proposed 0.556-0.557 % (below
 ///   the classical 1.45 %, not below 0.5 %): the record drifts; the mean
 ///   error over 5 s windows climbs steadily from −0.3 % to +0.5 % of the
 ///   input span over its 70 s, in the fit part as in the scored part, and
 ///   no hysteresis model fitted on the first half predicts the second
 ///   half's share of it (its mean error there is +0.33 %);
-/// - Model_Vi_Do.dat fitted, Test_Vi_Do_Di.dat validated: inverse-pi 3.07 %
+/// - Model_Vi_Do.dat fitted, Test_Vi_Do_Di.dat validated: inverse-pi 2.89-2.91 %
 ///   against classical 1.65 %, Bouc-Wen 2.58 % against a best line of
 ///   5.81 % (2.2×, not 5×): the Test file reads about 1.1 µm below what the
 ///   identification file's sensor offset predicts, for every model;
-/// - the lab-like staircases, inverse-pi, over seeds 0-5 (seeds 0-2 meet
-///   every bar, `lab_records_meet_the_bars_for_any_seed`): 0.054-0.060 % at
-///   200 Hz, 10.9 % apart, and 0.0128-0.0149 % at 5 kHz, 16 % apart. Each
-///   seed's search ends in another minimum; their F differ by up to 33 % and
-///   their scored errors by less, set by the sensor noise over the 0.1 s a
-///   stair is scored (4.5 nm, about 3.6 mV of command) and by the ±2 mV
-///   their models err at each stair's level, about the noise of the fit
-///   part's own means there;
+/// - the 5 kHz lab-like staircase, inverse-pi, over seeds 0-5 (seeds 0-2
+///   meet every bar, `lab_records_meet_the_bars_for_any_seed`, which holds
+///   the 200 Hz one over seeds 0-5): 0.01293-0.01423 %, 10.04 % apart. Each
+///   seed's search ends in another minimum, whose scored errors are set by
+///   the sensor noise over the 0.1 s a stair is scored (4.5 nm, about 3.6 mV
+///   of command) and by the few mV their models err at each stair's level,
+///   about the noise of the fit part's own means there;
 /// - a staircase of 7 stairs of 0.5 s at 200 Hz (`lab-record --rate 200
 ///   --stairs 0.5 --levels 7 --seconds 40 --noise-seed 14`), inverse-pi,
-///   seeds 0-5: 0.039-0.048 %, 24 % apart, for the same reason (every
+///   seeds 0-5: 0.039-0.051 %, 32 % apart, for the same reason (every
 ///   other bar met).
 #[test]
 #[ignore = "quality bars not met on these records; see the doc comment"]
@@ -337,7 +336,7 @@ fn known_gaps_on_real_records() {
             bouc_wen_bars("pair", &forward_errors(&report["validation"]["errors"]));
         },
     );
-    for staircase in ["lab_200Hz_unipolar_stairs", "lab_5kHz_unipolar_stairs"] {
+    for staircase in ["lab_5kHz_unipolar_stairs"] {
         check(&format!("{staircase} inverse-pi, seeds 0-5"), &|| {
             let (name, documented, spec) = lab_records()
                 .into_iter()
@@ -534,15 +533,18 @@ fn lab_records_meet_the_bars_for_any_seed() {
     // Seeds 1 and 2 too where the table's rows are measured again by seed;
     // the 5 kHz staircase's seeds were 24 % apart until the settling, the
     // first loading and the steps of staircases were mended, the 200 Hz
-    // one's 16 % until runs to convergence were restarted at their end.
+    // one's 16 % until runs to convergence were restarted at their end. The
+    // 200 Hz staircase holds over seeds 0-5 since the smoothing stays
+    // centred at the data's ends (10.9 % apart before, 4.2 % since).
     let by_seed = [
         "lab_200Hz_unipolar_1Hz",
         "lab_5kHz_bipolar_1Hz",
-        "lab_200Hz_unipolar_stairs",
         "lab_5kHz_unipolar_stairs",
     ];
     for (name, documented, spec) in &lab_records() {
-        let seeds: &[u64] = if by_seed.contains(documented) {
+        let seeds: &[u64] = if *documented == "lab_200Hz_unipolar_stairs" {
+            &[0, 1, 2, 3, 4, 5]
+        } else if by_seed.contains(documented) {
             &[0, 1, 2]
         } else {
             &[0]
