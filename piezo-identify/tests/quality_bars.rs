@@ -554,7 +554,10 @@ fn lab_records_meet_the_bars_for_any_seed() {
             .map(|&seed| {
                 let (inverse, bouc_wen, measured) =
                     lab_fit(name, documented, spec, seed, seed == 0);
-                rows.extend(measured);
+                // The table holds seeds 0, 1, 2.
+                if seed <= 2 {
+                    rows.extend(measured);
+                }
                 (inverse, bouc_wen)
             })
             .collect();
