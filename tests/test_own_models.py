@@ -97,10 +97,11 @@ def run_controller(start: dict, x_ref: np.ndarray, dt: float) -> dict:
 
 
 def centred_moving_average(y: np.ndarray, half_width: int) -> np.ndarray:
-    """`piezo_identify::validation::centred_moving_average` (the window
-    shrinks at the ends)."""
+    """`piezo_identify::validation::smoothed_between_steps` of a record without
+    voltage steps: the window shrinks on both sides at the ends, centred."""
     n = np.arange(len(y))
-    low, high = np.maximum(n - half_width, 0), np.minimum(n + half_width + 1, len(y))
+    reach = np.minimum(np.minimum(n, len(y) - 1 - n), half_width)
+    low, high = n - reach, n + reach + 1
     sums = np.concatenate([[0.0], np.cumsum(y)])
     return (sums[high] - sums[low]) / (high - low)
 
