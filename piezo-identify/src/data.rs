@@ -42,7 +42,8 @@
 //! with a decimal comma in a file whose numbers have decimal points (or the
 //! reverse) is refused, since `4,089` beside `0.005` is a thousands
 //! separator, not a decimal. A comma-separated file has no decimal commas:
-//! its commas are separators.
+//! its commas are separators, and a headerless one whose whole numbers look
+//! like decimal commas split by them is refused ([`SplitDecimalCommas`]).
 //!
 //! A time column may hold dates and times instead of numbers
 //! ([`clock_time`]: ISO 8601 and its common spellings, or a time of day);
@@ -268,6 +269,20 @@ pub enum Problem {
     },
     #[error("field {field} is {value}, not a finite number")]
     NotFinite { field: usize, value: f64 },
+    #[error(
+        "every value is a whole number and fields {} have {} digits in every row, some with a \
+         leading zero (\"{text}\" here): these read as the decimals of numbers written with a \
+         decimal comma, split at it by the comma separator; export with a point as the decimal \
+         mark, or separate the fields with semicolons or tabs",
+        fraction_fields(*fields), digits
+    )]
+    SplitDecimalCommas {
+        /// Number of fields per row.
+        fields: usize,
+        /// The digits of the fraction fields, in field order.
+        digits: String,
+        text: String,
+    },
     #[error(
         "field {field} is {value:e}, beyond ±{MAX_MEASURED_MAGNITUDE:e}: no displacement or \
          voltage is that large in any unit, and the fits' sums of powers of it would overflow; \
@@ -1001,6 +1016,96 @@ pub struct RateDisagreement {
 }
 
 /// Reads a record from a file.
+/// The fraction fields (1, 3, 5, …) of a row of `fields` fields, as the
+/// error message names them ("1 and 3").
+fn fraction_fields(fields: usize) -> String {
+    let odd: Vec<String> = (1..fields).step_by(2).map(|f| f.to_string()).collect();
+    match odd.split_last() {
+        Some((last, [])) => last.clone(),
+        Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+        None => String::new(),
+    }
+}
+
+/// Whether a headerless comma-separated file is numbers written with a
+/// decimal comma and split at it: `1,8000,17,8522` for 1.8 and 17.8522.
+/// Read as written it is four whole numbers a row, and the fit would run on
+/// integer parts and decimals (exit 0). The signature, checked over every
+/// data row: an even number of fields, all whole numbers, every second field
+/// unsigned with the same number of digits (at least two) in every row, and
+/// somewhere one of them with a leading zero (`0350`). A real column of
+/// whole numbers (ADC counts) is not written with leading zeros, and one
+/// whose width never changes is not a fraction unless a zero pads it; a
+/// single decimal (`1,5,2,3`) has no such trace and is not caught.
+#[derive(Debug)]
+struct SplitDecimalCommas {
+    possible: bool,
+    fields: usize,
+    digits: Vec<usize>,
+    leading_zero: Option<(usize, String)>,
+}
+
+impl SplitDecimalCommas {
+    fn new() -> Self {
+        SplitDecimalCommas {
+            possible: true,
+            fields: 0,
+            digits: Vec::new(),
+            leading_zero: None,
+        }
+    }
+
+    fn row(&mut self, line: usize, fields: &[&str]) {
+        if !self.possible {
+            return;
+        }
+        let digits_only = |f: &str| !f.is_empty() && f.bytes().all(|b| b.is_ascii_digit());
+        let whole = |f: &str| digits_only(f.strip_prefix(['-', '+']).unwrap_or(f));
+        let pairs: Vec<(&str, &str)> = fields
+            .chunks(2)
+            .filter_map(|pair| match pair {
+                [whole_part, fraction] => Some((whole_part.trim(), fraction.trim())),
+                _ => None,
+            })
+            .collect();
+        let digits: Vec<usize> = pairs.iter().map(|(_, fraction)| fraction.len()).collect();
+        let shaped = fields.len() >= 2
+            && fields.len().is_multiple_of(2)
+            && pairs.iter().all(|&(w, f)| whole(w) && digits_only(f))
+            && digits.iter().all(|&d| d >= 2)
+            && (self.fields == 0 || (self.fields == fields.len() && self.digits == digits));
+        if !shaped {
+            self.possible = false;
+            return;
+        }
+        self.fields = fields.len();
+        self.digits = digits;
+        if self.leading_zero.is_none()
+            && let Some((_, fraction)) = pairs.iter().find(|(_, f)| f.starts_with('0'))
+        {
+            self.leading_zero = Some((line, (*fraction).to_owned()));
+        }
+    }
+
+    /// The line and problem to refuse the file with, if it has the signature.
+    fn verdict(self) -> Option<(usize, Problem)> {
+        let (line, text) = self.leading_zero.filter(|_| self.possible)?;
+        let digits: Vec<String> = self.digits.iter().map(|d| d.to_string()).collect();
+        let digits = match digits.iter().all(|d| *d == digits[0]) {
+            true => digits[0].clone(),
+            false => digits.join(", "),
+        };
+        Some((
+            line,
+            Problem::SplitDecimalCommas {
+                fields: self.fields,
+                digits,
+                text,
+            },
+        ))
+    }
+}
+
 pub fn read_record(path: &Path, options: &ReadOptions) -> Result<Record, DataError> {
     read_record_with_columns(path, options).map(|(record, _)| record)
 }
@@ -1108,6 +1213,7 @@ pub fn parse_record_with_columns(
     let mut times: Vec<(usize, f64)> = Vec::new();
     let mut decimal_comma = false;
     let mut last_line = 0;
+    let mut split_decimal_commas = SplitDecimalCommas::new();
 
     // Only the line end and spaces are trimmed: a leading tab is an empty
     // first field.
@@ -1238,6 +1344,9 @@ pub fn parse_record_with_columns(
         {
             units = Some((line, fields.iter().map(|f| (*f).to_owned()).collect()));
             continue;
+        }
+        if separator == Separator::Comma && header.is_none() {
+            split_decimal_commas.row(line, &fields);
         }
         let columns = match &resolved {
             Some(columns) => *columns,
@@ -1443,6 +1552,12 @@ pub fn parse_record_with_columns(
             path: path.to_owned(),
         });
     };
+    if separator == Separator::Comma
+        && header.is_none()
+        && let Some((line, problem)) = split_decimal_commas.verdict()
+    {
+        return Err(malformed(line, problem));
+    }
     // Columns named in the options must exist even in a file without data.
     let columns = match resolved {
         Some(columns) => columns,
@@ -1986,6 +2101,54 @@ mod tests {
         assert_eq!(record.input[39], 39.0);
         assert_eq!(record.output[39], 78.0);
         assert!((record.sample_period - 0.005).abs() < 1e-15);
+    }
+
+    /// Numbers written with a decimal comma in a comma-separated file
+    /// (`0,5123,10,2371`: 0.5123 and 10.2371) read as four whole numbers a
+    /// row, and the fit ran on integer parts and decimals (exit 0). Refused
+    /// at the first decimal with a leading zero, which no column of counts
+    /// has.
+    #[test]
+    fn decimal_commas_split_by_the_comma_separator_are_refused() {
+        let write = |v: f64| format!("{v:.4}").replace('.', ",");
+        let rows: Vec<(String, String)> = (0..40)
+            .map(|n| {
+                (
+                    write(0.5 + 0.0123 * n as f64),
+                    write(10.2 + 0.0371 * n as f64),
+                )
+            })
+            .collect();
+        let commas: String = rows.iter().map(|(u, y)| format!("{u},{y}\n")).collect();
+        // Line 23 holds the first decimal with a leading zero: 11.0162.
+        assert_eq!(commas.lines().nth(22), Some("0,7706,11,0162"));
+        assert_eq!(
+            message(&commas, &by_index()),
+            "data.txt:23: every value is a whole number and fields 1 and 3 have 4 digits in \
+             every row, some with a leading zero (\"0162\" here): these read as the decimals of \
+             numbers written with a decimal comma, split at it by the comma separator; export \
+             with a point as the decimal mark, or separate the fields with semicolons or tabs"
+        );
+        // Separated by semicolons, the same numbers are read as written.
+        let semicolons: String = rows.iter().map(|(u, y)| format!("{u};{y}\n")).collect();
+        let record = parse_record(&semicolons, Path::new("data.txt"), &by_index()).unwrap();
+        assert_eq!((record.input[22], record.output[22]), (0.7706, 11.0162));
+    }
+
+    /// Whole numbers as a column of counts holds them, of any width, or of
+    /// one width that no zero pads, are read as written.
+    #[test]
+    fn comma_separated_whole_numbers_are_read() {
+        let varying: String = (0..40)
+            .map(|n| format!("{},{}\n", 5 * n, 1000 + 7 * n))
+            .collect();
+        let record = parse_record(&varying, Path::new("data.txt"), &by_index()).unwrap();
+        assert_eq!((record.input[39], record.output[39]), (195.0, 1273.0));
+        let fixed: String = (0..40)
+            .map(|n| format!("{},{},{},{}\n", n, 1000 + n, -n, 2000 + n))
+            .collect();
+        let record = parse_record(&fixed, Path::new("data.txt"), &by_index()).unwrap();
+        assert_eq!((record.input[39], record.output[39]), (39.0, 1039.0));
     }
 
     #[test]
