@@ -329,6 +329,15 @@ pub enum Problem {
         fields: usize,
         separator: &'static str,
     },
+    #[error(
+        "this row has {fields} {separator}-separated fields but the first row (line {first_line}) has {first_fields}"
+    )]
+    RowWidth {
+        first_line: usize,
+        first_fields: usize,
+        fields: usize,
+        separator: &'static str,
+    },
     #[error("time {time} s does not increase (previous row: {previous} s)")]
     TimeNotIncreasing { previous: f64, time: f64 },
     #[error(
@@ -1214,6 +1223,8 @@ pub fn parse_record_with_columns(
     let mut decimal_comma = false;
     let mut last_line = 0;
     let mut split_decimal_commas = SplitDecimalCommas::new();
+    // Line and width of the first data row of a file without a header.
+    let mut first_row_width: Option<(usize, usize)> = None;
 
     // Only the line end and spaces are trimmed: a leading tab is an empty
     // first field.
@@ -1495,6 +1506,43 @@ pub fn parse_record_with_columns(
                 return Err(malformed(line, Problem::NotFinite { field, value }));
             }
             values[field] = value;
+        }
+        // Every row as wide as the header, or as the first row of a file
+        // without one (checked after its fields, whose own faults say more): a row with a field more or less (a decimal comma
+        // split off, a value left out) would shift its columns and be read
+        // as another record's. LabVIEW names a last `Comment` column that
+        // its rows leave out when they have no comment.
+        match &header {
+            Some((header_line, names))
+                if names.len() != fields.len()
+                    && !(comment_column.is_some() && names.len() == fields.len() + 1) =>
+            {
+                return Err(malformed(
+                    line,
+                    Problem::HeaderWidth {
+                        header_line: *header_line,
+                        names: names.len(),
+                        fields: fields.len(),
+                        separator: separator.name(),
+                    },
+                ));
+            }
+            Some(_) => {}
+            None => {
+                let (first_line, first_fields) =
+                    *first_row_width.get_or_insert((line, fields.len()));
+                if fields.len() != first_fields {
+                    return Err(malformed(
+                        line,
+                        Problem::RowWidth {
+                            first_line,
+                            first_fields,
+                            fields: fields.len(),
+                            separator: separator.name(),
+                        },
+                    ));
+                }
+            }
         }
         for field in [columns.input, columns.output] {
             let value = values[field];
@@ -2575,6 +2623,40 @@ mod tests {
         assert_eq!(
             message(&text, &by_index()),
             "data.txt:3: field 1 is -inf, not a finite number"
+        );
+    }
+
+    /// A row with a field more than the header (a decimal comma splitting
+    /// `0.503` into `0,503` in a comma-separated file) or fewer shifts the
+    /// columns after it: refused at that row, not only at the first, and
+    /// in a file without a header against its first row.
+    #[test]
+    fn refuses_a_later_row_wider_or_narrower_than_the_first() {
+        let mut text = String::from("demand,error,time\n");
+        for n in 0..40 {
+            text.push_str(&format!("{},{},{}\n", n, 0.1 * n as f64, n as f64 * 0.005));
+        }
+        let options = options(
+            Column::Name("demand".into()),
+            Column::Name("error".into()),
+            Sampling::Rate(200.0),
+        );
+        let mut split: Vec<&str> = text.lines().collect();
+        split[20] = "19,1,9,0.095";
+        assert_eq!(
+            message(&(split.join("\n") + "\n"), &options),
+            "data.txt:21: the header (line 1) has 3 comma-separated names but this row has 4 fields"
+        );
+        // The time, which --rate leaves unread, left out.
+        split[20] = "19,1.9";
+        assert_eq!(
+            message(&(split.join("\n") + "\n"), &options),
+            "data.txt:21: the header (line 1) has 3 comma-separated names but this row has 2 fields"
+        );
+        let headerless = rows("# u y\n", 20) + "0.5 1.5 2.5\n" + &rows("", 20);
+        assert_eq!(
+            message(&headerless, &by_index()),
+            "data.txt:22: this row has 3 space-separated fields but the first row (line 2) has 2"
         );
     }
 
