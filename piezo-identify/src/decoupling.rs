@@ -17,7 +17,8 @@
 //! The fit minimises Σ (e − D(f))² over (Δk, Δb, p, q): least squares for the
 //! line, then Nelder-Mead from the line with the cutoffs at the extremes of the
 //! error; a cutoff that ends beyond the line's range over the data does
-//! nothing and is set to ±10 µm, which Table 2 uses for "no cutoff".
+//! nothing and is set to ±10 µm, which Table 2 uses for "no cutoff", or to
+//! the line's reach over the data where that is beyond ±10 µm.
 
 use argmin::core::{CostFunction, Executor};
 use argmin::solver::neldermead::NelderMead;
@@ -161,7 +162,18 @@ pub fn fit_compensation_with_cutoff(
     let e_max = e.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let e_min = e.iter().copied().fold(f64::INFINITY, f64::min);
     let problem = ClampedLine { f, e };
-    let line = vec![dk, db, no_cutoff, -no_cutoff];
+    // An unused cutoff: `no_cutoff`, or beyond the line's reach over the
+    // data where that is farther (a coupling of more than 10 µm on a larger
+    // stage), so that it clamps nothing the data hold.
+    let unused = |dk: f64, db: f64| {
+        let reach = f.iter().map(|v| dk * v + db);
+        (
+            no_cutoff.max(reach.clone().fold(f64::NEG_INFINITY, f64::max)),
+            (-no_cutoff).min(reach.fold(f64::INFINITY, f64::min)),
+        )
+    };
+    let (line_p, line_q) = unused(dk, db);
+    let line = vec![dk, db, line_p, line_q];
     let start = vec![dk, db, e_max, e_min];
     // A simplex around the start: each vertex moves one parameter by a step
     // of the size the data give it.
@@ -211,11 +223,12 @@ pub fn fit_compensation_with_cutoff(
     if !keep_upper && !keep_lower {
         best = line;
     } else {
+        let (unused_p, unused_q) = unused(best[0], best[1]);
         if !keep_upper {
-            best[2] = no_cutoff;
+            best[2] = unused_p;
         }
         if !keep_lower {
-            best[3] = -no_cutoff;
+            best[3] = unused_q;
         }
     }
     // A cutoff beyond what the line reaches over the data does nothing.
@@ -298,6 +311,35 @@ mod tests {
         assert!(fit.p >= NO_CUTOFF && fit.q <= -NO_CUTOFF, "{fit:?}");
         // The noise spans 0.02; the fitted line differs from the true one by
         // its estimation error (a few 1e-3 over the sweep).
+        assert!(fit.residual_span <= 0.025, "{fit:?}");
+    }
+
+    /// A coupling beyond Table 2's ±10 µm (27 % of a 50 µm stroke, as the
+    /// stage's D2 is of its 12 µm) is a plain line: its unused cutoffs lie
+    /// beyond its reach, where ±10 µm had clamped it (a residual of 3.5 µm).
+    #[test]
+    fn a_line_beyond_ten_micrometres_is_not_clamped() {
+        let f: Vec<f64> = (0..500).map(|i| 50.0 * i as f64 / 499.0).collect();
+        let e: Vec<f64> = f
+            .iter()
+            .enumerate()
+            .map(|(i, v)| 0.27 * v - 0.05 + 0.01 * ((i * 7919 % 13) as f64 - 6.0) / 6.0)
+            .collect();
+        let fit = fit_compensation(&f, &e).unwrap();
+        assert!((fit.dk - 0.27).abs() < 1e-4, "{fit:?}");
+        assert!((fit.db + 0.05).abs() < 5e-3, "{fit:?}");
+        assert!(
+            fit.p >= 0.27 * 50.0 - 0.05 && fit.q <= -NO_CUTOFF,
+            "{fit:?}"
+        );
+        assert!(fit.residual_span <= 0.025, "{fit:?}");
+        // Falling as steeply: the lower cutoff moves out instead.
+        let falling: Vec<f64> = e.iter().map(|v| -v).collect();
+        let fit = fit_compensation(&f, &falling).unwrap();
+        assert!(
+            fit.q <= -(0.27 * 50.0 - 0.05) && fit.p >= NO_CUTOFF,
+            "{fit:?}"
+        );
         assert!(fit.residual_span <= 0.025, "{fit:?}");
     }
 
