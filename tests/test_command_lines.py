@@ -256,6 +256,23 @@ def test_a_parameter_set_the_plant_refuses_is_what_was_given(tmp_path):
     assert "amplifier.gain = -5 is outside its allowed range" in done.stderr, done.stderr
 
 
+def test_the_controller_given_as_the_plant_is_refused_before_any_run(tmp_path):
+    """PiezoController has variables named u1..u3 and s1..s3 too, with the
+    causalities the other way round: `stage --plant` took it for a plant,
+    ran, and failed at its first fmi2SetReal on an output (exit 1). It is
+    now refused when opened, exit 2, and nothing is written."""
+    out = tmp_path / "preset.json"
+    done = subprocess.run(
+        [str(REPO_ROOT / "target" / "release" / "piezo-identify"), "stage", "--plant",
+         str(CONTROLLER), "--out", str(out)],
+        capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip() == (
+        f'{CONTROLLER}: u1 has causality "output", a plant\'s "input": a plant needs inputs '
+        "u1..u3 [V] and outputs s1..s3 [um]"), done.stderr
+    assert done.stdout == "" and not out.exists()
+
+
 def test_a_parameter_set_with_a_byte_order_mark_is_read(tmp_path):
     """A sweep's parameter set saved with a byte-order mark reads as its
     twin without one, as piezo-cosim reads it (json.loads refused it)."""

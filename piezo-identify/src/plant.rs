@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use fmi2_import::parameter_set::TypedValue;
-use fmi2_import::{FmuArchive, Instance, OK, WARNING};
+use fmi2_import::{Causality, FmuArchive, Instance, OK, WARNING};
 use piezo_models::{ControllerParams, PiezoController};
 
 use crate::compare::eq6_command;
@@ -65,16 +65,39 @@ impl PlantFmu {
         };
         let archive = FmuArchive::open(path).map_err(|e| archive_error(e.problem))?;
         let fmu = &archive.fmu;
-        let vr = |name: &str| {
-            fmu.find(name).map(|v| v.vr).ok_or_else(|| PlantError::Interface {
+        // By causality as well as name: the controller has u1..u3 and
+        // s1..s3 too, the other way round, and was taken for a plant until
+        // its first fmi2SetReal on an output failed mid-identification.
+        let vr = |name: &str, causality: Causality| {
+            let interface = |problem: String| PlantError::Interface {
                 path: path.to_owned(),
                 problem: format!(
-                    "no variable {name}: a plant needs inputs u1..u3 [V] and outputs s1..s3 [um]"
+                    "{problem}: a plant needs inputs u1..u3 [V] and outputs s1..s3 [um]"
                 ),
-            })
+            };
+            let variable = fmu
+                .find(name)
+                .ok_or_else(|| interface(format!("no variable {name}")))?;
+            if variable.causality != causality {
+                let role = |c: &Causality| format!("{c:?}").to_lowercase();
+                return Err(interface(format!(
+                    "{name} has causality \"{}\", a plant's \"{}\"",
+                    role(&variable.causality),
+                    role(&causality)
+                )));
+            }
+            Ok(variable.vr)
         };
-        let u = [vr("u1")?, vr("u2")?, vr("u3")?];
-        let s = [vr("s1")?, vr("s2")?, vr("s3")?];
+        let u = [
+            vr("u1", Causality::Input)?,
+            vr("u2", Causality::Input)?,
+            vr("u3", Causality::Input)?,
+        ];
+        let s = [
+            vr("s1", Causality::Output)?,
+            vr("s2", Causality::Output)?,
+            vr("s3", Causality::Output)?,
+        ];
         Ok(PlantFmu {
             path: path.to_owned(),
             archive,
