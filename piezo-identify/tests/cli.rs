@@ -1688,3 +1688,29 @@ fn a_fit_on_less_than_one_loop_on_few_levels_or_scored_on_faster_cycles_says_so(
         stderr(&output)
     );
 }
+
+/// `--starts 0` and `--decimation 0` are refused with the arguments (exit
+/// 2): `stage` had run the plant for its first record before its fit said
+/// so (exit 1), and `compare` refused them after reading the record.
+#[test]
+fn a_zero_count_is_refused_with_the_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("preset.json");
+    let out = out.to_str().unwrap();
+    for args in [
+        &["stage", "--starts", "0", "--out", out][..],
+        &["stage", "--decimation", "0", "--out", out][..],
+        &["compare", "--synthetic", "--starts", "0"][..],
+    ] {
+        let output = run(args);
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).contains("'0' for '--")
+                && stderr(&output).contains("\"0\" is not a whole number of 1 or more"),
+            "{args:?}: {}",
+            stderr(&output)
+        );
+        assert!(stdout(&output).is_empty(), "{args:?}: {}", stdout(&output));
+    }
+    assert!(!Path::new(out).exists());
+}

@@ -77,6 +77,15 @@ pub(crate) fn seconds(text: &str) -> Result<f64, String> {
 }
 
 /// A positive, finite number of seconds.
+/// A count of 1 or more (starts, every N-th sample): 0 is refused with the
+/// arguments, not after a plant has run for it.
+pub(crate) fn at_least_one(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(count) if count >= 1 => Ok(count),
+        _ => Err(format!("\"{text}\" is not a whole number of 1 or more")),
+    }
+}
+
 pub(crate) fn positive_seconds(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
@@ -179,7 +188,7 @@ impl ColumnArgs {
 #[derive(Args)]
 pub(crate) struct SearchArgs {
     /// Random starts of the Nelder-Mead search (seed 000: 30).
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 30, value_parser = at_least_one)]
     pub(crate) starts: usize,
     /// Seed of the random initial values.
     #[arg(long, default_value_t = 0)]
@@ -188,7 +197,7 @@ pub(crate) struct SearchArgs {
     #[arg(long, default_value_t = 2000)]
     pub(crate) max_iterations: u64,
     /// The search uses every N-th sample (the final linear solve and F use all).
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one)]
     pub(crate) decimation: Option<usize>,
     /// Seconds at the start of each record that run the models but are not
     /// fitted nor scored (a start-up transient).
