@@ -315,14 +315,25 @@ pub fn run_with(
     let mut grid: Vec<f64> = (0..=steps + preview).map(|k| k as f64 * h).collect();
     let mut signal_names = Vec::new();
     let mut signal_samples = Vec::new();
+    // A table that ends before the run holds its last value to the end: said,
+    // since a table cut short (or in ms read as s) otherwise runs silently.
+    let mut table_notes = Vec::new();
+    let run_end = steps as f64 * h;
     for (port, trajectory) in &scenario.signal {
         let (_, info) = resolve(port)?;
         let fail = |e: String| RunError::Scenario(format!("signal {port}: {e}"));
-        signal_samples.push(
-            trajectory
-                .sample(&grid, info.unit.as_deref())
-                .map_err(fail)?,
-        );
+        let (samples, table_end) = trajectory
+            .sample_to_end(&grid, info.unit.as_deref())
+            .map_err(fail)?;
+        if let Some(end) = table_end
+            && end < run_end - 1e-9 * run_end.max(h)
+        {
+            table_notes.push(format!(
+                "signal {port}: its table ends at {end} s, before the run's end at {run_end} s; \
+                 its last value is held from there"
+            ));
+        }
+        signal_samples.push(samples);
         signal_names.push(port.clone());
     }
     // The communication points t_0 .. t_steps: the grid without its preview.
@@ -421,7 +432,7 @@ pub fn run_with(
             input_sources: sources,
         });
     }
-    let mut warnings = Vec::new();
+    let mut warnings = table_notes;
     // The run takes whole steps: a duration between two is rounded to the
     // nearer, which the result's simulated_s shows and this says.
     let simulated = scenario.steps() as f64 * scenario.step;

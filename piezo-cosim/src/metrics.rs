@@ -234,7 +234,7 @@ pub(crate) fn command_ports() -> Vec<String> {
 }
 
 /// Tolerance of the window's start, as demo/experiments.py (`- 1e-12`).
-const WINDOW_SLACK: f64 = 1e-12;
+pub(crate) const WINDOW_SLACK: f64 = 1e-12;
 
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()

@@ -20,7 +20,7 @@
 //!
 //! [metrics]
 //! driven = "y"           # x | y | theta | xy | ytheta
-//! from = 2.0             # start of the measured window [s]
+//! from = 2.0             # start of the measured window [s]: 2 samples or more of the run's whole steps
 //! pose = false           # also the couplings on the plant's pose outputs x, y, theta_z
 //! ```
 //!
@@ -412,13 +412,31 @@ impl Scenario {
             instance_of(port, "recorded variable")?;
         }
         if let Some(metrics) = &self.metrics {
-            if !metrics.from.is_finite() || metrics.from > self.duration {
+            // The window is the communication points t_k = k·step at or
+            // after `from` (`metrics::first_sample`), of the run's whole
+            // steps: a `from` inside the duration but past the last point
+            // (2.02 of a 2.04 s run rounded to 2 s) left none, and one at
+            // the last point left one sample, whose spans are all 0.
+            let window = if metrics.from.is_finite() {
+                let first = ((metrics.from - crate::metrics::WINDOW_SLACK) / self.step)
+                    .ceil()
+                    .max(0.0);
+                (self.steps() as f64 + 1.0 - first).max(0.0)
+            } else {
+                0.0
+            };
+            if window < 2.0 {
                 return Err(Invalid::table_key(
                     "metrics",
                     "from",
                     format!(
-                        "metrics.from ({}) must lie within the run (duration {} s)",
-                        metrics.from, self.duration
+                        "metrics.from ({}) leaves {} of the run's samples to measure (it takes \
+                         {} steps of {} s, to {} s); metrics need 2 or more",
+                        metrics.from,
+                        window,
+                        self.steps(),
+                        self.step,
+                        self.steps() as f64 * self.step
                     ),
                 ));
             }
@@ -837,6 +855,27 @@ path = "c.fmu"
         let text = format!("{MINIMAL}\n[metrics]\ndriven = \"y\"\nfrom = 1.5 # after the end\n");
         let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
         assert!(e.starts_with("s.toml:10: metrics.from (1.5)"), "{e}");
+        // Inside the duration, but past the last whole step (2.04 s at 0.1 s
+        // per step runs 20 steps, to 2 s), or at it: no window to measure.
+        for (from, left) in [("2.02", 0), ("2", 1)] {
+            let text = format!(
+                "{}\n[metrics]\ndriven = \"y\"\nfrom = {from}\n",
+                MINIMAL.replace("duration = 1.0", "duration = 2.04\nstep = 0.1")
+            );
+            let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+            assert_eq!(
+                e,
+                format!(
+                    "s.toml:11: metrics.from ({from}) leaves {left} of the run's samples to \
+                     measure (it takes 20 steps of 0.1 s, to 2 s); metrics need 2 or more"
+                )
+            );
+        }
+        let text = format!(
+            "{}\n[metrics]\ndriven = \"y\"\nfrom = 1.9\n",
+            MINIMAL.replace("duration = 1.0", "duration = 2.04\nstep = 0.1")
+        );
+        assert!(Scenario::parse(&text, false, "s.toml").is_ok());
         let json =
             "{\n \"duration\": 1.0,\n \"step\": 0,\n \"fmu\": {\"p\": {\"path\": \"p.fmu\"}}\n}";
         let e = Scenario::parse(json, true, "s.json").unwrap_err().0;

@@ -107,6 +107,17 @@ impl Trajectory {
     /// `unit` (its declared unit, if any); reads the table file if there is
     /// one, converting a column whose header names another unit.
     pub fn sample(&self, times: &[f64], unit: Option<&str>) -> Result<Vec<f64>, String> {
+        self.sample_to_end(times, unit).map(|(values, _)| values)
+    }
+
+    /// [`Self::sample`], and for a table the time its path ends [s]
+    /// (`start` plus its last sample's time), after which its last value
+    /// holds.
+    pub fn sample_to_end(
+        &self,
+        times: &[f64],
+        unit: Option<&str>,
+    ) -> Result<(Vec<f64>, Option<f64>), String> {
         let table = match &self.table {
             Some(source) => Some(Table::read(source, unit)?),
             None => None,
@@ -116,7 +127,7 @@ impl Trajectory {
             None => self.sines_at(tau),
         };
         let first = path(0.0);
-        Ok(times
+        let values = times
             .iter()
             .map(|&t| {
                 let tau = t - self.start;
@@ -126,7 +137,12 @@ impl Trajectory {
                     self.blend(t) * first
                 }
             })
-            .collect())
+            .collect();
+        let end = table
+            .as_ref()
+            .and_then(|t| t.tau.last())
+            .map(|last| self.start + last);
+        Ok((values, end))
     }
 
     fn sines_at(&self, tau: f64) -> f64 {

@@ -9,6 +9,7 @@ use counting_allocator::{CountingAllocator, allocations_of};
 use std::path::{Path, PathBuf};
 
 use piezo_cosim::scenario::ParameterValue;
+use piezo_cosim::trajectory::{TableSource, Trajectory};
 use piezo_cosim::{OpenFmus, RunError, RunOptions, Scenario, run, run_with};
 
 #[global_allocator]
@@ -228,6 +229,30 @@ fn a_check_initializes_without_a_step() {
         output.warnings,
         [
             "duration 0.01 s is not a whole number of steps of 0.003 s: the run takes 3 steps, 0.009 s"
+        ]
+    ); // A table that ends before the run holds its last value, and says so
+    // (a table cut short, or in ms read as s, ran silently).
+    let dir = tempfile::tempdir().unwrap();
+    let table = dir.path().join("y.csv");
+    std::fs::write(&table, "t,y\n0,7\n1,8\n").unwrap();
+    let mut scenario = y_sine(&fmus, 3.0, "");
+    scenario.signal.insert(
+        "controller.y_ref".into(),
+        Trajectory {
+            table: Some(TableSource {
+                file: table,
+                column: "y".into(),
+                time: "t".into(),
+            }),
+            start: 1.0,
+            ..Trajectory::default()
+        },
+    );
+    let output = run(&scenario, options).unwrap();
+    assert_eq!(
+        output.warnings,
+        [
+            "signal controller.y_ref: its table ends at 2 s, before the run's end at 3 s; its last value is held from there"
         ]
     );
 }
