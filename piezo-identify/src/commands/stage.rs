@@ -53,7 +53,10 @@ pub(crate) struct StageArgs {
     /// shipped presets are made with the default).
     #[arg(long, default_value_t = 3)]
     pub(crate) rounds: usize,
-    /// Write the controller preset (JSON) here.
+    /// Write the controller preset (JSON) here, in the Rust form of
+    /// piezo-models/presets/; `piezo-controller-parameters FILE SET.json`
+    /// (built by `make fmus`) turns it into PiezoController's parameters by
+    /// FMI name, as importers take them.
     #[arg(long)]
     pub(crate) out: PathBuf,
     /// Write everything measured (fits, compensations per round) here as JSON.
@@ -172,7 +175,12 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
         }
     }
     write_json(&args.out, &identified.controller)?;
-    say!("controller preset written to {}", args.out.display());
+    say!(
+        "controller preset written to {} (as PiezoController's parameters by FMI name: \
+         piezo-controller-parameters {} SET.json)",
+        args.out.display(),
+        args.out.display()
+    );
     if let Some(path) = &args.report {
         write_json(path, &identified)?;
         say!("identification report written to {}", path.display());
