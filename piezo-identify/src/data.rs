@@ -752,8 +752,23 @@ pub struct Conversion {
 }
 
 /// The tool's unit for a length or voltage unit, and the factor to it; None
-/// for any other unit (a column in mdeg or % is read as written).
-fn conversion_of(unit: &str) -> Option<(f64, &'static str)> {
+/// for any other unit (a column in mdeg or % is read as written). With
+/// `angles`, where the roles name no quantities (`decoupling`: a θ_z
+/// demand beside lengths), an angle goes to µrad, the unit of the slope of
+/// seed 000's D4: a demand in mrad read as written gave a slope 1000 times
+/// too steep. A hysteresis record's command and displacement are no angles.
+fn conversion_of(unit: &str, angles: bool) -> Option<(f64, &'static str)> {
+    const DEGREE: f64 = std::f64::consts::PI / 180.0;
+    if angles {
+        match unit {
+            "rad" => return Some((1e6, "urad")),
+            "mrad" => return Some((1e3, "urad")),
+            "urad" | "µrad" | "μrad" => return Some((1.0, "urad")),
+            "deg" | "°" => return Some((DEGREE * 1e6, "urad")),
+            "mdeg" => return Some((DEGREE * 1e3, "urad")),
+            _ => {}
+        }
+    }
     Some(match unit {
         "m" => (1e6, "um"),
         "mm" => (1e3, "um"),
@@ -807,7 +822,7 @@ fn column_quantity(
     units: Option<&(usize, Vec<String>)>,
 ) -> Option<Quantity> {
     if let Some(unit) = written_unit(index, header, units) {
-        return match conversion_of(&unit) {
+        return match conversion_of(&unit, false) {
             Some((_, "V")) => Some(Quantity::Voltage),
             Some(_) => Some(Quantity::Length),
             None => None,
@@ -1676,7 +1691,7 @@ pub fn parse_record_with_columns(
             .map(str::to_owned);
         let written_in = written_unit(index, header.as_ref(), units.as_ref());
         let converted = written_in.and_then(|from| {
-            let (factor, to) = conversion_of(&from)?;
+            let (factor, to) = conversion_of(&from, options.roles.quantities.is_none())?;
             (factor != 1.0).then_some(Conversion { from, to, factor })
         });
         UsedColumn {

@@ -1714,3 +1714,33 @@ fn a_zero_count_is_refused_with_the_arguments() {
     }
     assert!(!Path::new(out).exists());
 }
+
+/// A θ_z demand in mrad or degrees is read in µrad, the unit of the slope of
+/// seed 000's D4 that the controller applies: read as written, a demand in
+/// mrad gave a slope 1000 times too steep (exit 0).
+#[test]
+fn decoupling_reads_an_angle_demand_in_microradians() {
+    let dir = tempfile::tempdir().unwrap();
+    for (unit, per_urad) in [("mrad", 1e-3), ("deg", 180.0 / std::f64::consts::PI * 1e-6)] {
+        // D4 of the stage preset: -0.004757 um per urad, over 0..160 urad.
+        let path = dir.path().join(format!("theta_{unit}.tsv"));
+        let mut text = format!("theta_zd [{unit}]\terror [um]\n");
+        for n in 0..200 {
+            let theta_urad = 160.0 * n as f64 / 199.0;
+            text.push_str(&format!(
+                "{}\t{}\n",
+                theta_urad * per_urad,
+                -0.004757 * theta_urad - 0.053
+            ));
+        }
+        std::fs::write(&path, text).unwrap();
+        let done = run(&["decoupling", path.to_str().unwrap()]);
+        assert!(done.status.success(), "{}", stderr(&done));
+        let out = stdout(&done);
+        assert!(
+            out.contains(&format!("(in {unit}, read as urad: x")),
+            "{unit}: {out}"
+        );
+        assert!(out.contains("clamp(-0.004757*f -0.053000"), "{unit}: {out}");
+    }
+}
