@@ -1744,3 +1744,27 @@ fn decoupling_reads_an_angle_demand_in_microradians() {
         assert!(out.contains("clamp(-0.004757*f -0.053000"), "{unit}: {out}");
     }
 }
+
+/// A coupling that is no clamped line of the demand (a loop about a slope)
+/// is fitted, and the summary says how little the compensation narrows it:
+/// no note was printed unless the residual was as wide as the error.
+#[test]
+fn decoupling_notes_a_coupling_that_is_no_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("loop.csv");
+    let mut text = String::from("demand,error\n");
+    for n in 0..400 {
+        let phase = std::f64::consts::TAU * n as f64 / 200.0;
+        let demand = 5.0 + 5.0 * phase.sin();
+        text.push_str(&format!("{demand},{}\n", 0.05 * demand + 0.2 * phase.cos()));
+    }
+    std::fs::write(&path, text).unwrap();
+    let done = run(&["decoupling", path.to_str().unwrap()]);
+    assert!(done.status.success(), "{}", stderr(&done));
+    let out = stdout(&done);
+    assert!(
+        out.contains("note: the compensation narrows the coupling error by ")
+            && out.contains("the error is not a clamped straight line of the demand"),
+        "{out}"
+    );
+}
