@@ -273,6 +273,28 @@ def test_the_controller_given_as_the_plant_is_refused_before_any_run(tmp_path):
     assert done.stdout == "" and not out.exists()
 
 
+def test_a_name_the_plant_lacks_names_the_parameter_file(tmp_path):
+    """A mistyped name in --plant-parameters is the file's fault: the message
+    names the file first (it named only the FMU), then the FMU's nearest
+    name; `--rounds 0` and a negative `--scale` are refused by the tool's
+    own messages, before any run."""
+    parameters = tmp_path / "mine.json"
+    parameters.write_text('{"pzt[1].pp": 1.0}')
+    binary = str(REPO_ROOT / "target" / "release" / "piezo-identify")
+    out = tmp_path / "preset.json"
+    done = subprocess.run([binary, "stage", "--plant", str(PLANT), "--plant-parameters",
+                           str(parameters), "--out", str(out)], capture_output=True, text=True)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip() == (
+        f'{parameters}: {PLANT}: no parameter pzt[1].pp (did you mean "pzt[1].p"?)'), done.stderr
+    for extra, said in ((["--rounds", "0"], "'0' for '--rounds <ROUNDS>'"),
+                        (["--scale", "-1"], "--scale -1: give a positive factor")):
+        done = subprocess.run([binary, "stage", "--out", str(out), *extra],
+                              capture_output=True, text=True)
+        assert done.returncode == 2 and said in done.stderr, done.stderr
+    assert not out.exists()
+
+
 def test_a_parameter_set_with_a_byte_order_mark_is_read(tmp_path):
     """A sweep's parameter set saved with a byte-order mark reads as its
     twin without one, as piezo-cosim reads it (json.loads refused it)."""

@@ -488,9 +488,11 @@ impl ProtocolArgs {
 pub(crate) fn open_plant(path: &Path, parameters: Option<&Path>) -> Result<PlantFmu, String> {
     let plant = PlantFmu::open(path).map_err(|e| e.to_string())?;
     match parameters {
+        // A name or value the FMU refuses is the parameter file's fault:
+        // named first, then the FMU that refused it.
         Some(set) => plant
             .with_parameters(&read_parameter_set(set)?)
-            .map_err(|e| e.to_string()),
+            .map_err(|e| format!("{}: {e}", set.display())),
         None => Ok(plant),
     }
 }

@@ -30,7 +30,7 @@ pub(crate) struct StageArgs {
     /// Scale of the single-axis runs relative to seed 000's (10 um sines,
     /// x at half of a 12.74 um stroke for the rotation run, 10 um for an
     /// unused cutoff): the stage's strokes over seed 000's.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub(crate) scale: f64,
     /// The stage does not rotate (its x actuators move together): no
     /// rotation run, D4 stays zero.
@@ -47,11 +47,11 @@ pub(crate) struct StageArgs {
     pub(crate) command_range: String,
     /// Factor on the §3.2 PI gains for the single-axis runs (1 for seed
     /// 000's stage; the inverse of the stage's um per volt relative to it).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub(crate) gain_scale: f64,
     /// Rounds of decoupling runs: each after the first refits what the previous left (the
     /// shipped presets are made with the default).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, value_parser = super::arguments::at_least_one)]
     pub(crate) rounds: usize,
     /// Write the controller preset (JSON) here, in the Rust form of
     /// piezo-models/presets/; `piezo-controller-parameters FILE SET.json`
