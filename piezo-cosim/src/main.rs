@@ -420,7 +420,7 @@ fn main() -> ExitCode {
                         .or_else(|| line_of_fmu_path(&text, message, paths))
                     {
                         Some(line) => eprintln!("{}:{line}: {message}", scenario_path.display()),
-                        None => eprintln!("{e}"),
+                        None => eprintln!("{}: {message}", scenario_path.display()),
                     }
                 }
                 _ => eprintln!("{e}"),

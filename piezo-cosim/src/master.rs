@@ -262,12 +262,21 @@ pub fn run_with(
         Ok(())
     };
     let connections: Vec<Connection> = scenario.connections();
+    // Which FMU a port is of, and what its variable is there: the stage's
+    // default wiring is written nowhere, so a plant and controller given the
+    // other way round are named by their files.
+    let of_fmu = |slot: usize, info: &VariableInfo| {
+        let path = &scenario.fmu[&loaded[slot].name].path;
+        let causality = format!("{:?}", info.causality).to_lowercase();
+        format!("in {} its causality is {causality}", path.display())
+    };
     for connection in &connections {
-        let (_, info) = resolve(&connection.from)?;
+        let (slot, info) = resolve(&connection.from)?;
         if info.causality != Causality::Output {
             return Err(RunError::Scenario(format!(
-                "connection source {} is not an output",
-                connection.from
+                "connection source {} is not an output ({})",
+                connection.from,
+                of_fmu(slot, info)
             )));
         }
         want_output(&connection.from, &mut read)?;
@@ -347,7 +356,10 @@ pub fn run_with(
     let mut add_input = |port: &str, source: Source, by: &str| -> Result<(), RunError> {
         let (slot, info) = resolve(port)?;
         if info.causality != Causality::Input {
-            return Err(RunError::Scenario(format!("{port} is not an input")));
+            return Err(RunError::Scenario(format!(
+                "{port} is not an input ({})",
+                of_fmu(slot, info)
+            )));
         }
         if let Some(other) = driven.insert(port.to_owned(), by.to_owned()) {
             return Err(RunError::Scenario(format!(

@@ -167,13 +167,15 @@ struct Table {
     value: Vec<f64>,
 }
 
-/// Whether a CSV header names `wanted`, with or without a `[unit]`.
+/// Whether a CSV header names `wanted`, with or without a `[unit]` (`t[ms]`,
+/// or `t [ms]` as spreadsheets write it).
 fn header_matches(header: &str, wanted: &str) -> bool {
     let header = header.trim();
     header == wanted
-        || header
-            .strip_prefix(wanted)
-            .is_some_and(|rest| rest.starts_with('[') && rest.ends_with(']'))
+        || header.strip_prefix(wanted).is_some_and(|rest| {
+            let rest = rest.trim_start();
+            rest.starts_with('[') && rest.ends_with(']')
+        })
 }
 
 /// The unit in a header's brackets: `y[nm]` is in nm.
@@ -445,6 +447,18 @@ mod tests {
         };
         let y = column("y").sample(&[0.0, 0.5, 1.0], Some("um")).unwrap();
         assert_eq!(y, vec![0.0, 2.5, 5.0]);
+        // A space before the brackets, as spreadsheets write a unit.
+        let spaced = dir.path().join("spaced.csv");
+        std::fs::write(&spaced, "t [ms],y [nm]\n0,0\n1000,5000\n").unwrap();
+        let y = Trajectory {
+            table: Some(TableSource {
+                file: spaced,
+                column: "y".into(),
+                time: "t".into(),
+            }),
+            ..Trajectory::default()
+        };
+        assert_eq!(y.sample(&[0.5], Some("um")).unwrap(), vec![2.5]);
         let theta = column("theta").sample(&[1.0], Some("rad")).unwrap();
         assert!((theta[0] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
         let e = column("y").sample(&[0.0], Some("rad")).unwrap_err();

@@ -279,6 +279,24 @@ fn a_scenario_that_does_not_fit_is_refused_by_name() {
     let error = run(&scenario, RunOptions::default()).unwrap_err();
     assert!(error.to_string().contains("driven twice"), "{error}");
 
+    // The plant and the controller given the other way round: the default
+    // wiring, written nowhere, is named by the FMU whose variable it is.
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario.signal.clear();
+    scenario.metrics = None;
+    let plant = scenario.fmu.remove("plant").unwrap();
+    let controller = scenario.fmu.remove("controller").unwrap();
+    scenario.fmu.insert("plant".into(), controller);
+    scenario.fmu.insert("controller".into(), plant);
+    let error = run(&scenario, RunOptions::default()).unwrap_err();
+    assert_eq!(
+        error.to_string(),
+        format!(
+            "connection source controller.u1 is not an output (in {} its causality is input)",
+            fmus.plant.display()
+        )
+    );
+
     let mut scenario = y_sine(&fmus, 0.01, "");
     scenario
         .fmu
