@@ -1768,3 +1768,52 @@ fn decoupling_notes_a_coupling_that_is_no_line() {
         "{out}"
     );
 }
+
+/// `lab-record` refuses, by option and before the stage runs, what wrote a
+/// record of NaN, an aliased or constant sine, or a few samples with exit 0.
+#[test]
+fn lab_record_refuses_options_that_make_no_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("record.csv");
+    let out = out.to_str().unwrap();
+    for (args, said) in [
+        (
+            &["--frequency", "nan"][..],
+            "--frequency NaN: give a frequency above 0",
+        ),
+        (
+            &["--frequency", "2500"][..],
+            "below half the sample rate (2500 Hz)",
+        ),
+        (
+            &["--frequency", "-1"][..],
+            "--frequency -1: give a frequency above 0",
+        ),
+        (
+            &["--sensor-offset", "inf"][..],
+            "--sensor-offset inf: give a finite offset",
+        ),
+        (
+            &["--noise", "-1"][..],
+            "--noise -1: give a noise of 0 um RMS or more",
+        ),
+        (
+            &["--rate", "0"][..],
+            "--rate 0: give a positive sample rate",
+        ),
+        (
+            &["--seconds", "0.001"][..],
+            "--seconds 0.001 at --rate 5000 Hz makes 5 samples of the excitation; a record \
+             needs 32 or more",
+        ),
+    ] {
+        let output = run(&[&["lab-record", "--out", out][..], args].concat());
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).contains(said),
+            "{args:?}: {}",
+            stderr(&output)
+        );
+        assert!(!Path::new(out).exists(), "{args:?}");
+    }
+}

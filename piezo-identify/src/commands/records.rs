@@ -17,8 +17,8 @@ pub(crate) struct LabRecordArgs {
     /// Command range: unipolar 0.5..9.5 V or bipolar -2..8 V.
     #[arg(long, default_value = "unipolar", value_parser = ["unipolar", "bipolar"])]
     pub(crate) drive: String,
-    /// Frequency of the sine [Hz].
-    #[arg(long, default_value_t = 1.0)]
+    /// Frequency of the sine [Hz], below half the sample rate.
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     pub(crate) frequency: f64,
     /// Sweep the sine's amplitude from 100 % to 20 % and back over this many
     /// seconds (0: a plain sine).
@@ -41,7 +41,7 @@ pub(crate) struct LabRecordArgs {
     #[arg(long, default_value_t = -42.7, allow_negative_numbers = true)]
     pub(crate) sensor_offset: f64,
     /// Sensor noise [um RMS].
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = 0.02, allow_negative_numbers = true)]
     pub(crate) noise: f64,
     /// Seed of the sensor noise.
     #[arg(long, default_value_t = 7)]
@@ -61,8 +61,56 @@ pub(crate) struct Xy200sPresetArgs {
     pub(crate) report: Option<PathBuf>,
 }
 
+/// What a lab record's options must be, named by option, before the stage
+/// runs: a NaN or infinite value wrote a record of NaN, a sine at or above
+/// half the sample rate an aliased or constant one, and a rate or duration
+/// too small a record of a few samples, or of rest alone (exit 0).
+fn check_lab_record_options(args: &LabRecordArgs) -> Result<(), String> {
+    use piezo_identify::data::MINIMUM_ROWS;
+    if !(args.rate.is_finite() && args.rate > 0.0) {
+        return Err(format!(
+            "--rate {}: give a positive sample rate in Hz",
+            args.rate
+        ));
+    }
+    if args.stairs.is_none() {
+        let nyquist = args.rate / 2.0;
+        if !(args.frequency.is_finite() && args.frequency > 0.0 && args.frequency < nyquist) {
+            return Err(format!(
+                "--frequency {}: give a frequency above 0 and below half the sample rate \
+                 ({nyquist} Hz); at or above it the samples alias",
+                args.frequency
+            ));
+        }
+    }
+    if !args.sensor_offset.is_finite() {
+        return Err(format!(
+            "--sensor-offset {}: give a finite offset in um",
+            args.sensor_offset
+        ));
+    }
+    if !(args.noise.is_finite() && args.noise >= 0.0) {
+        return Err(format!(
+            "--noise {}: give a noise of 0 um RMS or more",
+            args.noise
+        ));
+    }
+    let excitation_samples = args.seconds * args.rate;
+    if !(excitation_samples >= MINIMUM_ROWS as f64) {
+        return Err(format!(
+            "--seconds {} at --rate {} Hz makes {} samples of the excitation; a record needs \
+             {MINIMUM_ROWS} or more",
+            args.seconds,
+            args.rate,
+            excitation_samples.floor()
+        ));
+    }
+    Ok(())
+}
+
 pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
     check_destinations(&[("--out", Some(&args.out))], &[])?;
+    check_lab_record_options(args).map_err(Failure::Input)?;
     use piezo_identify::lab_records::{Drive, Excitation, LabRecordSpec, lab_record};
     let spec = LabRecordSpec {
         sample_rate: args.rate,
