@@ -54,7 +54,7 @@ pub const SUBSTEPS_PER_INPUT_SCALE: f64 = 500.0;
 const DIVERGED_STATE: f64 = 1e12;
 
 /// Smallest n: below 1, |h|^(n−1) is singular at h = 0.
-const MIN_EXPONENT: f64 = 1.0;
+pub const MIN_EXPONENT: f64 = 1.0;
 
 /// Default search box of the scaled shape (β̃, γ̃, n, δ̃): β̃ ≥ 0 keeps the
 /// loop dissipative; |β̃|, |γ̃| ≤ 10 let the state saturate within a tenth

@@ -1817,3 +1817,26 @@ fn lab_record_refuses_options_that_make_no_record() {
         assert!(!Path::new(out).exists(), "{args:?}");
     }
 }
+
+/// A `--bounds` box for n reaching below 1, where the model cannot go, is
+/// refused: the fit clamped n to 1 and reported it as inside the box given
+/// (n = 1.0 for `n=-1:0.5`, exit 0).
+#[test]
+fn bouc_wen_refuses_an_exponent_box_below_one() {
+    let record = p885_record();
+    let record = record.to_str().unwrap();
+    for bounds in ["n=-1:0.5", "n=0:3"] {
+        let output = run(&[
+            "bouc-wen", record, "--input", "0", "--output", "4", "--rate", "200", "--bounds",
+            bounds,
+        ]);
+        refused_as_input(&output);
+        assert_eq!(
+            stderr(&output).trim_end(),
+            format!(
+                "--bounds {bounds}: n's lower bound must be 1 or more: below 1, |h|^(n-1) is \
+                 singular at h = 0"
+            )
+        );
+    }
+}

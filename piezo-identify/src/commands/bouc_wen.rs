@@ -5,7 +5,9 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 
-use piezo_identify::bouc_wen_fit::{SHAPE_PARAMETERS, default_shape_bounds, wide_shape_bounds};
+use piezo_identify::bouc_wen_fit::{
+    MIN_EXPONENT, SHAPE_PARAMETERS, default_shape_bounds, wide_shape_bounds,
+};
 use piezo_identify::gapso::{Bounds, GaPsoOptions};
 use piezo_identify::plant::{ParameterValue, RecordAxis, sine_records};
 use piezo_identify::protocol::{
@@ -129,6 +131,13 @@ pub(crate) fn parse_shape_bounds(text: &str, bounds: &mut Bounds) -> Result<(), 
         let (lo, hi) = (number(lo)?, number(hi)?);
         if lo >= hi {
             return Err(problem("lower must be below upper"));
+        }
+        // Below 1 the model cannot go (the fit clamps n there), and a box
+        // reaching below it reported n = 1 as inside it.
+        if SHAPE_PARAMETERS[index] == "n" && lo < MIN_EXPONENT {
+            return Err(problem(&format!(
+                "n's lower bound must be {MIN_EXPONENT} or more: below 1, |h|^(n-1) is singular at h = 0"
+            )));
         }
         bounds.lower[index] = lo;
         bounds.upper[index] = hi;
