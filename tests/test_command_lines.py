@@ -295,6 +295,24 @@ def test_a_name_the_plant_lacks_names_the_parameter_file(tmp_path):
     assert not out.exists()
 
 
+def test_a_plant_run_that_makes_no_loop_or_too_many_samples_is_refused():
+    """`bouc-wen --plant` refuses, before the run, a rate that samples the
+    sine fewer than 20 times a period (its refusal blamed the settling) and
+    a run of more than 2,000,000 samples (--plant-rate 1e7 fitted 15 million
+    for hours)."""
+    binary = str(REPO_ROOT / "target" / "release" / "piezo-identify")
+    for extra, said in (
+            (["--plant-rate", "3"],
+             "--plant-rate 3 Hz samples the 2 Hz sine 1.500 times a period; give 20 or more"),
+            (["--plant-rate", "1e7"],
+             "--periods 3 of the 2 Hz sine at --plant-rate 10000000 Hz make 15000000 samples; "
+             "at most 2000000 are fitted (fewer periods or a lower rate)")):
+        done = subprocess.run([binary, "bouc-wen", "--plant", str(PLANT), *extra],
+                              capture_output=True, text=True, timeout=60)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.strip() == said, done.stderr
+
+
 def test_a_parameter_set_with_a_byte_order_mark_is_read(tmp_path):
     """A sweep's parameter set saved with a byte-order mark reads as its
     twin without one, as piezo-cosim reads it (json.loads refused it)."""

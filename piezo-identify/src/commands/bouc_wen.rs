@@ -147,6 +147,12 @@ pub(crate) fn parse_shape_bounds(text: &str, bounds: &mut Bounds) -> Result<(), 
 
 /// The identification record of `bouc-wen`: a file or a plant run, and the
 /// defaults that differ between them (decimation, warm-up seconds).
+/// Fewest samples per period of a plant run's sine.
+const MIN_PLANT_SAMPLES_PER_PERIOD: f64 = 20.0;
+/// Most samples of a plant run: 200 s at the default 10 kHz, 100 times the
+/// default run's.
+const MAX_PLANT_SAMPLES: usize = 2_000_000;
+
 pub(crate) fn bouc_wen_record(
     args: &BoucWenArgs,
 ) -> Result<(Loaded, Option<usize>, Option<f64>), Failure> {
@@ -175,6 +181,25 @@ pub(crate) fn bouc_wen_record(
                     "{name} must be positive (got {value})"
                 )));
             }
+        }
+        // A sine sampled a few times a period is no loop (the settling after
+        // its step then covered the fit part, which the refusal blamed), and
+        // --plant-rate 1e7 made 15 million samples whose fit ran for hours.
+        let per_period = args.plant_rate / args.frequency;
+        if per_period < MIN_PLANT_SAMPLES_PER_PERIOD {
+            return Err(Failure::Input(format!(
+                "--plant-rate {} Hz samples the {} Hz sine {per_period:.3} times a period; give \
+                 {MIN_PLANT_SAMPLES_PER_PERIOD} or more",
+                args.plant_rate, args.frequency
+            )));
+        }
+        let samples = (args.periods * per_period).ceil();
+        if samples > MAX_PLANT_SAMPLES as f64 {
+            return Err(Failure::Input(format!(
+                "--periods {} of the {} Hz sine at --plant-rate {} Hz make {samples} samples; \
+                 at most {MAX_PLANT_SAMPLES} are fitted (fewer periods or a lower rate)",
+                args.periods, args.frequency, args.plant_rate
+            )));
         }
         let (driven, coupled) = sine_records(
             &plant,
