@@ -1840,3 +1840,28 @@ fn bouc_wen_refuses_an_exponent_box_below_one() {
         );
     }
 }
+
+/// `compare --warm-up` beyond the record is refused before the fits: it
+/// printed an infinite offset and 18446744073709359643 scored samples.
+#[test]
+fn compare_refuses_a_warm_up_that_leaves_nothing_to_fit() {
+    let record = p885_record();
+    let output = run(&[
+        "compare",
+        record.to_str().unwrap(),
+        "--input",
+        "0",
+        "--output",
+        "4",
+        "--rate",
+        "200",
+        "--warm-up",
+        "1000",
+    ]);
+    refused_as_input(&output);
+    assert_eq!(
+        stderr(&output).trim_end(),
+        "--warm-up 1000 s leaves 0 of the record's 8027 samples to fit; a fit needs 32 or more"
+    );
+    assert!(stdout(&output).is_empty(), "{}", stdout(&output));
+}

@@ -38,13 +38,28 @@ pub(crate) struct CompareArgs {
     #[arg(long, default_value = "auto", allow_negative_numbers = true)]
     pub(crate) offset: String,
     /// Timed passes over the record per model (the median is reported).
-    #[arg(long, default_value_t = 31)]
+    #[arg(long, default_value_t = 31, value_parser = super::arguments::at_least_one)]
     pub(crate) repetitions: usize,
 }
 
 /// Decimation of the synthetic 10 kHz record for the search: 500 Hz, 250
 /// samples per period of eq. (6)'s fastest (1 Hz) component.
 pub(crate) const SYNTHETIC_DECIMATION: usize = 20;
+
+/// A warm-up that leaves fewer samples than a fit needs is refused: one
+/// beyond the record printed an infinite offset and a count wrapped below
+/// zero (18446744073709359643 scored samples).
+fn check_warm_up(seconds: f64, warm_up: usize, samples: usize) -> Result<(), Failure> {
+    let left = samples.saturating_sub(warm_up);
+    if left < piezo_identify::data::MINIMUM_ROWS {
+        return Err(Failure::Input(format!(
+            "--warm-up {seconds} s leaves {left} of the record's {samples} samples to fit; \
+             a fit needs {} or more",
+            piezo_identify::data::MINIMUM_ROWS
+        )));
+    }
+    Ok(())
+}
 
 pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
     let (record, name, offset, default_decimation) = if args.synthetic {
@@ -64,6 +79,7 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
         // Read as the fits read a record: a constant column is refused by name.
         let record = load(path, &args.columns)?.record;
         let warm_up = (args.search.warm_up / record.sample_period).round() as usize;
+        check_warm_up(args.search.warm_up, warm_up, record.input.len())?;
         let smoothed = centred_moving_average(&record.output, args.smooth);
         let offset = resolve_offset(&args.offset, &smoothed, warm_up)?;
         (record, path.display().to_string(), offset, 1)
@@ -71,6 +87,11 @@ pub(crate) fn compare(args: &CompareArgs) -> Result<(), Failure> {
     let options = args
         .search
         .options(record.sample_period, default_decimation);
+    check_warm_up(
+        args.search.warm_up,
+        options.warm_up_samples,
+        record.input.len(),
+    )?;
     let y = shifted(&centred_moving_average(&record.output, args.smooth), offset);
     let u = &record.input;
     say!("{}", describe(&record, &name));

@@ -96,7 +96,7 @@ fn check_lab_record_options(args: &LabRecordArgs) -> Result<(), String> {
         ));
     }
     let excitation_samples = args.seconds * args.rate;
-    if !(excitation_samples >= MINIMUM_ROWS as f64) {
+    if excitation_samples.is_nan() || excitation_samples < MINIMUM_ROWS as f64 {
         return Err(format!(
             "--seconds {} at --rate {} Hz makes {} samples of the excitation; a record needs \
              {MINIMUM_ROWS} or more",
