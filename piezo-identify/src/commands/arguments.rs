@@ -86,6 +86,20 @@ pub(crate) fn at_least_one(text: &str) -> Result<usize, String> {
     }
 }
 
+/// A `--smooth` half width whose window is wider than the record is refused:
+/// its average is of the whole record, and `bouc-wen --smooth 100000` on
+/// 8027 samples fitted 35 % errors with exit 0.
+pub(crate) fn check_smoothing(half_width: usize, samples: usize) -> Result<(), String> {
+    let window = half_width.saturating_mul(2).saturating_add(1);
+    if half_width > 0 && window > samples {
+        return Err(format!(
+            "--smooth {half_width}: a window of {window} samples is wider than the record's \
+             {samples}"
+        ));
+    }
+    Ok(())
+}
+
 pub(crate) fn positive_seconds(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),

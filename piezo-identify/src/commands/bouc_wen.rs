@@ -268,6 +268,8 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     args.protocol
         .check_destinations(args.out.as_deref(), &inputs)?;
     let (loaded, default_decimation, default_warm_up) = bouc_wen_record(args)?;
+    super::arguments::check_smoothing(args.smooth, loaded.record.input.len())
+        .map_err(Failure::Input)?;
     // The validation file is read before the fit: a typo costs nothing.
     let validation = match &args.protocol.validate {
         Some(path) => Some(load_validation(path, &args.columns, &loaded)?),
@@ -446,14 +448,21 @@ pub(crate) fn print_bouc_wen_fit(
         );
     }
     say!(
-        "\nGA-PSO: {} particles, {} generations ({} evaluations), seed {}, every {} sample(s): {:.2} s; eq. (5) RMS {:.6} um on the fitted samples",
+        "\nGA-PSO: {} particles, {} generations ({} evaluations), seed {}, every {} sample(s): {:.2} s; eq. (5) RMS {:.6} um on the fitted samples{}",
         settings.gapso.population,
         identification.history.len(),
         identification.gapso_evaluations,
         settings.gapso.seed,
         fit.options.decimation,
         identification.gapso_seconds,
-        identification.gapso.rms
+        identification.gapso.rms,
+        // The search's cost is against what it fitted; the errors below are
+        // against the measured displacement.
+        if settings.smoothing > 0 {
+            " (against the smoothed displacement)"
+        } else {
+            ""
+        }
     );
     if settings.refine {
         say!(
@@ -479,14 +488,25 @@ pub(crate) fn print_bouc_wen_fit(
     );
     let walls = best.on_search_walls(&settings.bounds);
     if !walls.is_empty() {
+        // A box as wide as --wide-bounds' already has it: only --bounds
+        // reaches farther.
+        let wide = wide_shape_bounds();
+        let already_wide = (0..SHAPE_PARAMETERS.len()).all(|i| {
+            settings.bounds.lower[i] <= wide.lower[i] && settings.bounds.upper[i] >= wide.upper[i]
+        });
         notes.add(format!(
             "the fit stopped on the search box's wall ({}, in the scaled shape --bounds \
-             takes): a better model may lie beyond it; try --wide-bounds, or --bounds past it",
+             takes): a better model may lie beyond it; try {}--bounds past it",
             walls
                 .iter()
                 .map(|(name, wall)| format!("{name} = {wall}"))
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join(", "),
+            if already_wide {
+                ""
+            } else {
+                "--wide-bounds, or "
+            }
         ));
     }
 }
