@@ -1924,3 +1924,48 @@ fn compare_notes_an_offset_set_by_a_startup_sample() {
     assert!(output.status.success(), "{}", stderr(&output));
     assert!(!stdout(&output).contains("note:"), "{}", stdout(&output));
 }
+
+/// `bouc-wen --no-offset` on a record whose sensor reads -42.7 um at rest
+/// says so: the displacement is taken as recorded, and the fit had only a
+/// note on the search box.
+#[test]
+fn bouc_wen_notes_a_rest_that_does_not_read_zero_under_no_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("lab.csv");
+    let record = record.to_str().unwrap();
+    let made = run(&[
+        "lab-record",
+        "--rate",
+        "200",
+        "--seconds",
+        "20",
+        "--out",
+        record,
+    ]);
+    assert!(made.status.success(), "{}", stderr(&made));
+    let quick = [
+        "--rate",
+        "200",
+        "--split",
+        "0.5",
+        "--population",
+        "10",
+        "--generations",
+        "5",
+    ];
+    let output = run(&[&["bouc-wen", record, "--no-offset"][..], &quick].concat());
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(
+        stdout(&output).contains("note: the record rests at 0 V from 0.000 s reading -42.70")
+            && stdout(&output).contains("--no-offset takes the displacement as recorded"),
+        "{}",
+        stdout(&output)
+    );
+    let output = run(&[&["bouc-wen", record][..], &quick].concat());
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(
+        !stdout(&output).contains("rests at 0 V"),
+        "{}",
+        stdout(&output)
+    );
+}

@@ -344,6 +344,32 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
     notes.few_turns(&plan, &record.input);
     notes.short_score(&plan);
     notes.implausible_stroke(fit.stroke);
+    if args.no_offset {
+        // --no-offset takes the displacement as recorded, so the stage must
+        // read 0 at rest at 0 V; a record that rests elsewhere was fitted
+        // with errors of a quarter of the stroke and only a box note.
+        let (low, high) = record
+            .input
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        let unpowered = plan.segments.rests.iter().find(|rest| {
+            let mean = record.input[(*rest).clone()].iter().sum::<f64>() / rest.len() as f64;
+            mean.abs() <= 0.01 * (high - low)
+        });
+        if let Some(rest) = unpowered {
+            let reads = record.output[rest.clone()].iter().sum::<f64>() / rest.len() as f64;
+            if reads.abs() > 0.05 * fit.stroke {
+                notes.add(format!(
+                    "the record rests at 0 V from {:.3} s reading {reads:.6} um, not 0, and \
+                     --no-offset takes the displacement as recorded: leave it out to fit the \
+                     sensor's offset",
+                    rest.start as f64 * dt
+                ));
+            }
+        }
+    }
     notes.few_levels(&plan);
     let mut validation_errors = None;
     let mut zero_alignment = None;
