@@ -1040,6 +1040,26 @@ pub struct RateDisagreement {
 }
 
 /// Reads a record from a file.
+/// The problem of a row of `fields` fields under a header of another width,
+/// if any. LabVIEW names a last `Comment` column that its rows leave out
+/// when they have no comment.
+fn header_width(
+    header: Option<&(usize, Vec<String>)>,
+    comment_column: Option<usize>,
+    fields: usize,
+    separator: Separator,
+) -> Option<Problem> {
+    let (header_line, names) = header?;
+    (names.len() != fields && !(comment_column.is_some() && names.len() == fields + 1)).then(|| {
+        Problem::HeaderWidth {
+            header_line: *header_line,
+            names: names.len(),
+            fields,
+            separator: separator.name(),
+        }
+    })
+}
+
 /// The fraction fields (1, 3, 5, …) of a row of `fields` fields, as the
 /// error message names them ("1 and 3").
 fn fraction_fields(fields: usize) -> String {
@@ -1377,21 +1397,12 @@ pub fn parse_record_with_columns(
         let columns = match &resolved {
             Some(columns) => *columns,
             None => {
-                // LabVIEW names a last `Comment` column that its rows leave
-                // out when they have no comment.
-                if let Some((header_line, names)) = &header
-                    && names.len() != fields.len()
-                    && !(comment_column.is_some() && names.len() == fields.len() + 1)
+                // Checked before the columns are resolved by the header's
+                // names (and again after every row's fields, below).
+                if let Some(problem) =
+                    header_width(header.as_ref(), comment_column, fields.len(), separator)
                 {
-                    return Err(malformed(
-                        line,
-                        Problem::HeaderWidth {
-                            header_line: *header_line,
-                            names: names.len(),
-                            fields: fields.len(),
-                            separator: separator.name(),
-                        },
-                    ));
+                    return Err(malformed(line, problem));
                 }
                 let columns = resolve_columns(options, header.as_ref(), units.as_ref(), x_is_time)
                     .map_err(|(at, problem)| malformed(at.unwrap_or(line), problem))?;
@@ -1523,26 +1534,17 @@ pub fn parse_record_with_columns(
             values[field] = value;
         }
         // Every row as wide as the header, or as the first row of a file
-        // without one (checked after its fields, whose own faults say more): a row with a field more or less (a decimal comma
-        // split off, a value left out) would shift its columns and be read
-        // as another record's. LabVIEW names a last `Comment` column that
-        // its rows leave out when they have no comment.
+        // without one (checked after its fields, whose own faults say more):
+        // a row with a field more or less (a decimal comma split off, a value
+        // left out) would shift its columns and be read as another record's.
         match &header {
-            Some((header_line, names))
-                if names.len() != fields.len()
-                    && !(comment_column.is_some() && names.len() == fields.len() + 1) =>
-            {
-                return Err(malformed(
-                    line,
-                    Problem::HeaderWidth {
-                        header_line: *header_line,
-                        names: names.len(),
-                        fields: fields.len(),
-                        separator: separator.name(),
-                    },
-                ));
+            Some(_) => {
+                if let Some(problem) =
+                    header_width(header.as_ref(), comment_column, fields.len(), separator)
+                {
+                    return Err(malformed(line, problem));
+                }
             }
-            Some(_) => {}
             None => {
                 let (first_line, first_fields) =
                     *first_row_width.get_or_insert((line, fields.len()));
