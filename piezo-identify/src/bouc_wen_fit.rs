@@ -247,8 +247,17 @@ impl BoucWenIdentification {
 pub enum BoucWenFitError {
     #[error("input has {input} samples, output {output}; they must be equal")]
     Lengths { input: usize, output: usize },
-    #[error("{scored} samples to fit after the warm-up; at least {needed} are needed")]
-    TooShort { scored: usize, needed: usize },
+    #[error(
+        "{scored} samples to fit after the warm-up{}; at least {needed} are needed",
+        if *decimation > 1 { format!(", one in {decimation} searched") } else { String::new() }
+    )]
+    TooShort {
+        scored: usize,
+        needed: usize,
+        /// The search's every-N-th sample, which a too-large --decimation
+        /// makes the cause (the message blamed the warm-up alone).
+        decimation: usize,
+    },
     #[error("sample {index} is not finite")]
     NotFinite { index: usize },
     #[error("the input is zero throughout: nothing drives the model")]
@@ -527,7 +536,11 @@ pub fn identify_bouc_wen(
         .filter(|f| **f)
         .count();
     if scored < needed {
-        return Err(BoucWenFitError::TooShort { scored, needed });
+        return Err(BoucWenFitError::TooShort {
+            scored,
+            needed,
+            decimation: options.decimation,
+        });
     }
     if let Some(index) = input
         .iter()

@@ -1712,6 +1712,14 @@ fn a_zero_count_is_refused_with_the_arguments() {
         );
         assert!(stdout(&output).is_empty(), "{args:?}: {}", stdout(&output));
     }
+    // No iteration at all ran the starts and reported them stopped at 0.
+    let output = run(&["compare", "--synthetic", "--max-iterations", "0"]);
+    refused_as_input(&output);
+    assert!(
+        stderr(&output).contains("invalid value '0' for '--max-iterations <MAX_ITERATIONS>'"),
+        "{}",
+        stderr(&output)
+    );
     assert!(!Path::new(out).exists());
 }
 
@@ -1967,5 +1975,33 @@ fn bouc_wen_notes_a_rest_that_does_not_read_zero_under_no_offset() {
         !stdout(&output).contains("rests at 0 V"),
         "{}",
         stdout(&output)
+    );
+}
+
+/// A `--decimation` that leaves too few samples says so: the refusal named
+/// the warm-up alone.
+#[test]
+fn bouc_wen_names_the_decimation_that_leaves_too_few_samples() {
+    let record = p885_record();
+    let output = run(&[
+        "bouc-wen",
+        record.to_str().unwrap(),
+        "--input",
+        "0",
+        "--output",
+        "4",
+        "--rate",
+        "200",
+        "--decimation",
+        "1000",
+    ]);
+    assert_eq!(output.status.code(), Some(2), "{}", stderr(&output));
+    assert!(
+        stderr(&output).trim_end().ends_with(
+            "Model_Vi_Do.dat: 8 samples to fit after the warm-up, one in 1000 searched; at least \
+             20 are needed"
+        ),
+        "{}",
+        stderr(&output)
     );
 }

@@ -208,7 +208,7 @@ pub(crate) struct SearchArgs {
     #[arg(long, default_value_t = 0)]
     pub(crate) seed: u64,
     /// Nelder-Mead iterations per start at most.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..))]
     pub(crate) max_iterations: u64,
     /// The search uses every N-th sample (the final linear solve and F use all).
     #[arg(long, value_parser = at_least_one)]
