@@ -385,6 +385,9 @@ pub struct Plan {
     /// Rests and steps of the whole record.
     pub segments: Segments,
     pub warm_up_samples: usize,
+    /// Whether the warm-up was set (`--warm-up`, or a plant run's period), in
+    /// place of the default start: settling and the first loading.
+    pub warm_up_given: bool,
     /// Samples of the fit part that are not fitted (warm-up included).
     pub fit_excluded: Vec<Range<usize>>,
     /// Samples of the scored part that are not scored.
@@ -484,6 +487,7 @@ impl Plan {
             thresholds,
             segments,
             warm_up_samples,
+            warm_up_given: options.warm_up_seconds.is_some(),
             fit_excluded,
             scored_excluded,
             fastest_cycle: None,

@@ -2005,3 +2005,42 @@ fn bouc_wen_names_the_decimation_that_leaves_too_few_samples() {
         stderr(&output)
     );
 }
+
+/// The left-out line names the warm-up given, not the default start it
+/// replaces (it named "settling 0.100 s and first loading" under --warm-up 3).
+#[test]
+fn the_left_out_line_names_a_warm_up_given() {
+    let record = p885_record();
+    let base = [
+        "inverse-pi",
+        record.to_str().unwrap(),
+        "--input",
+        "0",
+        "--output",
+        "4",
+        "--rate",
+        "200",
+        "--starts",
+        "1",
+        "--max-iterations",
+        "5",
+    ];
+    for (extra, said) in [
+        (
+            &["--warm-up", "3"][..],
+            "left out of the fit (warm-up: 3.000 s; rests;",
+        ),
+        (
+            &[][..],
+            "left out of the fit (warm-up: settling 0.100 s and first loading; rests;",
+        ),
+    ] {
+        let output = run(&[&base[..], extra].concat());
+        assert!(output.status.success(), "{}", stderr(&output));
+        assert!(
+            stdout(&output).contains(said),
+            "{extra:?}: {}",
+            stdout(&output)
+        );
+    }
+}

@@ -118,9 +118,18 @@ pub(crate) fn print_plan(plan: &Plan, name: &str) {
         );
     }
     let fitted = plan.fitted().iter().filter(|f| **f).count();
+    // The warm-up given replaces the default start (settling and first
+    // loading), which the line named even then.
+    let warm_up = if plan.warm_up_given {
+        format!("{:.3} s", plan.warm_up_samples as f64 * dt)
+    } else {
+        format!(
+            "settling {:.3} s and first loading",
+            plan.thresholds.settle_samples as f64 * dt
+        )
+    };
     say!(
-        "left out of the fit (warm-up: settling {:.3} s and first loading; rests; settling after steps): {}; {fitted} of {} samples fitted",
-        plan.thresholds.settle_samples as f64 * dt,
+        "left out of the fit (warm-up: {warm_up}; rests; settling after steps): {}; {fitted} of {} samples fitted",
         describe_ranges(&plan.fit_excluded, dt),
         plan.fit_end
     );
