@@ -120,6 +120,14 @@ pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, 
                 json_problem(&e)
             )
         })?;
+    let nested = |name: &str, kind: &str| {
+        format!(
+            "{}: parameter {name}: {kind} is no value; a parameter set maps each variable's FMI \
+             name to a number or a Boolean, and a nested file is parameters in another form, to \
+             be converted to one first",
+            path.display()
+        )
+    };
     map.into_iter()
         .map(|(name, value)| match value {
             serde_json::Value::Bool(b) => Ok((name, ParameterValue::Boolean(b))),
@@ -127,6 +135,11 @@ pub fn read_parameter_set(path: &Path) -> Result<Vec<(String, ParameterValue)>, 
                 let v = n.as_f64().expect("serde_json numbers convert to f64");
                 Ok((name, ParameterValue::Number(v)))
             }
+            // A nested value is a file of parameters in another form (a
+            // model's own struct, say): printed whole it was hundreds of
+            // characters that did not say so.
+            serde_json::Value::Object(_) => Err(nested(&name, "an object")),
+            serde_json::Value::Array(_) => Err(nested(&name, "an array")),
             other => Err(format!(
                 "{}: parameter {name}: {other} is neither a number nor a Boolean",
                 path.display()
@@ -294,6 +307,16 @@ mod tests {
         assert_eq!(
             read_parameter_set(&bad).unwrap_err(),
             format!("{}:2:5: expected `:`", bad.display())
+        );
+        std::fs::write(&bad, r#"{"actuators": [{"gain": 1.0}]}"#).unwrap();
+        assert_eq!(
+            read_parameter_set(&bad).unwrap_err(),
+            format!(
+                "{}: parameter actuators: an array is no value; a parameter set maps each \
+                 variable's FMI name to a number or a Boolean, and a nested file is parameters \
+                 in another form, to be converted to one first",
+                bad.display()
+            )
         );
         std::fs::write(&bad, r#"{"name": "text"}"#).unwrap();
         assert_eq!(
