@@ -53,6 +53,23 @@ fn quick_split_fit(path: &Path, time: &str, input: &str, output: &str) -> String
     stdout(&done)
 }
 
+/// `subcommand` on [`p885_record`] by its columns (command 0, displacement
+/// 4) and rate, then `extra`.
+fn on_p885(subcommand: &str, extra: &[&str]) -> Output {
+    let record = p885_record();
+    let base = [
+        subcommand,
+        record.to_str().unwrap(),
+        "--input",
+        "0",
+        "--output",
+        "4",
+        "--rate",
+        "200",
+    ];
+    run(&[&base[..], extra].concat())
+}
+
 /// The P-885 model record (200 Hz, no header).
 fn p885_record() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/piezo-p885/Model_Vi_Do.dat")
@@ -1831,13 +1848,8 @@ fn lab_record_refuses_options_that_make_no_record() {
 /// (n = 1.0 for `n=-1:0.5`, exit 0).
 #[test]
 fn bouc_wen_refuses_an_exponent_box_below_one() {
-    let record = p885_record();
-    let record = record.to_str().unwrap();
     for bounds in ["n=-1:0.5", "n=0:3"] {
-        let output = run(&[
-            "bouc-wen", record, "--input", "0", "--output", "4", "--rate", "200", "--bounds",
-            bounds,
-        ]);
+        let output = on_p885("bouc-wen", &["--bounds", bounds]);
         refused_as_input(&output);
         assert_eq!(
             stderr(&output).trim_end(),
@@ -1853,19 +1865,7 @@ fn bouc_wen_refuses_an_exponent_box_below_one() {
 /// printed an infinite offset and 18446744073709359643 scored samples.
 #[test]
 fn compare_refuses_a_warm_up_that_leaves_nothing_to_fit() {
-    let record = p885_record();
-    let output = run(&[
-        "compare",
-        record.to_str().unwrap(),
-        "--input",
-        "0",
-        "--output",
-        "4",
-        "--rate",
-        "200",
-        "--warm-up",
-        "1000",
-    ]);
+    let output = on_p885("compare", &["--warm-up", "1000"]);
     refused_as_input(&output);
     assert_eq!(
         stderr(&output).trim_end(),
@@ -1879,11 +1879,8 @@ fn compare_refuses_a_warm_up_that_leaves_nothing_to_fit() {
 /// errors with exit 0).
 #[test]
 fn a_smoothing_wider_than_the_record_is_refused() {
-    let record = p885_record();
-    let record = record.to_str().unwrap();
-    let columns = ["--input", "0", "--output", "4", "--rate", "200"];
     for subcommand in ["bouc-wen", "compare"] {
-        let output = run(&[&[subcommand, record][..], &columns, &["--smooth", "4014"]].concat());
+        let output = on_p885(subcommand, &["--smooth", "4014"]);
         refused_as_input(&output);
         assert_eq!(
             stderr(&output).trim_end(),
@@ -1898,14 +1895,7 @@ fn a_smoothing_wider_than_the_record_is_refused() {
 /// the summary says so, and a warm-up past it says nothing.
 #[test]
 fn compare_notes_an_offset_set_by_a_startup_sample() {
-    let record = p885_record();
     let quick = [
-        "--input",
-        "0",
-        "--output",
-        "4",
-        "--rate",
-        "200",
         "--starts",
         "1",
         "--max-iterations",
@@ -1913,7 +1903,7 @@ fn compare_notes_an_offset_set_by_a_startup_sample() {
         "--repetitions",
         "1",
     ];
-    let output = run(&[&["compare", record.to_str().unwrap()][..], &quick].concat());
+    let output = on_p885("compare", &quick);
     assert!(output.status.success(), "{}", stderr(&output));
     assert!(
         stdout(&output).contains(
@@ -1923,12 +1913,7 @@ fn compare_notes_an_offset_set_by_a_startup_sample() {
         "{}",
         stdout(&output)
     );
-    let output = run(&[
-        &["compare", record.to_str().unwrap()][..],
-        &quick,
-        &["--warm-up", "0.1"],
-    ]
-    .concat());
+    let output = on_p885("compare", &[&quick[..], &["--warm-up", "0.1"]].concat());
     assert!(output.status.success(), "{}", stderr(&output));
     assert!(!stdout(&output).contains("note:"), "{}", stdout(&output));
 }
@@ -1982,19 +1967,7 @@ fn bouc_wen_notes_a_rest_that_does_not_read_zero_under_no_offset() {
 /// the warm-up alone.
 #[test]
 fn bouc_wen_names_the_decimation_that_leaves_too_few_samples() {
-    let record = p885_record();
-    let output = run(&[
-        "bouc-wen",
-        record.to_str().unwrap(),
-        "--input",
-        "0",
-        "--output",
-        "4",
-        "--rate",
-        "200",
-        "--decimation",
-        "1000",
-    ]);
+    let output = on_p885("bouc-wen", &["--decimation", "1000"]);
     assert_eq!(output.status.code(), Some(2), "{}", stderr(&output));
     assert!(
         stderr(&output).trim_end().ends_with(
@@ -2010,21 +1983,7 @@ fn bouc_wen_names_the_decimation_that_leaves_too_few_samples() {
 /// replaces (it named "settling 0.100 s and first loading" under --warm-up 3).
 #[test]
 fn the_left_out_line_names_a_warm_up_given() {
-    let record = p885_record();
-    let base = [
-        "inverse-pi",
-        record.to_str().unwrap(),
-        "--input",
-        "0",
-        "--output",
-        "4",
-        "--rate",
-        "200",
-        "--starts",
-        "1",
-        "--max-iterations",
-        "5",
-    ];
+    let quick = ["--starts", "1", "--max-iterations", "5"];
     for (extra, said) in [
         (
             &["--warm-up", "3"][..],
@@ -2035,7 +1994,7 @@ fn the_left_out_line_names_a_warm_up_given() {
             "left out of the fit (warm-up: settling 0.100 s and first loading; rests;",
         ),
     ] {
-        let output = run(&[&base[..], extra].concat());
+        let output = on_p885("inverse-pi", &[&quick[..], extra].concat());
         assert!(output.status.success(), "{}", stderr(&output));
         assert!(
             stdout(&output).contains(said),
