@@ -99,10 +99,31 @@ pub fn main<M: CoSimModel>(
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("{program}: {e}");
+            match already_by_fmi_name::<M>(preset) {
+                Some(names) => eprintln!(
+                    "{program}: {preset} is already a parameter set by FMI name ({names} of {}'s \
+                     variables, the form this tool writes): importers take it as it is (fmpy's \
+                     start_values, a Simulink mask, an SSP parameter set). This tool takes {presets}.",
+                    M::INFO.model_identifier
+                ),
+                None => eprintln!("{program}: {e}"),
+            }
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// The number of keys of the JSON object in the file at `path` when every
+/// one of them names a variable of `M`: a set by FMI name, given where the
+/// model's own parameter JSON is expected. `None` for anything else (not a
+/// file, not JSON, not an object, an empty object, a key `M` lacks).
+fn already_by_fmi_name<M: CoSimModel>(path: &str) -> Option<usize> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let serde_json::Value::Object(map) = serde_json::from_str(&text).ok()? else {
+        return None;
+    };
+    let known = |key: &String| M::variables().iter().any(|v| v.name == key);
+    (!map.is_empty() && map.keys().all(known)).then_some(map.len())
 }
 
 #[cfg(test)]

@@ -24,3 +24,15 @@ fn declared_ranges_agree_with_the_model() {
         &[],
     );
 }
+
+/// `piezo-controller-parameters` given its own output (a set by FMI name, as
+/// `dist/presets/` holds) says what the file is and what the tool takes.
+#[test]
+fn a_set_by_fmi_name_is_named_as_such() {
+    fmi2_conformance::table::a_set_by_fmi_name_is_named_as_such(
+        env!("CARGO_BIN_EXE_piezo-controller-parameters"),
+        "stage",
+        "PiezoController",
+        "stage, paper or a ControllerParams JSON file",
+    );
+}

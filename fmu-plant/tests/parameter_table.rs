@@ -25,3 +25,15 @@ fn declared_ranges_agree_with_the_model() {
         &[".creep_time"],
     );
 }
+
+/// `flexure-stage-parameters` given its own output (a set by FMI name, as
+/// `dist/presets/` holds) says what the file is and what the tool takes.
+#[test]
+fn a_set_by_fmi_name_is_named_as_such() {
+    fmi2_conformance::table::a_set_by_fmi_name_is_named_as_such(
+        env!("CARGO_BIN_EXE_flexure-stage-parameters"),
+        "3dof",
+        "FlexureStage",
+        "3dof, xy200s or a FlexureStageParams JSON file",
+    );
+}
