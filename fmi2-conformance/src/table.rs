@@ -478,6 +478,63 @@ macro_rules! table_tests {
     };
 }
 
+/// A parameter-set binary (`fmi2_cosim::parameter_set::main`) given its own
+/// output back, a set by FMI name, says what the file is (the model's
+/// identifier) and what the binary takes (`presets`), with exit 1 and no
+/// file written, instead of serde's "unknown field" for the set's first
+/// name; a file with one key the model lacks still gets serde's message.
+pub fn a_set_by_fmi_name_is_named_as_such(
+    binary: &str,
+    preset: &str,
+    model_identifier: &str,
+    presets: &str,
+) {
+    let folder = std::env::temp_dir().join(format!(
+        "parameter-sets-{model_identifier}-{}",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&folder).unwrap();
+    let run = |input: &std::path::Path, out: &std::path::Path| {
+        let run = std::process::Command::new(binary)
+            .arg(input)
+            .arg(out)
+            .output()
+            .unwrap();
+        (
+            run.status.code(),
+            String::from_utf8_lossy(&run.stderr).into_owned(),
+        )
+    };
+    let by_name = folder.join("by_name.json");
+    let written = std::process::Command::new(binary)
+        .arg(preset)
+        .arg(&by_name)
+        .status()
+        .unwrap();
+    assert!(written.success(), "{binary} {preset} failed");
+    let again = folder.join("again.json");
+    let (code, stderr) = run(&by_name, &again);
+    assert_eq!(code, Some(1), "{stderr}");
+    for part in [
+        "is already a parameter set by FMI name".to_owned(),
+        format!("of {model_identifier}'s variables"),
+        format!("This tool takes {presets}."),
+    ] {
+        assert!(stderr.contains(&part), "{part:?} not in {stderr}");
+    }
+    assert!(!again.exists());
+    let text = std::fs::read_to_string(&by_name).unwrap();
+    let mixed = folder.join("mixed.json");
+    std::fs::write(&mixed, text.replacen('{', "{\"no_such_variable\": 1,", 1)).unwrap();
+    let (code, stderr) = run(&mixed, &again);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(
+        stderr.contains("unknown field `no_such_variable`"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&folder).unwrap();
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -586,61 +643,4 @@ mod tests {
         value_references_are_append_only(&table, &format!("{RECORD}3 d\n"));
         value_references_are_append_only(&table, RECORD);
     }
-}
-
-/// A parameter-set binary (`fmi2_cosim::parameter_set::main`) given its own
-/// output back, a set by FMI name, says what the file is (the model's
-/// identifier) and what the binary takes (`presets`), with exit 1 and no
-/// file written, instead of serde's "unknown field" for the set's first
-/// name; a file with one key the model lacks still gets serde's message.
-pub fn a_set_by_fmi_name_is_named_as_such(
-    binary: &str,
-    preset: &str,
-    model_identifier: &str,
-    presets: &str,
-) {
-    let folder = std::env::temp_dir().join(format!(
-        "parameter-sets-{model_identifier}-{}",
-        std::process::id()
-    ));
-    std::fs::create_dir_all(&folder).unwrap();
-    let run = |input: &std::path::Path, out: &std::path::Path| {
-        let run = std::process::Command::new(binary)
-            .arg(input)
-            .arg(out)
-            .output()
-            .unwrap();
-        (
-            run.status.code(),
-            String::from_utf8_lossy(&run.stderr).into_owned(),
-        )
-    };
-    let by_name = folder.join("by_name.json");
-    let written = std::process::Command::new(binary)
-        .arg(preset)
-        .arg(&by_name)
-        .status()
-        .unwrap();
-    assert!(written.success(), "{binary} {preset} failed");
-    let again = folder.join("again.json");
-    let (code, stderr) = run(&by_name, &again);
-    assert_eq!(code, Some(1), "{stderr}");
-    for part in [
-        "is already a parameter set by FMI name".to_owned(),
-        format!("of {model_identifier}'s variables"),
-        format!("This tool takes {presets}."),
-    ] {
-        assert!(stderr.contains(&part), "{part:?} not in {stderr}");
-    }
-    assert!(!again.exists());
-    let text = std::fs::read_to_string(&by_name).unwrap();
-    let mixed = folder.join("mixed.json");
-    std::fs::write(&mixed, text.replacen('{', "{\"no_such_variable\": 1,", 1)).unwrap();
-    let (code, stderr) = run(&mixed, &again);
-    assert_eq!(code, Some(1), "{stderr}");
-    assert!(
-        stderr.contains("unknown field `no_such_variable`"),
-        "{stderr}"
-    );
-    std::fs::remove_dir_all(&folder).unwrap();
 }
