@@ -1740,6 +1740,40 @@ fn a_zero_count_is_refused_with_the_arguments() {
     assert!(!Path::new(out).exists());
 }
 
+/// `compare --synthetic` makes its own record, so the options that read a
+/// file's columns, rate and zero are refused with it: they were ignored
+/// (`--input 3 --offset 5 --smooth 3` ran the synthetic record as it is,
+/// exit 0).
+#[test]
+fn compare_synthetic_refuses_the_options_of_a_file() {
+    for option in [
+        &["--input", "3"][..],
+        &["--output", "1"],
+        &["--rate", "100"],
+        &["--time", "0"],
+        &["--offset", "5"],
+        &["--smooth", "3"],
+    ] {
+        let mut args = vec!["compare", "--synthetic"];
+        args.extend_from_slice(option);
+        let output = run(&args);
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).contains(&format!(
+                "the argument '--synthetic' cannot be used with '{}",
+                option[0]
+            )),
+            "{option:?}: {}",
+            stderr(&output)
+        );
+        assert!(
+            stdout(&output).is_empty(),
+            "{option:?}: {}",
+            stdout(&output)
+        );
+    }
+}
+
 /// A θ_z demand in mrad or degrees is read in µrad, the unit of the slope of
 /// seed 000's D4 that the controller applies: read as written, a demand in
 /// mrad gave a slope 1000 times too steep (exit 0).

@@ -22,8 +22,9 @@ pub(crate) struct CompareArgs {
     #[arg(required_unless_present = "synthetic")]
     pub(crate) file: Option<PathBuf>,
     /// Generate the record: seed 000 eq. (6) driving the simulated stage's y
-    /// actuator for 10 s at 10 kHz.
-    #[arg(long, conflicts_with = "file")]
+    /// actuator for 10 s at 10 kHz (its columns, rate and zero are its own:
+    /// the options that read a file's are refused with it).
+    #[arg(long, conflicts_with_all = ["file", "input", "output", "rate", "time", "offset", "smooth"])]
     pub(crate) synthetic: bool,
     #[command(flatten)]
     pub(crate) columns: ColumnArgs,
