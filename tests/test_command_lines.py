@@ -313,6 +313,28 @@ def test_a_plant_run_that_makes_no_loop_or_too_many_samples_is_refused():
         assert done.stderr.strip() == said, done.stderr
 
 
+def test_a_plant_run_beyond_the_amplifier_is_refused():
+    """`bouc-wen --plant` refuses, before the run, a --peak the plant's
+    amplifier would clip (--peak 1000 fitted a saturated record with exit
+    0): on the 3-DOF stage its input range ends at 13 V, on the XY200S its
+    150 V output at gain 15 ends the command at 10 V, the default peak."""
+    binary = str(REPO_ROOT / "target" / "release" / "piezo-identify")
+    xy200s = str(REPO_ROOT / "dist" / "presets" / "FlexureStage.xy200s.json")
+    for extra, said in (
+            (["--peak", "1000"], "amplifier.input_max is 13 V"),
+            (["--peak", "13.5"], "amplifier.input_max is 13 V"),
+            (["--plant-parameters", xy200s, "--peak", "10.5"],
+             "amplifier.v_max 150 V at amplifier.gain 15 is a command of 10 V")):
+        done = subprocess.run([binary, "bouc-wen", "--plant", str(PLANT), *extra],
+                              capture_output=True, text=True, timeout=60)
+        assert done.returncode == 2, done.stderr
+        assert done.stderr.strip() == (
+            f"--peak {extra[-1]} V is beyond what the plant's amplifier follows: {said}; the "
+            "sine would be clipped there, and the record would not be the drive it claims"), \
+            done.stderr
+        assert done.stdout == ""
+
+
 def test_a_parameter_set_with_a_byte_order_mark_is_read(tmp_path):
     """A sweep's parameter set saved with a byte-order mark reads as its
     twin without one, as piezo-cosim reads it (json.loads refused it)."""

@@ -9,7 +9,7 @@ use piezo_identify::bouc_wen_fit::{
     MIN_EXPONENT, SHAPE_PARAMETERS, default_shape_bounds, wide_shape_bounds,
 };
 use piezo_identify::gapso::{Bounds, GaPsoOptions};
-use piezo_identify::plant::{ParameterValue, RecordAxis, sine_records};
+use piezo_identify::plant::{ParameterValue, PlantFmu, RecordAxis, sine_records};
 use piezo_identify::protocol::{
     BoucWenProtocolFit, BoucWenSettings, ForwardErrors, identify_bouc_wen_protocol,
 };
@@ -179,6 +179,18 @@ pub(crate) fn bouc_wen_record(
             if !(value.is_finite() && value > 0.0) {
                 return Err(Failure::Input(format!(
                     "{name} must be positive (got {value})"
+                )));
+            }
+        }
+        // A peak beyond what the amplifier follows clips the drive into a
+        // plateau the fit reads as the stack's (--peak 1000 fitted a
+        // saturated record with exit 0).
+        if let Some(limit) = amplifier_command_limit(&plant) {
+            if args.peak > limit.command {
+                return Err(Failure::Input(format!(
+                    "--peak {} V is beyond what the plant's amplifier follows: {}; the sine \
+                     would be clipped there, and the record would not be the drive it claims",
+                    args.peak, limit.reason
                 )));
             }
         }
@@ -535,4 +547,33 @@ pub(crate) fn print_bouc_wen_fit(
             }
         ));
     }
+}
+
+/// The largest command the plant's amplifier passes unclipped, and why:
+/// clamp(G·clamp(u, input_min, input_max), v_min, v_max) (piezo-models
+/// MODEL.md §2) follows u up to min(input_max, v_max/G). `None` for a plant
+/// without FlexureStage's amplifier parameters (nothing to check against).
+struct CommandLimit {
+    command: f64,
+    reason: String,
+}
+
+fn amplifier_command_limit(plant: &PlantFmu) -> Option<CommandLimit> {
+    let input_max = plant.start("amplifier.input_max")?;
+    let gain = plant.start("amplifier.gain")?;
+    let v_max = plant.start("amplifier.v_max")?;
+    let by_output = v_max / gain;
+    Some(if by_output < input_max {
+        CommandLimit {
+            command: by_output,
+            reason: format!(
+                "amplifier.v_max {v_max} V at amplifier.gain {gain} is a command of {by_output} V"
+            ),
+        }
+    } else {
+        CommandLimit {
+            command: input_max,
+            reason: format!("amplifier.input_max is {input_max} V"),
+        }
+    })
 }
