@@ -185,14 +185,14 @@ pub(crate) fn bouc_wen_record(
         // A peak beyond what the amplifier follows clips the drive into a
         // plateau the fit reads as the stack's (--peak 1000 fitted a
         // saturated record with exit 0).
-        if let Some(limit) = amplifier_command_limit(&plant) {
-            if args.peak > limit.command {
-                return Err(Failure::Input(format!(
-                    "--peak {} V is beyond what the plant's amplifier follows: {}; the sine \
-                     would be clipped there, and the record would not be the drive it claims",
-                    args.peak, limit.reason
-                )));
-            }
+        if let Some(limit) = amplifier_command_limit(&plant)
+            && args.peak > limit.command
+        {
+            return Err(Failure::Input(format!(
+                "--peak {} V is beyond what the plant's amplifier follows: {}; the sine would \
+                 be clipped there, and the record would not be the drive it claims",
+                args.peak, limit.reason
+            )));
         }
         // A sine sampled a few times a period is no loop (the settling after
         // its step then covered the fit part, which the refusal blamed), and
