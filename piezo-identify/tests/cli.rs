@@ -1729,14 +1729,56 @@ fn a_zero_count_is_refused_with_the_arguments() {
         );
         assert!(stdout(&output).is_empty(), "{args:?}: {}", stdout(&output));
     }
-    // No iteration at all ran the starts and reported them stopped at 0.
-    let output = run(&["compare", "--synthetic", "--max-iterations", "0"]);
-    refused_as_input(&output);
-    assert!(
-        stderr(&output).contains("invalid value '0' for '--max-iterations <MAX_ITERATIONS>'"),
-        "{}",
-        stderr(&output)
-    );
+    // No iteration at all ran the starts and reported them stopped at 0;
+    // inverse-pi scored its random starts unsearched.
+    let record = p885_record();
+    let record = record.to_str().unwrap();
+    let file = [
+        "--input", "0", "--output", "4", "--rate", "200", "--split", "0.5",
+    ];
+    for args in [
+        vec!["compare", "--synthetic", "--max-iterations", "0"],
+        [
+            &["inverse-pi", record][..],
+            &file,
+            &["--max-iterations", "0"],
+        ]
+        .concat(),
+    ] {
+        let output = run(&args);
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).contains("invalid value '0' for '--max-iterations <MAX_ITERATIONS>'"),
+            "{args:?}: {}",
+            stderr(&output)
+        );
+    }
+    // inverse-pi refused --starts 0 only after reading the record, and
+    // bouc-wen a swarm GA-PSO cannot run after its first progress line.
+    for (args, said) in [
+        (
+            vec!["inverse-pi", record, "--starts", "0"],
+            "'0' for '--starts <STARTS>': \"0\" is not a whole number of 1 or more",
+        ),
+        (
+            vec!["bouc-wen", record, "--population", "3"],
+            "'3' for '--population <POPULATION>': \"3\" is not a whole number of 4 or more",
+        ),
+        (
+            vec!["bouc-wen", record, "--generations", "0"],
+            "'0' for '--generations <GENERATIONS>': \"0\" is not a whole number of 1 or more",
+        ),
+    ] {
+        let args = [&args[..], &file].concat();
+        let output = run(&args);
+        refused_as_input(&output);
+        assert!(
+            stderr(&output).contains(said),
+            "{args:?}: {}",
+            stderr(&output)
+        );
+        assert!(stdout(&output).is_empty(), "{args:?}: {}", stdout(&output));
+    }
     assert!(!Path::new(out).exists());
 }
 

@@ -80,9 +80,14 @@ pub(crate) fn seconds(text: &str) -> Result<f64, String> {
 /// A count of 1 or more (starts, every N-th sample): 0 is refused with the
 /// arguments, not after a plant has run for it.
 pub(crate) fn at_least_one(text: &str) -> Result<usize, String> {
+    at_least::<1>(text)
+}
+
+/// A count of `MIN` or more, refused with the arguments as [`at_least_one`].
+pub(crate) fn at_least<const MIN: usize>(text: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
-        Ok(count) if count >= 1 => Ok(count),
-        _ => Err(format!("\"{text}\" is not a whole number of 1 or more")),
+        Ok(count) if count >= MIN => Ok(count),
+        _ => Err(format!("\"{text}\" is not a whole number of {MIN} or more")),
     }
 }
 

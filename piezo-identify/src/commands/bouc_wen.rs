@@ -57,11 +57,12 @@ pub(crate) struct BoucWenArgs {
     /// Sample rate of the plant run [Hz].
     #[arg(long, default_value_t = 10_000.0)]
     pub(crate) plant_rate: f64,
-    /// Particles of the swarm.
-    #[arg(long, default_value_t = 40)]
+    /// Particles of the swarm (4 or more: GA-PSO's crossover needs pairs
+    /// beside the best).
+    #[arg(long, default_value_t = 40, value_parser = super::arguments::at_least::<4>)]
     pub(crate) population: usize,
     /// GA-PSO generations at most.
-    #[arg(long, default_value_t = 150)]
+    #[arg(long, default_value_t = 150, value_parser = super::arguments::at_least_one)]
     pub(crate) generations: usize,
     /// Seed of GA-PSO's random stream.
     #[arg(long, default_value_t = 0)]

@@ -28,13 +28,13 @@ pub(crate) struct InversePiArgs {
     #[command(flatten)]
     pub(crate) protocol: ProtocolArgs,
     /// Random starts of the (c, w_s) search (seed 000: 30).
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 30, value_parser = super::arguments::at_least_one)]
     pub(crate) starts: usize,
     /// Seed of the random initial values.
     #[arg(long, default_value_t = 0)]
     pub(crate) seed: u64,
     /// Nelder-Mead iterations per start at most.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 2000, value_parser = clap::value_parser!(u64).range(1..))]
     pub(crate) max_iterations: u64,
     /// Run every start to convergence, restarted at its end, instead of
     /// screening them for 60 iterations and running on the best 5 (`compare`
@@ -81,9 +81,6 @@ pub(crate) fn inverse_pi(args: &InversePiArgs) -> Result<(), Failure> {
         Some(v) => Some(args.protocol.validation_scored(&plan, v)?),
         None => None,
     };
-    if args.starts == 0 {
-        return Err(Failure::Input("--starts: give at least 1".to_owned()));
-    }
     let settings = InversePiSettings {
         starts: args.starts,
         seed: args.seed,
