@@ -20,14 +20,15 @@ each column's unit (where it has one) in its Arrow field's metadata
 
 - Runs go to a LocalCluster of N worker processes (default: one per core), or
   to an existing cluster (`dask scheduler`, `dask worker`) with --scheduler.
-  The FMUs travel with the tasks (scattered to the workers, unpacked into
-  each worker's temporary folder); parameter sets are read here and sent as
-  values, so no shared filesystem is assumed. The scheduler and every worker
+  The FMUs and the reference tables travel with the tasks (scattered to the
+  workers, written into each worker's temporary folder); parameter sets are
+  read here and sent as values, so no shared filesystem is assumed. The scheduler and every worker
   need this package importable (the scheduler unpickles the tasks, which
   name its functions), the workers also demo/bin/piezo-cosim (`make
   master`): start them from a checkout with PYTHONPATH set to it.
 - A run is a pure function of its scenario (spec, sample seed), whichever
-  task runs it: its key is a hash of the scenario with the FMUs' contents. A
+  task runs it: its key is a hash of the scenario with the contents of its
+  FMUs and reference tables (an edited table makes new runs). A
   task rescheduled after a worker dies gives the same rows (a task whose
   worker died with the only copy of the FMUs is sent again, the FMUs
   scattered anew), and the table keeps each key once; two grid points that
@@ -254,7 +255,8 @@ class Spec:
     runs_per_task: int = RUNS_PER_TASK
 
     def file(self, name: str) -> Path:
-        """A file the spec names (an FMU, a parameter set), relative to its folder."""
+        """A file the spec names (an FMU, a parameter set, a reference
+        table), relative to its folder."""
         return (self.path.parent / name).resolve()
 
 
@@ -795,6 +797,29 @@ def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+#: A scenario names the files that travel with the tasks by their content
+#: digest: an FMU as `fmu:<digest>`, a reference table as
+#: `table:<digest>/<its file name>` (the name stays in the master's messages).
+FMU_PREFIX = "fmu:"
+TABLE_PREFIX = "table:"
+
+
+def _table_digest(file: str) -> tuple[str, str] | None:
+    """(digest, file name) of a scenario's travelling table, else None."""
+    if not file.startswith(TABLE_PREFIX):
+        return None
+    digest, _, name = file.removeprefix(TABLE_PREFIX).partition("/")
+    return digest, name
+
+
+def _tables(scenario: dict):
+    """The `table` entries of a scenario's signals."""
+    for signal in scenario.get("signal", {}).values():
+        table = signal.get("table") if isinstance(signal, dict) else None
+        if isinstance(table, dict) and isinstance(table.get("file"), str):
+            yield table
+
+
 def canonical(value) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"))
 
@@ -822,7 +847,7 @@ def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict, files: dic
         path = files[entry["path"]]
         if path not in fmus:
             fmus[path] = _digest(path)
-        entry["path"] = f"fmu:{fmus[path]}"
+        entry["path"] = f"{FMU_PREFIX}{fmus[path]}"
         values = {}
         for name in entry.pop("parameter_sets", []):
             set_path = spec.file(name)
@@ -838,6 +863,24 @@ def _resolve_fmus(scenario: dict, spec: Spec, fmus: dict, sets: dict, files: dic
             values.update(sets[set_path])
         values.update(entry.get("parameters", {}))
         entry["parameters"] = values
+    for port, signal in scenario.get("signal", {}).items():
+        table = signal.get("table") if isinstance(signal, dict) else None
+        if not isinstance(table, dict) or not isinstance(table.get("file"), str):
+            continue  # not a table source: the master names what is wrong
+        name = table["file"]
+        if name not in files:
+            path = spec.file(name)
+            if not path.is_file():
+                raise _fail(spec.path, spec.text, name,
+                            f"signal {port}: reference table {path} does not exist (a table "
+                            f"is read relative to the spec's folder)")
+            files[name] = path
+        path = files[name]
+        if path not in fmus:
+            fmus[path] = _digest(path)
+        # Its contents are part of the run's key (an edited table is a new
+        # run, as an edited FMU is), and it travels with the tasks.
+        table["file"] = f"{TABLE_PREFIX}{fmus[path]}/{path.name}"
     return scenario
 
 
@@ -905,7 +948,8 @@ def sample_factors(spec: Spec, sample: int, names: dict[int, list[str]]) -> tupl
 
 
 def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
-    """Every run of the spec, in a fixed order, and the FMUs by digest."""
+    """Every run of the spec, in a fixed order, and the files that travel
+    with its tasks (FMUs, reference tables) by digest."""
     fmus: dict[Path, str] = {}
     sets: dict[Path, dict] = {}
     files: dict[str, Path] = {}
@@ -1091,6 +1135,21 @@ def _unpacked(digest: str, data: bytes) -> Path:
     return target
 
 
+def _written(digest: str, name: str, data: bytes) -> Path:
+    """A reference table's `data` written once per process and digest, under
+    its own file name (which the master's messages name)."""
+    target = _cache_folder() / digest / name
+    if target.is_file():
+        return target
+    if hashlib.sha256(data).hexdigest() != digest:
+        raise RuntimeError(f"table {name}: the bytes received do not match its digest")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    partial = target.with_name(f".{name}.partial")
+    partial.write_bytes(data)
+    partial.replace(target)
+    return target
+
+
 def flatten_metrics(metrics: dict | None) -> dict:
     """Ranges [min, max] become two columns <name>_min, <name>_max
     (`y_error_range_min`): without the `_range` they would overwrite the
@@ -1120,8 +1179,11 @@ def execute_runs(runs: list[Run], fmu_data: dict, timeout: float | None) -> list
     for run in runs:
         scenario = copy.deepcopy(run.scenario)
         for entry in scenario["fmu"].values():
-            digest = entry["path"].removeprefix("fmu:")
+            digest = entry["path"].removeprefix(FMU_PREFIX)
             entry["path"] = str(_unpacked(digest, fmu_data[digest]))
+        for table in _tables(scenario):
+            if (travelling := _table_digest(table["file"])) is not None:
+                table["file"] = str(_written(*travelling, fmu_data[travelling[0]]))
         scenarios.append(scenario)
     rows = []
     for run, outcome in zip(runs, master.run_batch(scenarios, timeout=timeout)):
@@ -1468,11 +1530,22 @@ def _runs_to_check(runs: list[Run], spec: Spec) -> tuple[list, list]:
     return references, neighbours
 
 
-def _check_one(run: Run, fmus: dict[str, Path]) -> master.MasterError | None:
-    """The master's check of one run's scenario: its error, or None."""
+def local_scenario(run: Run, files: dict[str, Path]) -> dict:
+    """A run's scenario with the files it names by digest (`files`, as
+    `expand` returns them) back at their paths here: what the master runs
+    on this machine, as a worker runs it on its copies."""
     scenario = copy.deepcopy(run.scenario)
     for entry in scenario.get("fmu", {}).values():
-        entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
+        entry["path"] = str(files[entry["path"].removeprefix(FMU_PREFIX)])
+    for table in _tables(scenario):
+        if (travelling := _table_digest(table["file"])) is not None:
+            table["file"] = str(files[travelling[0]])
+    return scenario
+
+
+def _check_one(run: Run, fmus: dict[str, Path]) -> master.MasterError | None:
+    """The master's check of one run's scenario: its error, or None."""
+    scenario = local_scenario(run, fmus)
     try:
         master.check(scenario)
     except master.MasterError as e:

@@ -152,9 +152,7 @@ def test_a_local_cluster_sweep_makes_one_row_per_run(spec_path, reference_table)
     # A row is what the master gives for that run directly.
     spec = sweep.load_spec(spec_path)
     runs, fmus = sweep.expand(spec)
-    scenario = runs[5].scenario
-    for entry in scenario["fmu"].values():
-        entry["path"] = str(fmus[entry["path"].removeprefix("fmu:")])
+    scenario = sweep.local_scenario(runs[5], fmus)
     direct = master.run(scenario)["metrics"]
     assert set(direct) <= set(sweep.metric_definitions()), "the master's own list names them"
     assert rows[5]["tracking_rms"] == direct["tracking_rms"]
@@ -1413,3 +1411,71 @@ def test_an_envelope_report_of_a_monte_carlo_is_refused_before_any_run(tmp_path)
     assert done.stderr.strip().startswith(f"{spec}:{line}: report 'envelope' shows one run per "
                                           "grid point"), done.stderr
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").glob("*.parquet"))
+
+
+TABLE_SPEC = f"""
+study = "small"
+
+[template]
+duration = 0.3
+
+[template.fmu.plant]
+path = "{PLANT}"
+
+[template.fmu.controller]
+path = "{CONTROLLER}"
+parameters = {{ "translation.ki" = "= ki" }}
+
+[template.metrics]
+driven = "y"
+from = 0.15
+
+[template.signal."controller.y_ref"]
+table = {{ file = "step.csv", column = "y_ref" }}
+
+[[variable]]
+name = "ki"
+values = [20.0, 50.0]
+"""
+
+
+def test_a_reference_table_is_read_beside_the_spec_and_its_contents_key_the_runs(
+        tmp_path, monkeypatch):
+    """A relative reference table was read from the current folder, not the
+    spec's (from another folder the sweep blamed a file that exists, and a
+    file of that name there would have been read without a word), and its
+    contents were not part of the runs' keys: a table edited after a sweep
+    kept the old rows with "0 runs executed", exit 0. The table now travels
+    with the tasks by its digest, as the FMUs do, so an edited table makes
+    new runs, and the rows of the old ones are refused (StaleTable)."""
+    folder = tmp_path / "study"
+    folder.mkdir()
+    spec = _written(folder / "table.toml", TABLE_SPEC)
+    step = folder / "step.csv"
+    step.write_text("t[ms],y_ref[nm]\n0,0\n99.9,0\n100,4000\n300,4000\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "step.csv").write_text("t,y_ref\n0,0\n0.3,9\n")  # not the spec's
+    monkeypatch.chdir(elsewhere)
+    out = tmp_path / "out"
+    (summary,) = local_sweeps([(spec, out)])
+    assert (summary["executed"], summary["failed"]) == (2, 0), summary
+    rows = rows_of(out)
+    # The step reaches 4 um at 0.1 s (ms and nm converted), not the 9 um ramp here.
+    runs, files = sweep.expand(sweep.load_spec(spec))
+    direct = master.run(sweep.local_scenario(runs[0], files))["metrics"]
+    assert rows[0]["tracking_rms"] == direct["tracking_rms"]
+    assert direct["demand_span"] == pytest.approx(0.0, abs=1e-12)  # 4 um held over the window
+    # Edited, the table makes other runs: the old rows are refused, not kept.
+    step.write_text("t[ms],y_ref[nm]\n0,0\n99.9,0\n100,8000\n300,8000\n")
+    assert {r.key for r in sweep.expand(sweep.load_spec(spec))[0]}.isdisjoint(
+        {r["key"] for r in rows})
+    with pytest.raises(sweep.StaleTable):
+        sweep.run_sweep(sweep.load_spec(spec), out, client=None)
+    # A table that is not beside the spec is named with the line that names it.
+    step.unlink()
+    with pytest.raises(sweep.SpecError) as missing:
+        sweep.expand(sweep.load_spec(spec))
+    assert str(missing.value) == (
+        f"{spec}:19: signal controller.y_ref: reference table {step} does not exist (a table "
+        f"is read relative to the spec's folder)")
