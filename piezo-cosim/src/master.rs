@@ -292,6 +292,12 @@ pub fn run_with(
     for port in &metric_ports {
         want_output(port, &mut read)?;
     }
+    // What `record` names is checked in every run, with or without a
+    // series: `check` and `run` passed a misspelt name that `run --series`
+    // then refused.
+    for port in &scenario.record {
+        resolve(port)?;
+    }
     if options.series {
         for l in &loaded {
             for v in l.archive.fmu.with_causality(Causality::Output) {

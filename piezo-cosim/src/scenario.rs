@@ -440,6 +440,33 @@ impl Scenario {
                     ),
                 ));
             }
+            if let Some(spacing) = metrics.spacing
+                && !(spacing.is_finite() && spacing > 0.0)
+            {
+                return Err(Invalid::table_key(
+                    "metrics",
+                    "spacing",
+                    format!(
+                        "metrics.spacing ({spacing}) must be a positive distance between the x \
+                         sensors [um]"
+                    ),
+                ));
+            }
+            if let Some(circle) = &metrics.contour
+                && !(circle.centre.iter().all(|c| c.is_finite())
+                    && circle.radius.is_finite()
+                    && circle.radius > 0.0)
+            {
+                return Err(Invalid::table_key(
+                    "metrics",
+                    "contour",
+                    format!(
+                        "metrics.contour: a circle needs a finite centre and a positive radius \
+                         [um] (centre = [{}, {}], radius = {})",
+                        circle.centre[0], circle.centre[1], circle.radius
+                    ),
+                ));
+            }
             if metrics.driven == Driven::Xy && metrics.contour.is_none() {
                 return Err(Invalid::table_key(
                     "metrics",
@@ -894,6 +921,38 @@ path = "c.fmu"
         let text = format!("{MINIMAL}\n[metrics]\ndriven = \"xy\"\nfrom = 0.5\n");
         let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
         assert!(e.contains("contour"), "{e}");
+    }
+
+    /// A sensor spacing of 0 or below, or a circle of no radius, made null or
+    /// meaningless figures with exit 0; each is refused at its line.
+    #[test]
+    fn metric_geometry_must_be_positive() {
+        for (metrics, line, said) in [
+            (
+                "driven = \"theta\"\nfrom = 0.5\nspacing = 0.0",
+                11,
+                "metrics.spacing (0) must be a positive distance between the x sensors [um]",
+            ),
+            (
+                "driven = \"theta\"\nfrom = 0.5\nspacing = -5.0",
+                11,
+                "metrics.spacing (-5) must be a positive distance between the x sensors [um]",
+            ),
+            (
+                "driven = \"xy\"\nfrom = 0.5\ncontour = { centre = [0, 2], radius = -1 }",
+                11,
+                "metrics.contour: a circle needs a finite centre and a positive radius [um] \
+                 (centre = [0, 2], radius = -1)",
+            ),
+        ] {
+            let text = format!("{MINIMAL}\n[metrics]\n{metrics}\n");
+            let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+            assert_eq!(e, format!("s.toml:{line}: {said}"));
+        }
+        let text = format!(
+            "{MINIMAL}\n[metrics]\ndriven = \"xy\"\nfrom = 0.5\ncontour = {{ centre = [6, 6], radius = 5 }}\n"
+        );
+        assert!(Scenario::parse(&text, false, "s.toml").is_ok());
     }
 
     #[test]

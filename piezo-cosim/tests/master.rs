@@ -337,6 +337,36 @@ fn a_scenario_that_does_not_fit_is_refused_by_name() {
     );
 }
 
+/// A misspelt name in `record` is refused by `check` and by a run without a
+/// series, as a run with one refuses it: it passed both and was ignored by
+/// sweeps.
+#[test]
+fn a_recorded_name_is_checked_with_or_without_a_series() {
+    let fmus = fmus();
+    let mut scenario = y_sine(&fmus, 0.01, "");
+    scenario.record = vec!["plant.pzt[1].A".into(), "controller.kpp".into()];
+    for options in [
+        RunOptions {
+            check_only: true,
+            ..RunOptions::default()
+        },
+        RunOptions::default(),
+        RunOptions {
+            series: true,
+            ..RunOptions::default()
+        },
+    ] {
+        let error = run(&scenario, options).unwrap_err();
+        assert!(
+            matches!(&error, RunError::Scenario(m)
+                if m.starts_with("controller.kpp: ") && m.contains("has no variable \"kpp\"")),
+            "{error}"
+        );
+    }
+    scenario.record.pop();
+    assert!(run(&scenario, RunOptions::default()).is_ok());
+}
+
 /// A parameter value the FMU refuses ends the run with the FMU's log, as
 /// the scenario's problem (exit 2), not an FMU's failure while running.
 #[test]
