@@ -316,6 +316,13 @@ def describe_breaks(items, holds, breaks, tracking_limit, reduction_limit) -> st
     return "failing " + "; ".join(parts) + f" (why: {why})"
 
 
+def _legible_on(image, value: float) -> str:
+    """Black on a light cell (viridis's yellow end), white on a dark one:
+    white on yellow could not be read."""
+    red, green, blue, _ = image.cmap(image.norm(value))
+    return "black" if 0.299 * red + 0.587 * green + 0.114 * blue > 0.5 else "white"
+
+
 def envelope_figure(groups, where: tuple, label: str, kind, limit, path: Path) -> None:
     """One heatmap (frequency x amplitude) per axis or coupling and held
     demand, on one colour scale; the values of failing cells in red.
@@ -328,12 +335,12 @@ def envelope_figure(groups, where: tuple, label: str, kind, limit, path: Path) -
         if kind == "tracking":
             panels.append((axis, None, f"{axis}: tracking RMS / amplitude [%]"))
         else:
-            for _, label in COUPLINGS[axis]:
-                panels.append((axis, label, f"{label}: span without / with decoupling"))
+            for _, coupling in COUPLINGS[axis]:
+                panels.append((axis, coupling, f"{coupling}: span without / with decoupling"))
     held_values = sorted({k[0] for a in axes_present
                           for k, _ in groups[(stage, method, a, extra)]})
     grids = []
-    for axis, label, title in panels:
+    for axis, coupling, title in panels:
         items = groups[(stage, method, axis, extra)]
         amplitudes = sorted({k[1] for k, _ in items})
         frequencies = sorted({k[2] for k, _ in items})
@@ -343,7 +350,7 @@ def envelope_figure(groups, where: tuple, label: str, kind, limit, path: Path) -
                 if h == held:
                     z[amplitudes.index(a), frequencies.index(f)] = (
                         100 * relative_tracking(pair["on"]) if kind == "tracking"
-                        else reductions(axis, pair["off"], pair["on"])[label])
+                        else reductions(axis, pair["off"], pair["on"])[coupling])
             grids.append((title, held, amplitudes, frequencies, z))
     values = np.concatenate([g[-1].ravel() for g in grids])
     values = values[np.isfinite(values) & (values > 0)]
@@ -362,7 +369,7 @@ def envelope_figure(groups, where: tuple, label: str, kind, limit, path: Path) -
                 if np.isfinite(z[i, j]):
                     fails = z[i, j] > 100 * limit if kind == "tracking" else z[i, j] < limit
                     ax.text(j, i, fmt(z[i, j], 2), ha="center", va="center", fontsize=7,
-                            color="red" if fails else "white",
+                            color="red" if fails else _legible_on(image, z[i, j]),
                             fontweight="bold" if fails else "normal")
         ax.set_xticks(range(len(frequencies)), [fmt(f) for f in frequencies], fontsize=7)
         ax.set_yticks(range(len(amplitudes)), [fmt(a) for a in amplitudes], fontsize=7)

@@ -1072,12 +1072,21 @@ def test_the_robustness_report_keeps_a_further_variables_runs_apart(tmp_path):
     assert (tmp_path / "robustness.png").is_file()
 
 
-def test_the_envelope_report_keeps_a_further_variables_runs_apart(tmp_path):
+def test_the_envelope_report_keeps_a_further_variables_runs_apart(tmp_path, monkeypatch):
     """The envelope paired runs by (stage, method, axis, held, amplitude,
     frequency): a spec with a further variable (`kp`, two values) had each
     kp = 0.05 run replaced by its kp = 0.5 twin. Each value now has its row
-    and its heatmaps, and the points they count add up to the table."""
+    and its heatmaps, and the points they count add up to the table; each
+    figure's title says its value (a loop over the couplings overwrote it,
+    and titled the coupling figure by its last panel, "x3 from y")."""
+    from matplotlib.figure import Figure
+
     from demo.sweep_report import envelope_section
+
+    titles = []
+    save = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda figure, *args, **kwargs: (
+        titles.append(figure.get_suptitle()), save(figure, *args, **kwargs)))
 
     rows = []
     for kp in (0.05, 0.5):
@@ -1099,6 +1108,8 @@ def test_the_envelope_report_keeps_a_further_variables_runs_apart(tmp_path):
     assert 2 * sum(int(row["points holding"].split("/")[1]) for row in table) == len(rows)
     for kp in ("0.05", "0.5"):
         assert (tmp_path / f"envelope_flexure_m_kp-{kp}_coupling.png").is_file(), kp
+    assert len(titles) == 4 and all("kp" in title for title in titles), titles
+    assert not any("x3 from y" in title for title in titles), titles
 
 
 def test_a_report_refuses_to_show_one_run_in_place_of_another():
