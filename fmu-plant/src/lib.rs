@@ -256,7 +256,7 @@ const AMPLIFIER: &[Variable<FlexureStageFmu>] = &[
     piezo_fmu_tables::fixed_parameter!(
         FlexureStageFmu,
         "amplifier.gain",
-        "Amplifier voltage gain, > 0 (Guo et al. §2: 10)",
+        "Amplifier voltage gain, > 0 (Guo et al. §3.2: 10)",
         "",
         AmplifierParams::GAIN,
         amplifier.gain
