@@ -76,6 +76,10 @@ impl ParameterValue {
             }
             ("Boolean", ParameterValue::Boolean(v)) => Ok(TypedValue::Boolean(v)),
             ("Real", _) => Err("a number"),
+            // A whole number beyond fmi2Integer's 32 bits is not "not whole".
+            ("Integer" | "Enumeration", ParameterValue::Number(v)) if v.fract() == 0.0 => {
+                Err("a whole number from -2147483648 to 2147483647 (32 bits)")
+            }
             ("Integer" | "Enumeration", _) => Err("a whole number"),
             ("Boolean", _) => Err("true or false"),
             _ => Err("no value set by name"),
@@ -259,14 +263,17 @@ mod tests {
         assert_eq!(Number(2.5).typed("Real"), Ok(TypedValue::Real(2.5)));
         assert_eq!(Number(3.0).typed("Integer"), Ok(TypedValue::Integer(3)));
         assert_eq!(Number(3.5).typed("Integer"), Err("a whole number"));
-        assert_eq!(Number(1e10).typed("Integer"), Err("a whole number"));
+        assert_eq!(
+            Number(1e10).typed("Integer"),
+            Err("a whole number from -2147483648 to 2147483647 (32 bits)")
+        );
         assert_eq!(
             Number(-2147483648.0).typed("Integer"),
             Ok(TypedValue::Integer(i32::MIN))
         );
         assert_eq!(
             Number(-2147483649.0).typed("Integer"),
-            Err("a whole number")
+            Err("a whole number from -2147483648 to 2147483647 (32 bits)")
         );
         assert_eq!(
             Boolean(true).typed("Boolean"),
