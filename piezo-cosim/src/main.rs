@@ -113,8 +113,13 @@ fn line_of_port<'a>(
     instances: impl Iterator<Item = &'a str>,
 ) -> Option<usize> {
     let instances: Vec<&str> = instances.collect();
-    // `controller.decoupling is a Boolean variable ...`, `plant.x: ...`
-    let port = message
+    // `controller.decoupling is a Boolean variable ...`, `plant.x: ...`,
+    // `connection source plant.u1 is not an output ...`
+    let named = message
+        .strip_prefix("connection source ")
+        .or_else(|| message.strip_prefix("connection destination "))
+        .unwrap_or(message);
+    let port = named
         .split(|c: char| c == ':' || c.is_whitespace())
         .next()?;
     if let Some((instance, variable)) = port.split_once('.')
@@ -515,6 +520,14 @@ offset = 0.0
             Some(5)
         );
         assert_eq!(line("controller: fmi2DoStep returned status 3"), None);
+        // A connection's end the FMU does not have that way round: the
+        // connection that writes it (SCENARIO's own signal key here).
+        assert_eq!(
+            line(
+                "connection source controller.x_reff is not an output (in c.fmu its causality is input)"
+            ),
+            Some(12)
+        );
     }
 
     #[test]

@@ -384,7 +384,7 @@ pub fn run_with(
     }
 
     // Parameter values by FMI name, typed by the variable.
-    let mut parameters: Vec<Vec<(u32, TypedValue)>> = Vec::with_capacity(loaded.len());
+    let mut parameters: Vec<Vec<(u32, TypedValue, String)>> = Vec::with_capacity(loaded.len());
     let mut parameter_value: BTreeMap<String, f64> = BTreeMap::new();
     for l in &loaded {
         let spec = &scenario.fmu[&l.name];
@@ -415,7 +415,7 @@ pub fn run_with(
             if let TypedValue::Real(v) = value {
                 parameter_value.insert(port, v);
             }
-            typed.push((info.vr, value));
+            typed.push((info.vr, value, name));
         }
         parameters.push(typed);
     }
@@ -464,6 +464,14 @@ pub fn run_with(
             scenario.steps()
         ));
     }
+    // A value the FMU refuses that came from a parameter set is named with
+    // the set's file, as an unknown name from one is.
+    let with_origin = |instance: &str, name: &str, message: String| match scenario.fmu[instance]
+        .parameter_origin(name)
+    {
+        Some(set) => format!("{message} (given in {})", set.display()),
+        None => message,
+    };
     for (slot, typed) in slots.iter_mut().zip(&parameters) {
         let status = slot.instance.setup(0.0);
         check(slot, "fmi2SetupExperiment", status, 0.0, &mut warnings)?;
@@ -475,12 +483,13 @@ pub fn run_with(
             0.0,
             &mut warnings,
         )?;
-        for &(vr, value) in typed {
-            let (call, status) = slot.instance.set_typed(vr, value);
+        for (vr, value, name) in typed {
+            let (call, status) = slot.instance.set_typed(*vr, *value);
             // A value the FMU refuses (out of its range, an output) is the
             // scenario's to fix, as an unknown name is.
+            let instance = slot.name.clone();
             check(slot, call, status, 0.0, &mut warnings).map_err(|e| match e {
-                RunError::Fmu(message) => RunError::Scenario(message),
+                RunError::Fmu(message) => RunError::Scenario(with_origin(&instance, name, message)),
                 e => e,
             })?;
         }
@@ -496,7 +505,14 @@ pub fn run_with(
             &mut warnings,
         )
         .map_err(|e| match e {
-            RunError::Fmu(message) if message.contains("parameter ") => RunError::Scenario(message),
+            RunError::Fmu(message) if message.contains("parameter ") => {
+                let named = message
+                    .split_once("parameter ")
+                    .and_then(|(_, rest)| rest.split_whitespace().next())
+                    .unwrap_or("")
+                    .to_owned();
+                RunError::Scenario(with_origin(&slot.name, &named, message))
+            }
             e => e,
         })?;
     }

@@ -370,12 +370,16 @@ impl Scenario {
         // The signals are sampled up to t_(steps + preview): a preview past
         // the run's end previews nothing the run uses.
         if self.preview as usize > self.steps() {
-            return Err(Invalid::key(
-                "preview",
+            return Err(Invalid::first_key(
+                &["preview", "step", "duration"],
                 format!(
-                    "preview ({} samples) must not exceed the run's {} steps",
+                    "the run's {} steps (duration {} s at {} s a step) are fewer than its preview \
+                     of {} samples (`preview`, {DEFAULT_PREVIEW} unless given): a shorter step, a \
+                     longer duration or a shorter preview",
+                    self.steps(),
+                    self.duration,
+                    self.step,
                     self.preview,
-                    self.steps()
                 ),
             ));
         }
@@ -398,6 +402,30 @@ impl Scenario {
                 ))
             }
         };
+        // The default wiring is written nowhere: an instance it does not
+        // know is the one to point at, not the wiring's port.
+        if self.connection.is_none()
+            && !(self.fmu.contains_key(PLANT) && self.fmu.contains_key(CONTROLLER))
+        {
+            let unknown = self
+                .fmu
+                .keys()
+                .find(|name| ![PLANT, CONTROLLER].contains(&name.as_str()))
+                .cloned();
+            return Err(Invalid {
+                message: format!(
+                    "the stage's default wiring connects FMU instances \"{PLANT}\" and \
+                     \"{CONTROLLER}\"; this scenario's are {}: name them so, or give \
+                     [[connection]] entries",
+                    self.fmu
+                        .keys()
+                        .map(|k| format!("{k:?}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                written: unknown.map_or(Written::Anywhere, Written::Instance),
+            });
+        }
         for connection in self.connections() {
             instance_of(&connection.from, "connection source")?;
             instance_of(&connection.to, "connection destination")?;
@@ -498,6 +526,10 @@ enum Written {
         table: &'static str,
         key: &'static str,
     },
+    /// The first of these top-level keys the text writes.
+    FirstKey(&'static [&'static str]),
+    /// An FMU instance, by its `[fmu.<name>]` header.
+    Instance(String),
     /// The whole scenario.
     Anywhere,
 }
@@ -521,6 +553,13 @@ impl Invalid {
         }
     }
 
+    fn first_key(keys: &'static [&'static str], message: String) -> Invalid {
+        Invalid {
+            message,
+            written: Written::FirstKey(keys),
+        }
+    }
+
     fn anywhere(message: String) -> Invalid {
         Invalid {
             message,
@@ -534,6 +573,19 @@ impl Invalid {
     fn line(&self, text: &str, json: bool) -> Option<usize> {
         match &self.written {
             Written::Port(port) => return line_of_quoted(text, port),
+            Written::FirstKey(keys) => {
+                return keys
+                    .iter()
+                    .find_map(|key| Invalid::table_key("", key, String::new()).line(text, json));
+            }
+            Written::Instance(name) if !json => {
+                let headers = [format!("[fmu.{name}]"), format!("[fmu.\"{name}\"]")];
+                text.lines().position(|line| {
+                    let line = line.split('#').next().unwrap_or("").trim();
+                    headers.iter().any(|h| line.starts_with(h.as_str()))
+                })
+            }
+            Written::Instance(name) => line_of_quoted(text, name).map(|line| line - 1),
             Written::Key { .. } if json => None,
             Written::Key { table, key } => {
                 let mut current = "";
@@ -815,7 +867,16 @@ path = "c.fmu"
         let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
         assert_eq!(
             e,
-            "s.toml:3: preview (10001 samples) must not exceed the run's 10000 steps"
+            "s.toml:3: the run's 10000 steps (duration 1 s at 0.0001 s a step) are fewer than \
+             its preview of 10001 samples (`preview`, 2 unless given): a shorter step, a longer \
+             duration or a shorter preview"
+        );
+        // Not written, the default preview is pointed at by the step.
+        let text = MINIMAL.replace("duration = 1.0", "duration = 0.2\nstep = 0.15");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert!(
+            e.starts_with("s.toml:3: the run's 1 steps (duration 0.2 s at 0.15 s a step)"),
+            "{e}"
         );
         let text = MINIMAL.replace("duration = 1.0", "duration = 1.0\npreview = 10000");
         assert!(Scenario::parse(&text, false, "s.toml").is_ok());
@@ -840,6 +901,21 @@ path = "c.fmu"
     /// A port of an unknown instance is named at the line that writes it:
     /// a signal's table, a connection's end, a recorded variable, in TOML
     /// and in JSON.
+    /// A misspelt instance under the default wiring was named by the
+    /// wiring's port, which the scenario does not write ("connection source
+    /// \"controller.u1\": no FMU instance"); it is named at its header.
+    #[test]
+    fn the_default_wiring_names_the_instance_it_lacks() {
+        let text = MINIMAL.replace("[fmu.controller]", "[fmu.controler]");
+        let e = Scenario::parse(&text, false, "s.toml").unwrap_err().0;
+        assert_eq!(
+            e,
+            "s.toml:5: the stage's default wiring connects FMU instances \"plant\" and \
+             \"controller\"; this scenario's are \"controler\", \"plant\": name them so, or \
+             give [[connection]] entries"
+        );
+    }
+
     #[test]
     fn ports_must_name_an_instance() {
         let text = format!("{MINIMAL}\n[signal.\"ctrl.y_ref\"]\noffset = 1.0\n");

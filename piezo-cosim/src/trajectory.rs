@@ -309,7 +309,15 @@ impl Table {
             let counted = row as u64 + 2;
             let record = record.map_err(|e| {
                 let line = line_at(e.position(), counted);
-                format!("{}:{line}: {e}", name(&source.file))
+                // The csv crate's own message carries its position, which
+                // counts a CRLF file's lines otherwise ("line: 2" on line 3).
+                let problem = match e.kind() {
+                    csv::ErrorKind::UnequalLengths {
+                        expected_len, len, ..
+                    } => format!("{len} fields where the header has {expected_len}"),
+                    _ => e.to_string(),
+                };
+                format!("{}:{line}: {problem}", name(&source.file))
             })?;
             let line = line_at(record.position(), counted);
             let number = |column: usize| -> Result<f64, String> {
@@ -505,6 +513,19 @@ mod tests {
                 e.ends_with(&format!(
                     "r.csv:5: column \"y\": \"{bad}\" is not a finite number"
                 )),
+                "{e}"
+            );
+        }
+        // A row of another width is named by its line alone, which the csv
+        // crate's own message counted otherwise in a CRLF file.
+        for text in [
+            "t,y\n0,0\n0.1,1,\n0.2,1\n",
+            "t,y\r\n0,0\r\n0.1,1,\r\n0.2,1\r\n",
+        ] {
+            std::fs::write(y.table.as_ref().unwrap().file.clone(), text).unwrap();
+            let e = y.sample(&[0.0], None).unwrap_err();
+            assert!(
+                e.ends_with("r.csv:3: 3 fields where the header has 2"),
                 "{e}"
             );
         }

@@ -335,6 +335,16 @@ fn a_scenario_that_does_not_fit_is_refused_by_name() {
         )),
         "{error}"
     );
+    // So does a value from a set that the FMU refuses, as the scenario's.
+    std::fs::write(&set, r#"{"translation.kp": -0.05}"#).unwrap();
+    let error = run(&scenario, RunOptions::default()).unwrap_err();
+    std::fs::remove_file(&set).ok();
+    assert!(
+        matches!(&error, RunError::Scenario(m)
+            if m.contains("translation.kp = -0.05 is outside its allowed range")
+                && m.ends_with(&format!("(given in {})", set.display()))),
+        "{error}"
+    );
 }
 
 /// A misspelt name in `record` is refused by `check` and by a run without a
