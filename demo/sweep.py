@@ -659,6 +659,13 @@ def load_spec(path: str | Path) -> Spec:
             raise fail_at("seed_parameter", f"monte_carlo.seed_parameter "
                                             f"{_shown(seed_parameter)}: a parameter's FMI name "
                                             f"in quotes", mc_span)
+        # Samples that vary nothing are one run, said as such: the grid's
+        # "two points make the same run" blamed a variable or a value.
+        if not vary and seed_parameter is None and samples > 1:
+            raise fail(mc_span[0] if mc_span else "monte_carlo",
+                       f"monte_carlo: its {samples} samples would all be one plant: give a "
+                       f"[[monte_carlo.vary]] group (match, relative) to draw parameters from, "
+                       f"or seed_parameter to draw the noise's seed")
         mc = MonteCarlo(samples, instance, vary, seed_parameter)
     report_options = data.get("report_options", {})
     options_span = lines.table_or_key("report_options")
@@ -995,7 +1002,10 @@ def expand(spec: Spec) -> tuple[list[Run], dict[str, Path]]:
             for earlier in range(g):
                 both = sorted(set(vary_names[earlier]) & set(vary_names[g]))
                 if both:
-                    raise _fail(spec.path, spec.text, group.pattern.pattern,
+                    lines = _SpecLines(spec.text)
+                    own = lines.table("monte_carlo.vary", g)
+                    raise _fail(spec.path, spec.text,
+                                lines.key("match", own) if own else group.pattern.pattern,
                                 f"monte_carlo.vary {group.pattern.pattern!r} matches "
                                 f"{', '.join(both)}, which "
                                 f"{mc.vary[earlier].pattern.pattern!r} matches too")
@@ -1189,7 +1199,7 @@ def execute_runs(runs: list[Run], fmu_data: dict, timeout: float | None) -> list
     for run, outcome in zip(runs, master.run_batch(scenarios, timeout=timeout)):
         row = {"run": run.index, "key": run.key, **run.values}
         if isinstance(outcome, master.MasterError):
-            row.update(status="error", error=str(outcome)[:2000])
+            row.update(status="error", error=_without_stdin(str(outcome))[:2000])
         elif isinstance(outcome, subprocess.TimeoutExpired):
             # Not a property of the run (a loaded machine can cause it): the
             # row says so, and the next invocation runs it again.
@@ -1485,7 +1495,7 @@ def check_scenarios(runs: list[Run], fmus: dict[str, Path], spec: Spec) -> list[
                                  [run for run, _ in references + neighbours]))
     for (run, signature), error in zip(references, outcomes):
         if error is not None:
-            raise _case_error(spec, signature, error)
+            raise _case_error(spec, run, signature, error)
     for (run, value), error in zip(neighbours, outcomes[len(references):]):
         if error is not None:
             raise _value_error(spec, run, value, error)
@@ -1562,11 +1572,58 @@ def _unread(error: master.MasterError) -> tuple[str, str] | None:
     return found.groups() if found else None
 
 
-def _case_error(spec: Spec, signature: tuple, error: master.MasterError) -> SpecError:
+def _without_stdin(text: str) -> str:
+    """The master's message without the place in the JSON it was sent
+    (`<stdin>:1:253: `, `<stdin>: `), which means nothing to the spec's
+    reader."""
+    return re.sub(r"^<stdin>(?::\d+)*: ", "", text)
+
+
+def _port_place(spec: Spec, signature: tuple, message: str) -> tuple[str, str] | None:
+    """(where, a note on it) of a message about an FMI name (`controller.kpp: ...
+    has no variable`, `connection source plant.u1 is not ...`): the spec's
+    line that writes the name (a parameter, a signal's port, the Monte Carlo's
+    seed_parameter; quoted or bare), or the parameter set that gives it;
+    None where the message names no `instance.variable` of the template."""
+    named = re.sub(r"^(?:connection (?:source|destination)|signal|recorded variable) ", "",
+                   _without_stdin(message))
+    port = re.split(r"[:\s]", named, maxsplit=1)[0].strip('"')
+    instance, _, variable = port.partition(".")
+    fmu = spec.template.get("fmu", {})
+    if not variable or instance not in fmu:
+        return None
+    for entry in (fmu[instance], *(_case_patch(spec, n, c).get("fmu", {}).get(instance, {})
+                                   for n, c in signature)):
+        for name in entry.get("parameter_sets", []) if isinstance(entry, dict) else []:
+            try:
+                values = json.loads(spec.file(name).read_text(encoding="utf-8-sig"))
+            except (OSError, json.JSONDecodeError):
+                continue
+            if isinstance(values, dict) and variable in values and \
+                    variable not in entry.get("parameters", {}):
+                set_text = spec.file(name).read_text(encoding="utf-8-sig")
+                line = next((n for n, text in enumerate(set_text.splitlines(), 1)
+                             if f'"{variable}"' in text), None)
+                where = f"{spec.file(name)}:{line}" if line else str(spec.file(name))
+                return where, " (a value of this parameter set)"
+    for needle in (f'"{port}"', f'"{variable}"', f"'{variable}'"):
+        line = next((n for n, text in enumerate(spec.text.splitlines(), 1)
+                     if needle in text.split("#")[0]), None)
+        if line:
+            return f"{spec.path}:{line}", ""
+    line = _line_of(spec.text, variable)
+    return (f"{spec.path}:{line}", "") if line else None
+
+
+def _case_error(spec: Spec, run: Run, signature: tuple,
+                error: master.MasterError) -> SpecError:
     """The error of a run of named cases `signature` that does not check: at
     the line of the key the master names, in the template or in a case's
-    patch, or of the spec."""
-    cases = ", ".join(f"{k} = {v}" for k, v in signature) or "the template"
+    patch, or of the spec. The run's values are named: a value of a further
+    variable may be the cause."""
+    names = [v.name for v in spec.variables]
+    cases = ", ".join(f"{n} = {v}" if isinstance(v, str) else f"{n} = {_shown(v)}"
+                      for n, v in ((n, run.values[n]) for n in names)) or "the template"
     unread = _unread(error)
     if unread:
         key, problem = unread
@@ -1584,7 +1641,16 @@ def _case_error(spec: Spec, signature: tuple, error: master.MasterError) -> Spec
         where = f"{spec.path}:{line}" if line else str(spec.path)
         source = "template" if line else "scenario"
         return SpecError(f"{where}: {source} {key}: {problem} (in the scenario of {cases})")
-    return SpecError(f"{spec.path}: the scenario of {cases} does not run: {error}")
+    text = _without_stdin(str(error))
+    place = _port_place(spec, signature, text)
+    if place is not None:
+        return SpecError(f"{place[0]}: {text}{place[1]} (in the scenario of {cases})")
+    # A check of the scenario as a whole (`metrics.from (0.4) leaves ...`):
+    # at the template's line of the key it names.
+    key = re.match(r"^([a-z_]+(?:\.[a-z_]+)+) ", text)
+    line = _template_line(_SpecLines(spec.text), key.group(1)) if key else None
+    where = f"{spec.path}:{line}" if line else str(spec.path)
+    return SpecError(f"{where}: the scenario of {cases} does not run: {text}")
 
 
 def _value_error(spec: Spec, run: Run, value: tuple, error: master.MasterError) -> SpecError:
@@ -1601,7 +1667,8 @@ def _value_error(spec: Spec, run: Run, value: tuple, error: master.MasterError) 
     names = [v.name for v in spec.variables]
     others = ", ".join(f"{n} = {run.values[n]!r}" for n in names if n != name)
     unread = _unread(error)
-    problem = f"{unread[0]}: {unread[1]}" if unread else f"the scenario does not run: {error}"
+    problem = (f"{unread[0]}: {unread[1]}" if unread
+               else f"the scenario does not run: {_without_stdin(str(error))}")
     return SpecError(f"{where}: {name} = {_shown(shown)}: {problem} (in the scenario of "
                      f"{others or 'the template'})")
 

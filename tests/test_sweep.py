@@ -755,13 +755,15 @@ def test_every_key_of_the_spec_format_refuses_a_wrong_type_at_its_line(tmp_path)
 TEMPLATE_VALUES = {
     "metrics": ('driven = "y"', "driven = true",
                 "template metrics.driven: invalid type: boolean `true`, expected one of `y`, `x`, "
-                "`theta`, `xy`, `ytheta` (in the scenario of decoupling = off)"),
+                "`theta`, `xy`, `ytheta` (in the scenario of frequency = 5.0, decoupling = off, "
+                "amplitude = 2.0)"),
     "signal": ("offset = 6.0\nsines", 'offset = "text"\nsines',
                'template signal."controller.y_ref".offset: invalid type: string "text", expected '
-               "f64 (in the scenario of decoupling = off)"),
+               "f64 (in the scenario of frequency = 5.0, decoupling = off, amplitude = 2.0)"),
     "parameter": ('"noise.enabled" = true }', '"noise.enabled" = true, "mode.x.damping" = "low" }',
                   'template fmu.plant.parameters."mode.x.damping": invalid type: string "low", '
-                  "expected a number, or true or false (in the scenario of decoupling = off)"),
+                  "expected a number, or true or false (in the scenario of frequency = 5.0, "
+                  "decoupling = off, amplitude = 2.0)"),
     # A named case's patch, not the template, gives the value.
     "patch": ("parameters = {{ decoupling = true }}".replace("{{", "{").replace("}}", "}"),
               'parameters = { decoupling = "yes" }',
@@ -780,7 +782,8 @@ GRID_SPEC = re.sub(r"\[monte_carlo\].*?(?=\n\[template\])", "", SPEC, flags=re.D
 TEMPLATE_VALUES["seed"] = (
     '"noise.enabled" = true }', '"noise.enabled" = true, "noise.seed" = "s" }',
     'template fmu.plant.parameters."noise.seed": invalid type: string "s", expected a number, '
-    "or true or false (in the scenario of decoupling = off)")
+    "or true or false (in the scenario of frequency = 5.0, decoupling = off, "
+    "amplitude = 2.0)")
 
 
 @pytest.mark.parametrize("case", TEMPLATE_VALUES)
@@ -894,7 +897,7 @@ def test_restart_keeps_the_table_when_the_spec_does_not_run(spec_path, reference
     pq.write_table(pa.Table.from_pylist(reference_table), table)
     bad = tmp_path / "bad.toml"
     bad.write_text(SPEC.replace('"noise.enabled" = true', '"noise.enabld" = true'))
-    with pytest.raises(sweep.SpecError, match="does not run"):
+    with pytest.raises(sweep.SpecError, match="has no variable"):
         sweep.run_sweep(sweep.load_spec(bad), tmp_path, client=None, restart=True)
     assert pq.read_table(table).num_rows == len(reference_table)
 
@@ -1490,3 +1493,77 @@ def test_a_reference_table_is_read_beside_the_spec_and_its_contents_key_the_runs
     assert str(missing.value) == (
         f"{spec}:19: signal controller.y_ref: reference table {step} does not exist (a table "
         f"is read relative to the spec's folder)")
+
+
+def _check_error(path: Path) -> str:
+    """The refusal of the spec at `path` by expansion or its check, before
+    any run (no cluster)."""
+    with pytest.raises(sweep.SpecError) as e:
+        spec = sweep.load_spec(path)
+        runs, files = sweep.expand(spec)
+        sweep.check_scenarios(runs, files, spec)
+    return str(e.value)
+
+
+def _line(text: str, needle: str) -> int:
+    return next(n for n, row in enumerate(text.splitlines(), 1) if needle in row)
+
+
+def test_a_misspelt_name_is_named_where_the_spec_writes_it(tmp_path):
+    """A name the FMUs lack was named with the file alone ("the scenario of
+    the template does not run: controller.translation.kpp: ..."), in a
+    template, a case's patch, a parameter set or the Monte Carlo's
+    seed_parameter alike, and a check of the whole scenario with the
+    master's `<stdin>`. Each is now at the line that writes it (a set's own
+    file and line), with the values of the run checked."""
+    cases = {
+        "template": ('"noise.enabled" = true }', '"noise.enabled" = true, "noise.enabld" = 1 }',
+                     '"noise.enabld"'),
+        "patch": ("parameters = {{ decoupling = true }}".replace("{{", "{").replace("}}", "}"),
+                  "parameters = { decoupling = true, feedbak_x = true }", "feedbak_x"),
+        "seed_parameter": ('seed_parameter = "noise.seed"', 'seed_parameter = "noise.sed"',
+                           '"noise.sed"'),
+    }
+    for case, (old, new, needle) in cases.items():
+        text = SPEC.replace(old, new)
+        assert text != SPEC, case
+        error = _check_error(_written(tmp_path / f"{case}.toml", text))
+        assert error.startswith(f"{tmp_path / f'{case}.toml'}:{_line(text, needle)}: "), error
+        assert "has no variable" in error and "<stdin>" not in error, error
+        decoupling = "on" if case == "patch" else "off"  # the case whose patch has it
+        assert error.endswith(f"(in the scenario of frequency = 5.0, decoupling = {decoupling}, "
+                              f"amplitude = 2.0)"), error
+    # A parameter set's value: the set's file and line.
+    (tmp_path / "mine.json").write_text('{\n  "amplifier.gain": 10,\n  "pzt[1].AA": 1\n}')
+    text = GRID_SPEC.replace(f'path = "{PLANT}"\n',
+                             f'path = "{PLANT}"\nparameter_sets = ["mine.json"]\n')
+    error = _check_error(_written(tmp_path / "set.toml", text))
+    assert error.startswith(f"{tmp_path / 'mine.json'}:3: plant.pzt[1].AA: "), error
+    assert "(a value of this parameter set)" in error, error
+    # A check of the whole scenario, at the template's line of its key.
+    text = SPEC.replace('from = "= 0.2 + 1 / frequency"', 'from = "= 5 / frequency"')
+    error = _check_error(_written(tmp_path / "from.toml", text))
+    assert error.startswith(f"{tmp_path / 'from.toml'}:{_line(text, 'from = ')}: the scenario "
+                            f"of frequency = 5.0, decoupling = off, amplitude = 2.0 does not run: "
+                            f"metrics.from (1) leaves 0 of the run's samples"), error
+
+
+def test_a_monte_carlo_that_varies_nothing_or_twice_is_named_at_its_group(tmp_path):
+    """A Monte Carlo with no group and no seed_parameter was refused as two
+    grid points making one run ("a variable the template does not use");
+    two groups matching one parameter were named at the first group's line,
+    not the later one's."""
+    text = re.sub(r'seed_parameter = "noise.seed"\n\[\[monte_carlo.vary\]\].*?(?=\n\[template\])',
+                  "", SPEC, flags=re.DOTALL)
+    assert "[[monte_carlo.vary]]" not in text
+    error = _check_error(_written(tmp_path / "nothing.toml", text))
+    assert error == (f"{tmp_path / 'nothing.toml'}:{_line(text, '[monte_carlo]')}: monte_carlo: "
+                     f"its 2 samples would all be one plant: give a [[monte_carlo.vary]] group "
+                     f"(match, relative) to draw parameters from, or seed_parameter to draw the "
+                     f"noise's seed"), error
+    text = SPEC.replace("match = '^amplifier\\.gain$'", "match = 'pzt.1..A$'")
+    assert text != SPEC
+    error = _check_error(_written(tmp_path / "twice.toml", text))
+    later = _line(text, "match = 'pzt.1..A$'")
+    assert error.startswith(f"{tmp_path / 'twice.toml'}:{later}: monte_carlo.vary "
+                            f"'pzt.1..A$' matches pzt[1].A, which "), error
