@@ -337,10 +337,19 @@ pub fn run_with(
     for (port, trajectory) in &scenario.signal {
         let (_, info) = resolve(port)?;
         let fail = |e: String| RunError::Scenario(format!("signal {port}: {e}"));
-        let (samples, table_end) = trajectory
+        let (samples, table_span) = trajectory
             .sample_to_end(&grid, info.unit.as_deref())
             .map_err(fail)?;
-        if let Some(end) = table_end
+        if let Some((start, _)) = table_span
+            && start > trajectory.start + 1e-9 * run_end.max(h)
+        {
+            table_notes.push(format!(
+                "signal {port}: its table starts at {start} s, after its signal starts at {} s; \
+                 its first value is held until then",
+                trajectory.start
+            ));
+        }
+        if let Some((_, end)) = table_span
             && end < run_end - 1e-9 * run_end.max(h)
         {
             table_notes.push(format!(

@@ -63,6 +63,9 @@ fn default_time_column() -> String {
     "t".to_owned()
 }
 
+/// The first and last times of a reference table's path [s].
+pub type TableSpan = (f64, f64);
+
 impl Trajectory {
     /// A constant demand.
     pub fn constant(value: f64) -> Trajectory {
@@ -110,14 +113,14 @@ impl Trajectory {
         self.sample_to_end(times, unit).map(|(values, _)| values)
     }
 
-    /// [`Self::sample`], and for a table the time its path ends [s]
-    /// (`start` plus its last sample's time), after which its last value
-    /// holds.
+    /// [`Self::sample`], and for a table the times its path starts and ends
+    /// [s] (`start` plus its first and last samples' times), before and
+    /// after which its first and last values hold.
     pub fn sample_to_end(
         &self,
         times: &[f64],
         unit: Option<&str>,
-    ) -> Result<(Vec<f64>, Option<f64>), String> {
+    ) -> Result<(Vec<f64>, Option<TableSpan>), String> {
         let table = match &self.table {
             Some(source) => Some(Table::read(source, unit)?),
             None => None,
@@ -138,11 +141,11 @@ impl Trajectory {
                 }
             })
             .collect();
-        let end = table
+        let span = table
             .as_ref()
-            .and_then(|t| t.tau.last())
-            .map(|last| self.start + last);
-        Ok((values, end))
+            .and_then(|t| Some((*t.tau.first()?, *t.tau.last()?)))
+            .map(|(first, last)| (self.start + first, self.start + last));
+        Ok((values, span))
     }
 
     fn sines_at(&self, tau: f64) -> f64 {
@@ -257,16 +260,29 @@ impl Table {
             .map_err(|e| format!("{}: {e}", name(&source.file)))?
             .clone();
         let find = |wanted: &str| {
-            headers
-                .iter()
-                .position(|h| header_matches(h, wanted))
-                .ok_or_else(|| {
-                    format!(
-                        "{}: no column {wanted:?} (columns: {})",
-                        name(&source.file),
-                        headers.iter().collect::<Vec<_>>().join(", ")
-                    )
-                })
+            let matching: Vec<usize> = (0..headers.len())
+                .filter(|&i| header_matches(&headers[i], wanted))
+                .collect();
+            match matching[..] {
+                [one] => Ok(one),
+                [] => Err(format!(
+                    "{}: no column {wanted:?} (columns: {})",
+                    name(&source.file),
+                    headers.iter().collect::<Vec<_>>().join(", ")
+                )),
+                // `y[um]` and `y[nm]` both answer to `y`: the first was taken
+                // without a word.
+                _ => Err(format!(
+                    "{}: {} columns answer to {wanted:?} ({}): name one with its unit",
+                    name(&source.file),
+                    matching.len(),
+                    matching
+                        .iter()
+                        .map(|&i| &headers[i])
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )),
+            }
         };
         let (time_column, value_column) = (find(&source.time)?, find(&source.column)?);
         // A unit the header names is read, never dropped: a column in nm
@@ -516,6 +532,17 @@ mod tests {
                 "{e}"
             );
         }
+        // Two columns that answer to one name are refused, not taken first.
+        std::fs::write(
+            y.table.as_ref().unwrap().file.clone(),
+            "t[s],y[um],y[nm]\n0,0,0\n",
+        )
+        .unwrap();
+        let e = y.sample(&[0.0], None).unwrap_err();
+        assert!(
+            e.ends_with("r.csv: 2 columns answer to \"y\" (y[um], y[nm]): name one with its unit"),
+            "{e}"
+        );
         // A row of another width is named by its line alone, which the csv
         // crate's own message counted otherwise in a CRLF file.
         for text in [

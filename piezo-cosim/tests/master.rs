@@ -255,6 +255,16 @@ fn a_check_initializes_without_a_step() {
             "signal controller.y_ref: its table ends at 2 s, before the run's end at 3 s; its last value is held from there"
         ]
     );
+    // One that starts after its signal does holds its first value before,
+    // and says so too (it ran silently).
+    std::fs::write(dir.path().join("y.csv"), "t,y\n0.5,7\n3,8\n").unwrap();
+    let output = run(&scenario, options).unwrap();
+    assert_eq!(
+        output.warnings,
+        [
+            "signal controller.y_ref: its table starts at 1.5 s, after its signal starts at 1 s; its first value is held until then"
+        ]
+    );
 }
 
 #[test]
