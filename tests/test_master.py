@@ -6,8 +6,8 @@ same order, so every signal must agree to 1e-12 um (V for the commands):
 what differs is only who keeps the loop, how parameters are applied (by FMI
 name, from parameter sets or the scenario) and how the references reach the
 controller. The references are handed to piezo-cosim as a table sampled at
-the very times the master asks for (t_k for the record, t_k + 2h for the
-controller), so the comparison does not depend on how an experiment writes
+the very times the master asks for (t_k = k·h for the record, (k + 2)·h for
+the controller), so the comparison does not depend on how an experiment writes
 its trajectory.
 """
 
@@ -51,7 +51,8 @@ def reference_table(reference, duration: float, folder) -> dict:
     at t_k + preview·h, computed as demo/cosim.py computes those times."""
     steps = round(duration / SAMPLE_PERIOD)
     t = np.arange(steps + 1) * SAMPLE_PERIOD
-    times = np.unique(np.concatenate([t, t[:-1] + PREVIEW * SAMPLE_PERIOD]))
+    ahead = (np.arange(steps) + PREVIEW) * SAMPLE_PERIOD  # (k + preview)·h, as both masters
+    times = np.unique(np.concatenate([t, ahead]))
     values = np.asarray(reference(times), dtype=float)
     path = folder / "references.csv"
     with path.open("w") as f:
@@ -428,3 +429,36 @@ def test_run_outputs_are_checked_before_the_run_and_a_table_holds_finite_numbers
     done = subprocess.run([binary, "run", str(path)], capture_output=True, text=True)
     assert done.returncode == 2, done.stderr
     assert f'{table}:5: column "y": "nan" is not a finite number' in done.stderr, done.stderr
+
+
+def test_a_reference_tables_step_edge_agrees_with_the_fmpy_master(tmp_path):
+    """The preview's times were t_k + 2h in the fmpy master and (k + 2)·h in
+    the compiled one: the last bit apart, which on a table's step edge (0 to
+    4 um between 99.9 and 100 ms) put the two 2.8e-12 um apart. Both take
+    (k + 2)·h now."""
+    table = tmp_path / "step.csv"
+    table.write_text("t[ms],y_ref[nm]\n0,0\n99.9,0\n100,4000\n150,4000\n")
+    times_s, y_um = np.array([0.0, 0.0999, 0.1, 0.15]), np.array([0.0, 0.0, 4.0, 4.0])
+
+    def reference(t):
+        demand = np.zeros((len(t), 3))
+        demand[:, 1] = np.interp(t, times_s, y_um)
+        return demand
+
+    parameters = {"feedback_x": True, "feedback_y": True, "feedback_theta": True}
+    with Fmu(PLANT) as plant, Fmu(CONTROLLER) as controller:
+        run = simulate(plant, controller, reference, 0.15, controller_parameters=parameters,
+                       preview=PREVIEW)
+    scenario = {
+        "step": SAMPLE_PERIOD, "duration": 0.15, "preview": PREVIEW,
+        "fmu": {cosim.PLANT_INSTANCE: {"path": str(PLANT)},
+                cosim.CONTROLLER_INSTANCE: {"path": str(CONTROLLER), "parameters": parameters}},
+        "connection": master.connections(),
+        "signal": {master.reference_port("y_ref"): {"table": {"file": str(table),
+                                                              "column": "y_ref"}}},
+    }
+    master.run(scenario, series=tmp_path / "series.csv")
+    series = master.read_series(tmp_path / "series.csv")
+    worst = max(np.max(np.abs(series[f"plant.{name}"] - run.plant[name]))
+                for name in PLANT_OUTPUTS)
+    assert worst <= TOLERANCE, worst
