@@ -2241,7 +2241,8 @@ def _run_on_cluster(args, specs: list[Spec], expanded: dict) -> int:
     # The report shows what is in the tables; a table with timed-out or
     # failed runs is not complete, and the exit status says so.
     if failed:
-        print(f"{failed} runs failed: their rows say why (status, error)", file=sys.stderr)
+        print(f"{failed} run{'s' if failed != 1 else ''} failed: their rows say why (status, "
+              f"error)", file=sys.stderr)
     return 1 if timed_out or failed else 0
 
 

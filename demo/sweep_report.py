@@ -106,7 +106,9 @@ def run_summary(rows: list[dict]) -> str:
     failed = [r for r in rows if r["status"] != "ok"]
     cpu = sum(r.get("wall_s") or 0.0 for r in rows)
     workers = len({r.get("worker") for r in rows})
-    text = (f"{len(rows)} runs ({len(failed)} failed), {cpu:.0f} s of master wall time in "
+    # Short studies' runs take tenths of a second: "0 s" said nothing.
+    wall = f"{cpu:.0f} s" if cpu >= 10 else f"{cpu:.2g} s"
+    text = (f"{len(rows)} runs ({len(failed)} failed), {wall} of master wall time in "
             f"all, on {workers} worker(s).")
     if failed:
         reasons = defaultdict(int)

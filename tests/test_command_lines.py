@@ -150,6 +150,16 @@ def test_a_series_path_that_is_a_folder_is_refused_before_the_run(tmp_path, name
     assert len(done.stderr.strip().splitlines()) == 1 and str(folder) in done.stderr
 
 
+def test_piezo_cosim_names_a_folder_given_as_the_series(tmp_path):
+    """`piezo-cosim run --series .` was told to name the file .csv; it is a
+    folder, and is said to be one."""
+    done = subprocess.run([str(REPO_ROOT / "demo" / "bin" / "piezo-cosim"), "run", str(EXAMPLE),
+                           "--series", str(tmp_path)], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.strip() == f"{tmp_path}: is a folder; give the name of the file to write"
+
+
 def test_a_series_in_a_missing_folder_is_refused_before_the_run(tmp_path, monkeypatch):
     def no_run(*args, **kwargs):
         raise AssertionError("the master was started")

@@ -347,6 +347,7 @@ fn main() -> ExitCode {
     if let Some(path) = &series_path
         && path.extension().is_none_or(|e| e != "csv")
         && !is_device(path)
+        && !path.is_dir()
     {
         eprintln!(
             "{}: the series is written as CSV (name it .csv); `python -m demo.master` also writes Parquet",
