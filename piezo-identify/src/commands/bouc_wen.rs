@@ -553,7 +553,8 @@ pub(crate) fn print_bouc_wen_fit(
 /// The largest command the plant's amplifier passes unclipped, and why:
 /// clamp(G·clamp(u, input_min, input_max), v_min, v_max) (piezo-models
 /// MODEL.md §2) follows u up to min(input_max, v_max/G). `None` for a plant
-/// without FlexureStage's amplifier parameters (nothing to check against).
+/// without FlexureStage's amplifier parameters (nothing to check against),
+/// or with values it will refuse itself.
 struct CommandLimit {
     command: f64,
     reason: String,
@@ -563,6 +564,10 @@ fn amplifier_command_limit(plant: &PlantFmu) -> Option<CommandLimit> {
     let input_max = plant.start("amplifier.input_max")?;
     let gain = plant.start("amplifier.gain")?;
     let v_max = plant.start("amplifier.v_max")?;
+    // Values the plant itself refuses are its to name, when its session starts.
+    if !(gain > 0.0 && [input_max, gain, v_max].iter().all(|v| v.is_finite())) {
+        return None;
+    }
     let by_output = v_max / gain;
     Some(if by_output < input_max {
         CommandLimit {
