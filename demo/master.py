@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import selectors
 import subprocess
 import sys
@@ -130,7 +131,7 @@ def run(scenario: dict | str | Path, series: str | Path | None = None,
             raise MasterError(message, done.returncode)
         result = json.loads(done.stdout)
         if series is not None and csv != series:
-            write_parquet(read_series(csv), series)
+            write_parquet(read_series(csv), series, series_units(csv))
     return result
 
 
@@ -240,20 +241,41 @@ def check(scenario: dict, cwd: str | Path | None = None) -> dict:
     return json.loads(done.stdout)
 
 
+_HEADER_UNIT = re.compile(r"^(.*?)\[([^\[\]]*)\]$")
+
+
+def series_units(path: str | Path) -> dict[str, str]:
+    """The unit of each column of a series CSV that its header gives in
+    brackets (`plant.x[um]`, `t[s]`), by the column's name."""
+    with Path(path).open() as f:
+        header = f.readline().strip().split(",")
+    return {found.group(1): found.group(2) for found in map(_HEADER_UNIT.match, header) if found}
+
+
 def read_series(path: str | Path) -> dict[str, np.ndarray]:
-    """A series CSV written by piezo-cosim, as columns by name."""
+    """A series CSV written by piezo-cosim, as columns by name (`t`,
+    `plant.x`: the header's units left out; `series_units` gives them)."""
     path = Path(path)
     with path.open() as f:
-        names = f.readline().strip().split(",")
+        header = f.readline().strip().split(",")
+    names = [found.group(1) if (found := _HEADER_UNIT.match(h)) else h for h in header]
     data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     return {name: data[:, i] for i, name in enumerate(names)}
 
 
-def write_parquet(columns: dict[str, np.ndarray], path: str | Path) -> None:
+def write_parquet(columns: dict[str, np.ndarray], path: str | Path,
+                  units: dict[str, str] | None = None) -> None:
+    """The columns as a Parquet table, each column's unit (where `units`
+    gives one) in its Arrow field's metadata (b"unit"), as a sweep's table
+    carries them."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    pq.write_table(pa.table({k: pa.array(v) for k, v in columns.items()}), str(path))
+    units = units or {}
+    fields = [pa.field(name, pa.float64(), metadata={b"unit": units[name].encode()}
+                       if name in units else None) for name in columns]
+    table = pa.table({k: pa.array(v) for k, v in columns.items()}, schema=pa.schema(fields))
+    pq.write_table(table, str(path))
 
 
 def main(argv=None) -> int:

@@ -462,3 +462,28 @@ def test_a_reference_tables_step_edge_agrees_with_the_fmpy_master(tmp_path):
     worst = max(np.max(np.abs(series[f"plant.{name}"] - run.plant[name]))
                 for name in PLANT_OUTPUTS)
     assert worst <= TOLERANCE, worst
+
+
+def test_a_series_carries_each_columns_unit(tmp_path):
+    """The series had no units (`t,controller.y_ref,...`), where the sweep
+    tables carry theirs: its CSV header now gives each column's unit as the
+    FMUs declare it, in brackets as a reference table's header takes it, and
+    a Parquet series has it in each field's metadata (b"unit")."""
+    import pyarrow.parquet as pq
+
+    scenario = {"duration": 0.01,
+                "fmu": {cosim.PLANT_INSTANCE: {"path": str(PLANT)},
+                        cosim.CONTROLLER_INSTANCE: {"path": str(CONTROLLER)}},
+                "signal": {master.reference_port("y_ref"): {"offset": 1.0}}}
+    master.run(scenario, series=tmp_path / "s.csv")
+    header = (tmp_path / "s.csv").read_text().splitlines()[0].split(",")
+    assert header[0] == "t[s]"
+    for column in ("plant.s1[um]", "plant.theta_z[rad]", "controller.u1[V]",
+                   "controller.y_ref[um]", "controller.e_theta[rad]"):
+        assert column in header, (column, header)
+    columns = master.read_series(tmp_path / "s.csv")
+    assert "t" in columns and "plant.s1" in columns
+    master.run(scenario, series=tmp_path / "s.parquet")
+    schema = pq.read_schema(tmp_path / "s.parquet")
+    units = {f.name: f.metadata[b"unit"].decode() for f in schema if f.metadata}
+    assert units["t"] == "s" and units["plant.s1"] == "um" and units["controller.u1"] == "V"

@@ -42,6 +42,9 @@ pub struct Series {
     pub t: Vec<f64>,
     /// `instance.variable`
     pub names: Vec<String>,
+    /// Each column's unit, as its FMU declares the variable's (None where it
+    /// declares none).
+    pub units: Vec<Option<String>>,
     pub columns: Vec<Vec<f64>>,
 }
 
@@ -641,9 +644,14 @@ pub fn run_with(
             names.push(port.clone());
             data.push(column);
         }
+        let units = names
+            .iter()
+            .map(|port| resolve(port).ok().and_then(|(_, info)| info.unit.clone()))
+            .collect();
         Some(Series {
             t: times,
             names,
+            units,
             columns: data,
         })
     } else {
