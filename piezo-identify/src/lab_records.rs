@@ -9,18 +9,22 @@
 //! identification's defaults must cope with; [`lab_record`] makes them with
 //! the y actuator (PZT1) of [`piezo_models::FlexureStage`] (asymmetric
 //! Bouc-Wen hysteresis, creep, amplifier lag and structural modes), so that a
-//! test can score a fit on a part of the record it has not seen.
+//! test can score a fit on a part of the record it has not seen;
+//! [`lab_record_on`] on the x pair too, and on a stage of the user's own
+//! parameters.
 //!
-//! The amplifier's limits are set here, not taken from the preset: a bipolar
-//! drive needs a negative limit, and a test must not change meaning when the
-//! preset's amplifier does. [`LAB_AMPLIFIER_LIMITS`] is the output range of a
-//! PI E-505 (−30..130 V); the commands stay within −2..10 V (−20..100 V after
-//! the gain of 10). A command the stage clips is refused, not recorded.
+//! The default stage's amplifier limits are set here, not taken from the
+//! preset: a bipolar drive needs a negative limit, and a test must not change
+//! meaning when the preset's amplifier does. [`LAB_AMPLIFIER_LIMITS`] is the
+//! output range of a PI E-505 (−30..130 V); the commands stay within −2..10 V
+//! (−20..100 V after the gain of 10). A stage of the user's own keeps its own
+//! amplifier. A command the stage clips is refused, not recorded.
 
 use piezo_models::{FlexureStage, FlexureStageParams, ParamError, SensorNoiseParams};
 use serde::{Deserialize, Serialize};
 
 use crate::data::Record;
+use crate::plant::RecordAxis;
 
 /// Output range of the amplifier in every lab record [V] (PI E-505).
 pub const LAB_AMPLIFIER_LIMITS: (f64, f64) = (-30.0, 130.0);
@@ -174,6 +178,18 @@ pub enum LabRecordError {
 /// Takes a record (module comment): input the command [V], output the y
 /// sensor [µm] with offset and noise.
 pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
+    lab_record_on(spec, None, RecordAxis::Y)
+}
+
+/// [`lab_record`] on `axis` (y: u1 driven, s1 read; x: u2 = u3 driven, the
+/// mean of s2 and s3 read, each sensor with the spec's noise) of the stage
+/// `stage` (default: FlexureStage's preset with the lab's amplifier limits;
+/// its own noise settings are replaced by the spec's).
+pub fn lab_record_on(
+    spec: &LabRecordSpec,
+    stage: Option<&FlexureStageParams>,
+    axis: RecordAxis,
+) -> Result<Record, LabRecordError> {
     for (name, value) in [
         ("sample_rate", spec.sample_rate),
         ("excitation_seconds", spec.excitation_seconds),
@@ -206,8 +222,14 @@ pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
             });
         }
     }
-    let mut params = FlexureStageParams::default();
-    (params.amplifier.v_min, params.amplifier.v_max) = LAB_AMPLIFIER_LIMITS;
+    let mut params = match stage {
+        Some(own) => own.clone(),
+        None => {
+            let mut params = FlexureStageParams::default();
+            (params.amplifier.v_min, params.amplifier.v_max) = LAB_AMPLIFIER_LIMITS;
+            params
+        }
+    };
     params.noise = SensorNoiseParams {
         enabled: spec.noise_rms_um > 0.0,
         rms_um: spec.noise_rms_um,
@@ -225,8 +247,12 @@ pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
         } else {
             spec.command_after_step((n - rest) as f64 * sample_period)
         };
-        let report = stage.step([command, 0.0, 0.0], sample_period);
-        if report.clipped[0] {
+        let (commands, driven) = match axis {
+            RecordAxis::Y => ([command, 0.0, 0.0], &[0][..]),
+            RecordAxis::X => ([0.0, command, command], &[1, 2][..]),
+        };
+        let report = stage.step(commands, sample_period);
+        if driven.iter().any(|&channel| report.clipped[channel]) {
             return Err(LabRecordError::Clipped {
                 command,
                 time: n as f64 * sample_period,
@@ -234,8 +260,13 @@ pub fn lab_record(spec: &LabRecordSpec) -> Result<Record, LabRecordError> {
         }
         // Sample n pairs the command held over [t_n, t_n + T] with the
         // displacement at the end of it (as compare::synthetic_plant_record).
+        let sensors = stage.sensors();
+        let displacement = match axis {
+            RecordAxis::Y => sensors[0],
+            RecordAxis::X => 0.5 * (sensors[1] + sensors[2]),
+        };
         input.push(command);
-        output.push(stage.sensors()[0] + spec.sensor_offset_um);
+        output.push(displacement + spec.sensor_offset_um);
     }
     Ok(Record {
         input,
@@ -271,6 +302,42 @@ mod tests {
         let sd = (rest.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / rest.len() as f64).sqrt();
         assert!((mean + 42.7).abs() < 0.01, "rest reads the offset: {mean}");
         assert!((sd - 0.02).abs() < 0.004, "noise 0.02 um RMS: {sd}");
+    }
+
+    /// The x pair driven together reads x, the mean of s2 and s3 (noise
+    /// RMS over √2); a stage of the user's own keeps its own amplifier, so
+    /// the XY200S's 0..150 V refuses the bipolar drive's negative commands.
+    #[test]
+    fn the_x_pair_and_a_stage_of_ones_own() {
+        let mut spec = LabRecordSpec::new(
+            200.0,
+            Drive::Unipolar,
+            Excitation::Sine { frequency: 1.0 },
+            3.0,
+        );
+        let x = lab_record_on(&spec, None, RecordAxis::X).unwrap();
+        let y = lab_record(&spec).unwrap();
+        assert_eq!(x.input, y.input);
+        let span = |r: &Record| {
+            let w = &r.output[500..];
+            w.iter().copied().fold(f64::MIN, f64::max) - w.iter().copied().fold(f64::MAX, f64::min)
+        };
+        // 9 V of command span: the x pair's stroke per volt is 12.74/10
+        // against y's 12.22/10.
+        let ratio = span(&x) / span(&y);
+        assert!((ratio - 12.74 / 12.22).abs() < 0.03, "{ratio}");
+        let rest = &x.output[100..400];
+        let mean = rest.iter().sum::<f64>() / rest.len() as f64;
+        let sd = (rest.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / rest.len() as f64).sqrt();
+        assert!((sd - 0.02 / 2f64.sqrt()).abs() < 0.003, "{sd}");
+        let xy200s = FlexureStageParams::xy200s();
+        let own = lab_record_on(&spec, Some(&xy200s), RecordAxis::Y).unwrap();
+        assert!(span(&own) > 8.0 * span(&y), "the XY200S's 150 um stroke");
+        spec.drive = Drive::Bipolar;
+        assert!(matches!(
+            lab_record_on(&spec, Some(&xy200s), RecordAxis::Y),
+            Err(LabRecordError::Clipped { .. })
+        ));
     }
 
     #[test]

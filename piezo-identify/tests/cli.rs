@@ -1919,6 +1919,78 @@ fn lab_record_refuses_options_that_make_no_record() {
     }
 }
 
+/// `lab-record --axis x --stage FILE` records the x pair of a stage of one's
+/// own (it recorded the default stage's y alone); a set by FMI name given as
+/// the stage is named as such, and a malformed one by its line and column.
+#[test]
+fn lab_record_takes_the_x_axis_and_a_stage_of_ones_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("record.csv");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let xy200s = root.join("piezo-models/presets/xy200s_stage.json");
+    let span = |args: &[&str]| {
+        let output = run(&[
+            &["lab-record", "--rate", "200", "--seconds", "2", "--out"][..],
+            &[out.to_str().unwrap()],
+            args,
+        ]
+        .concat());
+        assert!(output.status.success(), "{args:?}: {}", stderr(&output));
+        let text = std::fs::read_to_string(&out).unwrap();
+        let y: Vec<f64> = text
+            .lines()
+            .skip(1)
+            .map(|l| l.rsplit(',').next().unwrap().parse().unwrap())
+            .collect();
+        (
+            stdout(&output),
+            y.iter().copied().fold(f64::MIN, f64::max) - y.iter().copied().fold(f64::MAX, f64::min),
+        )
+    };
+    let (_, y) = span(&[]);
+    let (said, x) = span(&["--axis", "x"]);
+    assert!(
+        said.contains("of the x axis of the default stage"),
+        "{said}"
+    );
+    assert!(x > y, "the x pair's stroke is the longer: {x} against {y}");
+    let (said, own) = span(&["--stage", xy200s.to_str().unwrap()]);
+    assert!(
+        said.contains(&format!("of the y axis of {}", xy200s.display())),
+        "{said}"
+    );
+    assert!(own > 8.0 * y, "the XY200S's stroke: {own} against {y}");
+    std::fs::remove_file(&out).unwrap();
+    let by_name = dir.path().join("by_name.json");
+    std::fs::write(&by_name, "{\"L\": 76.58, \"pzt[1].p\": 0.1}").unwrap();
+    let malformed = dir.path().join("malformed.json");
+    std::fs::write(&malformed, "{\"amplifier\": 3}").unwrap();
+    for (file, said) in [
+        (
+            &by_name,
+            "is a parameter set by FMI name (the form the FMUs take)".to_owned(),
+        ),
+        (
+            &malformed,
+            format!(
+                "--stage {}:1:15: invalid type: integer `3`, expected struct AmplifierParams",
+                malformed.display()
+            ),
+        ),
+    ] {
+        let output = run(&[
+            "lab-record",
+            "--stage",
+            file.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        refused_as_input(&output);
+        assert!(stderr(&output).contains(&said), "{}", stderr(&output));
+        assert!(!out.exists());
+    }
+}
+
 /// A `--bounds` box for n reaching below 1, where the model cannot go, is
 /// refused: the fit clamped n to 1 and reported it as inside the box given
 /// (n = 1.0 for `n=-1:0.5`, exit 0).

@@ -1,7 +1,7 @@
 //! `piezo-identify lab-record` and `xy200s-preset`: records and parameter sets
 //! written from the simulated stage and the printed tables.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args;
 
@@ -46,6 +46,16 @@ pub(crate) struct LabRecordArgs {
     /// Seed of the sensor noise.
     #[arg(long, default_value_t = 7)]
     pub(crate) noise_seed: u32,
+    /// Axis driven and read: y (u1 driven, s1 read) or x (u2 = u3 driven, the
+    /// mean of s2 and s3 read).
+    #[arg(long, default_value = "y", value_parser = ["x", "y"])]
+    pub(crate) axis: String,
+    /// The stage: FlexureStage's parameters in their own form
+    /// (piezo_models::FlexureStageParams, as piezo-models/presets/flexure_stage.json;
+    /// not a set by FMI name), its amplifier as given [default: the default
+    /// stage with the lab's -30..130 V amplifier].
+    #[arg(long)]
+    pub(crate) stage: Option<PathBuf>,
     /// The record file to write (comma-separated, with a header).
     #[arg(long)]
     pub(crate) out: PathBuf,
@@ -108,10 +118,49 @@ fn check_lab_record_options(args: &LabRecordArgs) -> Result<(), String> {
     Ok(())
 }
 
+/// FlexureStage's parameters in their own form from `path`, checked: a
+/// malformed file is named with its line and column, and a set by FMI name
+/// (`dist/presets/FlexureStage.*.json`, which the FMUs take) as such.
+fn read_stage_parameters(path: &Path) -> Result<piezo_models::FlexureStageParams, String> {
+    let shown = path.display();
+    let text = std::fs::read_to_string(path).map_err(|e| format!("--stage {shown}: {e}"))?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let params: piezo_models::FlexureStageParams = serde_json::from_str(text).map_err(|e| {
+        let by_fmi_name = serde_json::from_str::<serde_json::Map<String, serde_json::Value>>(text)
+            .is_ok_and(|map| {
+                map.keys()
+                    .any(|k| k.contains('.') || k.contains('[') || k == "L")
+            });
+        if by_fmi_name {
+            format!(
+                "--stage {shown} is a parameter set by FMI name (the form the FMUs take); \
+                 lab-record runs the stage's model, which takes its parameters in their own form \
+                 (piezo-models/presets/flexure_stage.json, MODEL.md section 4), as \
+                 flexure-stage-parameters does"
+            )
+        } else {
+            // serde_json ends its message with the place, which leads here.
+            let place = format!(" at line {} column {}", e.line(), e.column());
+            let message = e.to_string();
+            let message = message.strip_suffix(&place).unwrap_or(&message);
+            format!("--stage {shown}:{}:{}: {message}", e.line(), e.column())
+        }
+    })?;
+    params
+        .validate()
+        .map_err(|e| format!("--stage {shown}: {e}"))?;
+    Ok(params)
+}
+
 pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
     check_destinations(&[("--out", Some(&args.out))], &[])?;
     check_lab_record_options(args).map_err(Failure::Input)?;
-    use piezo_identify::lab_records::{Drive, Excitation, LabRecordSpec, lab_record};
+    let stage = match &args.stage {
+        Some(path) => Some(read_stage_parameters(path).map_err(Failure::Input)?),
+        None => None,
+    };
+    use piezo_identify::lab_records::{Drive, Excitation, LabRecordSpec, lab_record_on};
+    use piezo_identify::plant::RecordAxis;
     let spec = LabRecordSpec {
         sample_rate: args.rate,
         drive: if args.drive == "bipolar" {
@@ -140,17 +189,27 @@ pub(crate) fn write_lab_record(args: &LabRecordArgs) -> Result<(), Failure> {
         noise_rms_um: args.noise,
         noise_seed: args.noise_seed,
     };
-    let record = lab_record(&spec).map_err(|e| e.to_string())?;
+    let axis = if args.axis == "x" {
+        RecordAxis::X
+    } else {
+        RecordAxis::Y
+    };
+    let record = lab_record_on(&spec, stage.as_ref(), axis).map_err(|e| e.to_string())?;
     let mut text = String::from("time_s,command_V,displacement_um\n");
     for (n, (u, y)) in record.input.iter().zip(&record.output).enumerate() {
         text.push_str(&format!("{},{u},{y}\n", n as f64 * record.sample_period));
     }
     write_result(&args.out, text.as_bytes())?;
     say!(
-        "{}: {} samples at {} Hz (columns time_s, command_V, displacement_um)",
+        "{}: {} samples at {} Hz of the {} axis of {} (columns time_s, command_V, \
+         displacement_um)",
         args.out.display(),
         record.input.len(),
-        args.rate
+        args.rate,
+        args.axis,
+        args.stage
+            .as_ref()
+            .map_or("the default stage".to_owned(), |p| p.display().to_string())
     );
     Ok(())
 }
