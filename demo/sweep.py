@@ -1588,6 +1588,11 @@ def _port_place(spec: Spec, signature: tuple, message: str) -> tuple[str, str] |
     named = re.sub(r"^(?:connection (?:source|destination)|signal|recorded variable) ", "",
                    _without_stdin(message))
     port = re.split(r"[:\s]", named, maxsplit=1)[0].strip('"')
+    # What an FMU refused, in its log: `controller: fmi2ExitInitializationMode
+    # ...: parameter translation.kp = -5 is outside its allowed range`.
+    refused = re.match(r"^(\w+): .*?\bparameter (\S+) = ", named, re.DOTALL)
+    if "." not in port and refused:
+        port = f"{refused.group(1)}.{refused.group(2)}"
     instance, _, variable = port.partition(".")
     fmu = spec.template.get("fmu", {})
     if not variable or instance not in fmu:

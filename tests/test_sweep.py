@@ -1540,6 +1540,13 @@ def test_a_misspelt_name_is_named_where_the_spec_writes_it(tmp_path):
     error = _check_error(_written(tmp_path / "set.toml", text))
     assert error.startswith(f"{tmp_path / 'mine.json'}:3: plant.pzt[1].AA: "), error
     assert "(a value of this parameter set)" in error, error
+    # A value the FMU refuses when its initialization ends, at its line.
+    text = SPEC.replace('"noise.enabled" = true }', '"noise.enabled" = true, '
+                        '"mode.x.damping" = -1 }')
+    assert text != SPEC
+    error = _check_error(_written(tmp_path / "range.toml", text))
+    assert error.startswith(f"{tmp_path / 'range.toml'}:{_line(text, 'mode.x.damping')}: "
+                            f"plant: fmi2"), error
     # A check of the whole scenario, at the template's line of its key.
     text = SPEC.replace('from = "= 0.2 + 1 / frequency"', 'from = "= 5 / frequency"')
     error = _check_error(_written(tmp_path / "from.toml", text))
