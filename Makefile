@@ -94,6 +94,8 @@ fmus: system-deps
 	$(RELEASE)/flexure-stage-parameters 3dof $(DIST)/presets/FlexureStage.3dof.json
 	$(RELEASE)/flexure-stage-parameters xy200s $(DIST)/presets/FlexureStage.xy200s.json
 	$(RELEASE)/piezo-controller-parameters stage $(DIST)/presets/PiezoController.stage.json
+	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_stage_once.json \
+	  $(DIST)/presets/PiezoController.stage_once.json
 	$(RELEASE)/piezo-controller-parameters paper $(DIST)/presets/PiezoController.paper.json
 	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_xy200s.json \
 	  $(DIST)/presets/PiezoController.xy200s.json
@@ -146,12 +148,17 @@ demo: fmus venv systems fingerprints-tool
 	@echo "report: out/demo/report.md (plant: out/plant/report.md)"
 
 # Re-identifies the controller on the plant (seed 000 §3.1 and §4) and bakes
-# the result into PiezoController's start values. Run after a plant change.
+# the result into PiezoController's start values; writes beside it the same
+# preset with D1..D4 fitted once (seed 000 §4's procedure, which make demo's
+# seed 000 table runs; the start values refine them over three rounds). Run
+# after a plant change.
 stage-preset: fmus
 	$(CARGO) build --release --locked -p piezo-identify
 	mkdir -p out/stage
 	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu \
-	  --out piezo-models/presets/piezo_controller_stage.json --report out/stage/identification.json
+	  --out piezo-models/presets/piezo_controller_stage.json \
+	  --out-fitted-once piezo-models/presets/piezo_controller_stage_once.json \
+	  --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
 
 # PiezoController identified on the XY200S preset of FlexureStage by the same

@@ -9,7 +9,7 @@ it is at or under the paper's.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 DEG = 180.0 / math.pi
 
@@ -25,6 +25,9 @@ class Row:
     rule: str
     met: bool
     where: str
+    #: Measured on a run with the decoupling on (Table 3's, Fig. 11, 12b,
+    #: 13b): a figure of the decoupling law.
+    decoupled: bool = False
 
 
 def _um(v: float) -> str:
@@ -98,12 +101,24 @@ def _within(measured, paper) -> bool:
     return measured[0] >= paper[0] and measured[1] <= paper[1]
 
 
-def rows(results: dict) -> list[Row]:
+#: The runs of the table with the decoupling on: demo.experiments runs each
+#: with the law fitted once (this key) and refined (this key + "_refined").
+DECOUPLED = ("fig10_y_decoupled", "fig10_x_decoupled", "fig10_theta_decoupled",
+             "fig11_composite", "fig12_circle_decoupled", "fig13_y_theta_decoupled")
+
+
+def rows(results: dict, law: str = "") -> list[Row]:
     """Every numbered figure of seed 000 that the closed loop reproduces, with
-    its verdict. `results` maps run keys to `experiments.metrics` dicts."""
+    its verdict. `results` maps run keys to `experiments.metrics` dicts; the
+    runs with the decoupling on are read under their key plus `law` (""
+    for the law fitted once, as seed 000 §4 does; "_refined" for the
+    start values' three rounds)."""
+    def run(key: str) -> dict:
+        return results[key + law if key in DECOUPLED else key]
+
     out = []
     for key, (what, (paper_max, paper_rms), where) in TRACKING.items():
-        m = results[key]
+        m = run(key)
         theta = key.startswith("fig7_theta")
         fmt = _deg if theta else _um
         paper = (f"{paper_max * DEG:.3g} / {paper_rms * DEG:.3g} deg" if theta
@@ -111,38 +126,62 @@ def rows(results: dict) -> list[Row]:
         out.append(Row(f"{what}: max / RMS error", paper,
                        f"{fmt(m['tracking_max'])} / {fmt(m['tracking_rms'])}",
                        "max and RMS <= paper",
-                       m["tracking_max"] <= paper_max and m["tracking_rms"] <= paper_rms, where))
+                       m["tracking_max"] <= paper_max and m["tracking_rms"] <= paper_rms, where,
+                       key in DECOUPLED))
     for name, axis, key, (paper_without, paper_with) in TABLE_3:
         without = results[f"fig7_{axis}_ffpi"][key]
-        with_ = results[f"fig10_{axis}_decoupled"][key]
+        with_ = run(f"fig10_{axis}_decoupled")[key]
         ratio = without / with_
         out.append(Row(
             f"coupling span {name}, without / with decoupling (ratio)",
             f"{paper_without} / {paper_with} um ({paper_without / paper_with:.1f}x)",
             f"{without:.4f} / {with_:.4f} um ({ratio:.1f}x)",
             f"with <= {paper_with} um, ratio >= {TABLE_3_RATIO:g}x",
-            with_ <= paper_with and ratio >= TABLE_3_RATIO, "Table 3"))
+            with_ <= paper_with and ratio >= TABLE_3_RATIO, "Table 3", True))
     for key, (what, (paper_x, paper_y), paper_norm, where) in CIRCLE.items():
-        m = results[key]
+        m = run(key)
         out.append(Row(
             f"circle eq. (14)-(15) {what}: x / y error within",
             f"+-{1e3 * paper_x:.0f} / +-{1e3 * paper_y:.0f} nm",
             f"{_nm_range(m['x_error_range'])} / {_nm_range(m['y_error_range'])}",
             "|error| <= paper on each axis",
-            m["x_error_max"] <= paper_x and m["y_error_max"] <= paper_y, where))
+            m["x_error_max"] <= paper_x and m["y_error_max"] <= paper_y, where,
+            key in DECOUPLED))
         out.append(Row(
             f"circle {what}: 2-norm of the contour error",
             f"{paper_norm}",
             f"{m['contour_2norm']:.2f} um over {m['contour_samples']} samples "
             f"(RMS {_nm(m['contour_rms'])})",
-            "<= paper", m["contour_2norm"] <= paper_norm, where))
+            "<= paper", m["contour_2norm"] <= paper_norm, where, key in DECOUPLED))
     for key, (what, paper_theta, paper_y, where) in Y_THETA.items():
-        m = results[key]
+        m = run(key)
         out.append(Row(f"y + theta_z eq. (16) {what}: theta_z error range",
                        _deg_range(paper_theta), _deg_range(m["theta_error_range"]),
                        "inside the paper's range", _within(m["theta_error_range"], paper_theta),
-                       where))
+                       where, key in DECOUPLED))
         out.append(Row(f"y + theta_z eq. (16) {what}: y error range",
                        _nm_range(paper_y), _nm_range(m["y_error_range"]),
-                       "inside the paper's range", _within(m["y_error_range"], paper_y), where))
+                       "inside the paper's range", _within(m["y_error_range"], paper_y), where,
+                       key in DECOUPLED))
     return out
+
+
+#: The label the refined law's rows carry (their own rows in a document).
+REFINED_LABEL = "refined law: "
+
+
+def refined_rows(results: dict) -> list[Row]:
+    """The rows of the decoupled runs under the start values' law, refined
+    over three rounds on the same runs (in-sample), labelled as such."""
+    return [replace(r, what=REFINED_LABEL + r.what) for r in rows(results, "_refined")
+            if r.decoupled]
+
+
+#: The rows the law fitted once misses (Table 3's x2 from y on its span and
+#: ratio, y from x and from rotation on the issue's 7x ratio): measured, and
+#: asserted as measured, so that a change either way is seen.
+MISSED_FITTED_ONCE = (
+    "coupling span x2 from y, without / with decoupling (ratio)",
+    "coupling span y from x, without / with decoupling (ratio)",
+    "coupling span y from rotation, without / with decoupling (ratio)",
+)

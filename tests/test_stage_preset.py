@@ -33,13 +33,24 @@ def makefile_command(target: str) -> tuple[list[str], pathlib.Path]:
     """The arguments target `target` gives `piezo-identify stage` before
     `--out` ($(DIST) read as dist/), and the preset it writes; read from the
     Makefile so the test runs what the target runs."""
-    text = (REPO_ROOT / "Makefile").read_text(encoding="utf-8").replace("\\\n", " ")
-    recipe = re.search(rf"^{re.escape(target)}:.*\n((?:\t.*\n)+)", text, re.MULTILINE)
-    assert recipe, f"Makefile: no {target} target"
-    command = re.search(r"piezo-identify stage (.*?) --out (\S+)", recipe.group(1))
+    recipe = _recipe(target)
+    command = re.search(r"piezo-identify stage (.*?) --out (\S+)", recipe)
     assert command, f"Makefile: {target} does not run `piezo-identify stage ... --out PRESET`"
     arguments = [word.replace("$(DIST)", str(DIST)) for word in command.group(1).split()]
     return arguments, REPO_ROOT / command.group(2)
+
+
+def _recipe(target: str) -> str:
+    text = (REPO_ROOT / "Makefile").read_text(encoding="utf-8").replace("\\\n", " ")
+    recipe = re.search(rf"^{re.escape(target)}:.*\n((?:\t.*\n)+)", text, re.MULTILINE)
+    assert recipe, f"Makefile: no {target} target"
+    return recipe.group(1)
+
+
+def fitted_once_preset(target: str) -> pathlib.Path | None:
+    """The preset with the law fitted once that `target` writes, if any."""
+    found = re.search(r"--out-fitted-once (\S+)", _recipe(target))
+    return REPO_ROOT / found.group(1) if found else None
 
 
 def differences(shipped, made, path="") -> list[str]:
@@ -71,10 +82,16 @@ def identified(target: str, scratch: pathlib.Path) -> tuple[dict, dict]:
                 pytest.fail(f"{path} is missing: run `make fmus` and build the workspace",
                             pytrace=False)
         made, report = scratch / f"{target}.json", scratch / f"{target}.report.json"
+        once = scratch / f"{target}.once.json"
         subprocess.run([str(BINARY), "stage", *arguments, "--out", str(made),
-                        "--report", str(report)], check=True, capture_output=True, text=True)
+                        "--out-fitted-once", str(once), "--report", str(report)],
+                       check=True, capture_output=True, text=True)
         _IDENTIFIED[target] = (json.loads(made.read_text()), json.loads(report.read_text()))
+        _FITTED_ONCE[target] = json.loads(once.read_text())
     return _IDENTIFIED[target]
+
+
+_FITTED_ONCE: dict[str, dict] = {}
 
 
 @pytest.fixture(scope="module")
@@ -90,6 +107,23 @@ def test_the_preset_target_makes_the_shipped_preset(scratch, target):
     assert not problems, (
         f"`piezo-identify stage` as `make {target}` runs it no longer makes {shipped.name} "
         f"(run `make {target}` after a plant or identification change):\n" + "\n".join(problems))
+
+
+def test_the_stage_target_makes_the_shipped_law_fitted_once(scratch):
+    """`make stage-preset` also writes the preset with D1..D4 fitted once
+    (seed 000 §4's procedure, which make demo's seed 000 table runs): the
+    same identification gives it again, and it differs from the refined
+    preset in the decoupling law alone."""
+    shipped = fitted_once_preset("stage-preset")
+    assert shipped is not None, "make stage-preset writes no --out-fitted-once preset"
+    made, _ = identified("stage-preset", scratch)
+    once = _FITTED_ONCE["stage-preset"]
+    problems = differences(json.loads(shipped.read_text()), once)
+    assert not problems, (f"`make stage-preset` no longer makes {shipped.name}:\n"
+                          + "\n".join(problems))
+    assert {k: v for k, v in once.items() if k != "decoupling_params"} == \
+        {k: v for k, v in made.items() if k != "decoupling_params"}
+    assert once["decoupling_params"] != made["decoupling_params"]
 
 
 def test_seed_000s_feedforward_on_the_xy200s_errs_at_most_its_fit(scratch):

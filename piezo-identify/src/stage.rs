@@ -12,7 +12,10 @@
 //!    ([`crate::decoupling`]).
 //! 3. Further rounds repeat the runs with the decoupling on and refit each
 //!    compensation, whole, to what it applied plus the coupling left (the
-//!    plant's coupling moves once the compensations move the actuators). The
+//!    plant's coupling moves once the compensations move the actuators).
+//!    Seed 000 fits the compensations once (step 2 alone,
+//!    [`StageIdentification::fitted_once`]); the rounds go beyond it, fitted
+//!    on the very runs Table 3 is measured on. The
 //!    static coupling of the x pair at home into y belongs to D3; D4 fits
 //!    what D3 leaves of the rotation run's y error, since y_r = y_d + D3 + D4
 //!    applies both.
@@ -346,6 +349,21 @@ pub struct StageIdentification {
     pub rounds: Vec<[Compensation; 4]>,
     /// Seed 001's models: name and eq. (5) RMS of the refined fit [µm].
     pub bouc_wen_fits: Vec<(String, f64)>,
+}
+
+impl StageIdentification {
+    /// The preset with the compensations of the first round alone: D1..D4
+    /// fitted once, on single-axis runs without decoupling, as seed 000 §4
+    /// computes them "based on the experimental results from single axis
+    /// actuation testing (Fig. 7)". Later rounds refit them on runs with
+    /// the decoupling on, which the paper does not.
+    pub fn fitted_once(&self) -> ControllerParams {
+        let mut once = self.controller.clone();
+        if let Some(first) = self.rounds.first() {
+            once.decoupling_params = decoupling_params(first);
+        }
+        once
+    }
 }
 
 /// Seed 001 §5.2's identification run on the plant: 2 Hz, 0 to 10 V.

@@ -59,6 +59,11 @@ pub(crate) struct StageArgs {
     /// FMI name, as importers take them.
     #[arg(long)]
     pub(crate) out: PathBuf,
+    /// Also write the preset with the compensations of the first round alone
+    /// (D1..D4 fitted once on runs without decoupling, as seed 000 §4 does),
+    /// in the same form as --out.
+    #[arg(long)]
+    pub(crate) out_fitted_once: Option<PathBuf>,
     /// Write everything measured (fits, compensations per round) here as JSON.
     #[arg(long)]
     pub(crate) report: Option<PathBuf>,
@@ -95,6 +100,7 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
     check_destinations(
         &[
             ("--out", Some(&args.out)),
+            ("--out-fitted-once", args.out_fitted_once.as_deref()),
             ("--report", args.report.as_deref()),
         ],
         &inputs,
@@ -181,6 +187,14 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
         args.out.display(),
         args.out.display()
     );
+    if let Some(path) = &args.out_fitted_once {
+        write_json(path, &identified.fitted_once())?;
+        say!(
+            "the same preset with D1..D4 fitted once (round 1, seed 000 §4's procedure) written \
+             to {}",
+            path.display()
+        );
+    }
     if let Some(path) = &args.report {
         write_json(path, &identified)?;
         say!("identification report written to {}", path.display());
