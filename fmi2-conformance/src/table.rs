@@ -357,6 +357,28 @@ pub fn ports_have_units<M: CoSimModel>(ports: &[(&str, &str)]) {
     }
 }
 
+/// Asserts that every unit the model defines is some variable's unit:
+/// PiezoController defined `um/urad` for D4's slope, which carried none.
+pub fn every_defined_unit_is_used<M: CoSimModel>() {
+    let used: Vec<&str> = M::variables()
+        .iter()
+        .filter_map(|v| match &v.value {
+            Value::Real(r) => r.unit,
+            Value::Time(t) => t.unit,
+            _ => None,
+        })
+        .collect();
+    let unused: Vec<&str> = M::UNITS
+        .iter()
+        .map(|u| u.name)
+        .filter(|name| !used.contains(name))
+        .collect();
+    assert!(
+        unused.is_empty(),
+        "units defined but on no variable: {unused:?}"
+    );
+}
+
 /// Checks a variable table against its committed record of value references
 /// (`record`, each FMU crate's `valueReferences.txt`: lines
 /// `<value reference> <name>`, `#` comments): every
@@ -474,6 +496,10 @@ macro_rules! table_tests {
         #[test]
         fn every_parameter_maps_to_its_preset_path() {
             $crate::table::every_parameter_has_a_model_path::<$model>();
+        }
+        #[test]
+        fn every_defined_unit_is_used() {
+            $crate::table::every_defined_unit_is_used::<$model>();
         }
     };
 }

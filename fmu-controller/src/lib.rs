@@ -112,7 +112,6 @@ const UNITS: &[UnitDefinition] = &[
     units::MICROMETRE,
     units::MILLIMETRE,
     units::RADIAN,
-    units::SECOND,
     UnitDefinition {
         name: "V/um",
         base: volt_per(1, 0, 1e6),
@@ -529,8 +528,14 @@ const Y_MODEL: &[Variable<PiezoControllerFmu>] =
 
 // Δk, Δb, p, q of the four compensations D_i (seed 000 eq. 11, Table 2).
 const DECOUPLING_DK: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", dk,
-        "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um], D4 on theta_zd [um/urad] (Guo et al. eq. 11)",
-        "", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
+        "Slope Δk_i of compensation D_i: D1, D2 on y_d [um/um], D3 on x_d [um/um] (Guo et al. eq. 11)",
+        "", decoupling_params; 1 => 0, 2 => 1, 3 => 2);
+// D4's slope takes the rotation demand in microradians: a unit of its own,
+// declared where the other three are dimensionless (listed right after them,
+// so the value references stay as they were).
+const DECOUPLING_DK_ROTATION: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", dk,
+        "Slope Δk_4 of compensation D4 on theta_zd [um/urad] (Guo et al. eq. 11)",
+        "um/urad", decoupling_params; 4 => 3);
 const DECOUPLING_DB: &[Variable<PiezoControllerFmu>] = &indexed!("compensation", db,
         "Offset Δb_i of compensation D_i (Guo et al. eq. 11)",
         "um", decoupling_params; 1 => 0, 2 => 1, 3 => 2, 4 => 3);
@@ -609,6 +614,7 @@ const BLOCKS: &[&[Variable<PiezoControllerFmu>]] = &[
     X_MODEL,
     Y_MODEL,
     DECOUPLING_DK,
+    DECOUPLING_DK_ROTATION,
     DECOUPLING_DB,
     DECOUPLING_P,
     DECOUPLING_Q,
