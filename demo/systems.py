@@ -335,6 +335,13 @@ def _copy_variable(variable, name: str, start=None) -> ModelVariable:
         canHandleMultipleSetPerTimeInstant=False,  # False: fmpy writes no attribute
         description=variable.description,
         unit=variable.unit,
+        # The inner FMUs' ranges and display units, which importers' dialogs
+        # show (FMI 2.0.4 §2.2.7); the inner FMUs still refuse a value out of
+        # range, but the container dropped them.
+        displayUnit=variable.displayUnit,
+        min=variable.min,
+        max=variable.max,
+        nominal=variable.nominal,
         start=start,
     )
 
@@ -352,6 +359,10 @@ def container_configuration(members: list[Member]):
     }
     time = ModelVariable(name="time", type="Real", causality="independent", variability="continuous",
                          canHandleMultipleSetPerTimeInstant=False)
+    # fmpy's container runtime takes value reference 0 for the time (without
+    # it every variable reads its neighbour's value). libcosim's FMI Library
+    # logs two "[error] Start attribute is required" lines for it on loading
+    # (FMI 2.0 allows an independent variable without one); the run is right.
     variables = [time]
     mappings = {}
     outputs = []

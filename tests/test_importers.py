@@ -469,6 +469,9 @@ def test_container_fmu_exposes_the_loop_and_both_parameter_sets(members):
         v.name for m in members.values() for v in m.description.modelVariables if v.causality == "output"
     ]
     assert [v.name for v in by_causality["output"]] == expected_outputs
+    plant_outputs = {v.name: v for v in members["plant"].description.modelVariables}
+    assert [v.displayUnit for v in by_causality["output"] if v.name == "theta_z"] == \
+        [plant_outputs["theta_z"].displayUnit] == ["deg"]
     parameters = {v.name: v for v in by_causality["parameter"]}
     for instance, member in members.items():
         for v in member.description.modelVariables:
@@ -476,6 +479,11 @@ def test_container_fmu_exposes_the_loop_and_both_parameter_sets(members):
                 continue
             exposed = parameters.pop(f"{instance}.{v.name}")
             assert (exposed.type, exposed.variability) == (v.type, v.variability)
+            # The ranges and display units importers' dialogs show (44 min,
+            # 6 max and deg were dropped).
+            assert (exposed.unit, exposed.displayUnit, exposed.min, exposed.max,
+                    exposed.nominal) == (v.unit, v.displayUnit, v.min, v.max, v.nominal), \
+                exposed.name
             start = member.parameters.get(v.name)
             assert exposed.start == (v.start if start is None else literal(start)), exposed.name
     assert not parameters, f"parameters of no FMU: {sorted(parameters)}"
@@ -555,7 +563,8 @@ def test_container_default_experiment_holds_home_as_the_direct_loop(fmus, member
 
 def test_container_tracks_a_trajectory_as_the_direct_loop(fmus, members):
     t = np.arange(STEPS + 1) * SAMPLE_PERIOD
-    ahead = trajectory(t + PREVIEW * SAMPLE_PERIOD)  # the demo's preview, given as the input
+    # The demo's preview, given as the input, at the times its master takes: (k + 2)·h.
+    ahead = trajectory((np.arange(STEPS + 1) + PREVIEW) * SAMPLE_PERIOD)
     signals = np.zeros(STEPS + 1, dtype=[("time", float)] + [(n, float) for n in REFERENCES])
     signals["time"] = t
     for i, name in enumerate(REFERENCES):
