@@ -154,7 +154,10 @@ def feedforward_xy_section(results: dict) -> list[str]:
         "stage's controller is identified on it (`piezo-identify stage`: the `stage` preset on "
         "FlexureStage, `piezo_controller_xy200s.json` on the XY200S parameter set). Coupling "
         "is the peak-to-peak x (or y) displacement over the last second; seed 001 reports "
-        "amplitudes, so compare the reductions.",
+        "amplitudes, so compare the reductions. Seed 001's linearity figures fit a sine from "
+        "rest up to the same peak as well; read so, its method misses on the XY200S's x "
+        "(18.9 % against 8 %), where the X actuator's ratchet is largest near rest "
+        "(docs/seed001.md, \"Seed 001's §5.2 read from rest\").",
         "",
         "| what | stage | seed 001 | simulated (seed 001's method) | target | verdict |",
         "|---|---|---|---|---|---|",
