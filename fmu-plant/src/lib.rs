@@ -750,7 +750,23 @@ const BLOCKS: &[&[Variable<FlexureStageFmu>]] = &[
     APPENDED,
     STATES,
     DERIVATIVES,
+    MINOR_LOOPS,
 ];
+
+/// Whether the stacks' minor loops close, added after the states and their
+/// derivatives: last, so that every earlier value reference stays.
+const MINOR_LOOPS: &[Variable<FlexureStageFmu>] =
+    &[Variable::<FlexureStageFmu>::boolean_parameter(
+        "return_point_memory",
+        "Close the stacks' minor loops, as a real stack's close: each branch is the Bouc-Wen \
+         branch (ABW-XY eq. 3) tilted to end at the reversal it returns to, and an excursion past \
+         a reversal wipes its loop out (false: eq. 3 as integrated; its minor loops drift and \
+         dither ratchets it). Co-Simulation only",
+        Variability::Fixed,
+        |m| m.params.return_point_memory,
+        |m, v| m.params.return_point_memory = v,
+    )
+    .model_path("return_point_memory")];
 
 /// Every variable, in value-reference order.
 static VARIABLES: [Variable<FlexureStageFmu>; piezo_fmu_tables::total_len(BLOCKS)] =
@@ -800,6 +816,14 @@ impl CoSimModel for FlexureStageFmu {
                 "noise.enabled = true: the sensor noise is one sample per communication step, \
                  and Model Exchange has none; add the noise in the importer, or use \
                  Co-Simulation"
+                    .to_owned(),
+            ));
+        }
+        if ctx.interface() == Interface::ModelExchange && self.params.return_point_memory {
+            return Err(ModelError(
+                "return_point_memory = true: the memory turns each branch at the input's \
+                 reversals, which a co-simulation step sees and Model Exchange's continuous \
+                 states do not; use Co-Simulation, or return_point_memory = false"
                     .to_owned(),
             ));
         }

@@ -89,6 +89,14 @@ pub struct FlexureStageParams {
     /// there, as a stack rests after it has been operated (MODEL.md §2).
     /// 0: the virgin state h = 0 of seed 001's model.
     pub rest_cycle_voltage: f64,
+    /// Whether every hysteresis model (actuators and couplings) closes its
+    /// minor loops, as a real stack does (`bouc_wen::ReturnPointMemory`:
+    /// eq. (3)'s branches, each tilted to end at the reversal it returns
+    /// to). `false`, the default: seed 001's model as integrated, whose
+    /// minor loops drift and which dither ratchets (MODEL.md §6).
+    /// Co-simulation only: Model Exchange integrates h without the memory.
+    #[serde(default)]
+    pub return_point_memory: bool,
     pub modes: ModeSet,
     /// L, distance between the two x sensors (s2, s3) [mm].
     pub sensor_spacing_mm: f64,
@@ -463,15 +471,25 @@ impl FlexureStage {
             diverging_model(model, name, &params.amplifier)?;
         }
         let cycle = params.rest_cycle_voltage;
-        let same_cycle =
-            reuse.filter(|old| old.params.rest_cycle_voltage.to_bits() == cycle.to_bits());
+        let memory = params.return_point_memory;
+        let same_cycle = reuse.filter(|old| {
+            old.params.rest_cycle_voltage.to_bits() == cycle.to_bits()
+                && old.params.return_point_memory == memory
+        });
         let at_rest = |hysteresis: BoucWenParams, old: Option<&AsymmetricBoucWen>| match old {
             Some(old) if old.params() == &hysteresis => {
                 let mut model = old.clone();
                 model.reset();
                 model
             }
-            _ => AsymmetricBoucWen::at_exercised_rest(hysteresis, cycle),
+            _ => {
+                let model = AsymmetricBoucWen::at_exercised_rest(hysteresis, cycle);
+                if memory {
+                    model.with_return_point_memory(cycle)
+                } else {
+                    model
+                }
+            }
         };
         let actuators: [AsymmetricBoucWen; 3] = std::array::from_fn(|i| {
             at_rest(
@@ -600,6 +618,12 @@ impl FlexureStage {
                     .map(|(m, name)| (name, m.input())),
             )
             .chain(NOISE_SAMPLES.into_iter().zip(self.noise.current()))
+            .chain(
+                self.actuators
+                    .iter()
+                    .chain(&self.couplings)
+                    .filter_map(AsymmetricBoucWen::unreachable_memory),
+            )
             .find_map(|(variable, value)| UnreachableState::unless_finite(variable, value))
     }
 
