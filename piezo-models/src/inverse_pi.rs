@@ -43,6 +43,15 @@ const DEAD_ZONE_PATTERN: [f64; DEAD_ZONE_OPERATORS] = [0.0, 1.0, 3.0, 5.0, 7.0, 
 const BACKLASH_PATTERN: [f64; BACKLASH_OPERATORS] =
     [0.0, 0.25, 0.5, 1.0, 1.5, 2.25, 3.0, 4.0, 5.0, 6.5];
 
+/// The largest demanded rate eq. (4)'s weights take [µm/s]. A backward
+/// difference over a step of subnormal length (legal in FMI: any step size
+/// above 0) overflows to ±∞, and with it the weights, whose k_i of both signs
+/// (or 0) then add to NaN. 1e12 µm/s is a million metres per second, eight
+/// orders above the fastest demand the seeds track (10 µm at 100 Hz, about
+/// 4·10³ µm/s): no demand a stage can follow reaches it, and k_i·rate·h_i
+/// stays finite for every model a fit produces.
+pub const MAX_DEMAND_RATE: f64 = 1e12;
+
 /// Backlash (play) operator, eq. (1): the output follows the input with a
 /// play of ±r around its previous value.
 pub fn backlash(input: f64, threshold: f64, previous: f64) -> f64 {
@@ -258,8 +267,10 @@ impl ModifiedInversePi {
 
     /// One sample of eq. (3)-(5): the command [V] for demanded displacement
     /// `y` [µm] moving at `y_rate` [µm/s]; advances the backlash memories.
+    /// Eq. (4)'s weights take the rate within ±[`MAX_DEMAND_RATE`].
     pub fn evaluate(&mut self, y: f64, y_rate: f64) -> f64 {
         let p = &self.params;
+        let y_rate = y_rate.clamp(-MAX_DEMAND_RATE, MAX_DEMAND_RATE);
         let z: f64 = self
             .dead_zone_thresholds
             .iter()
@@ -312,6 +323,8 @@ pub fn linear_regressors(
     y.iter()
         .zip(backward_rates(y, sample_period))
         .map(|(&y, rate)| {
+            // The rate as `ModifiedInversePi::evaluate` weights it.
+            let rate = rate.clamp(-MAX_DEMAND_RATE, MAX_DEMAND_RATE);
             let h = memories.advance(dead_zone_superposition(y, ws, c), &thresholds);
             let mut row = [0.0; LINEAR_COEFFICIENTS];
             row[..4].copy_from_slice(&[y * y * y, y * y, y, 1.0]);
@@ -362,6 +375,34 @@ mod tests {
         assert_eq!(dead_zone(-1.0, 0.0), -1.0);
         assert_eq!(dead_zone(5.0, 3.0), 2.0);
         assert_eq!(dead_zone(2.0, 3.0), 0.0);
+    }
+
+    /// A step of the smallest positive length after a jump of the demand
+    /// (the backward difference overflows to ±∞): the command is the one at
+    /// the largest rate eq. (4) takes, finite, where the unbounded rate gave
+    /// NaN through the k_i of both signs and the zero ones.
+    #[test]
+    fn a_rate_that_overflows_gives_a_finite_command() {
+        let params = InversePiParams {
+            k: [0.1, -0.2, 0.05, 0.0, 0.3, -0.1, 0.02, 0.04, -0.06, 0.0],
+            b: [1.0, 0.5, -0.3, 0.2, 0.1, 0.4, -0.2, 0.3, 0.1, -0.05],
+            ws: [0.9, 0.05, -0.02, 0.01, 0.03, -0.01],
+            c: 1.1,
+            u1max: 11.0,
+            a: [1e-4, -0.02, 0.9, -0.1],
+            rest_cycle: 10.0,
+        };
+        let subnormal_period = f64::from_bits(1);
+        for jump in [3.0, -3.0] {
+            let rate = jump / subnormal_period;
+            assert!(rate.is_infinite());
+            let mut model = ModifiedInversePi::new(params);
+            let mut at_the_bound = model.clone();
+            let u = model.evaluate(5.0 + jump, rate);
+            let bound = at_the_bound.evaluate(5.0 + jump, jump.signum() * MAX_DEMAND_RATE);
+            assert!(u.is_finite(), "jump {jump}: {u}");
+            assert_eq!(u, bound, "jump {jump}");
+        }
     }
 
     #[test]
