@@ -126,6 +126,12 @@ pub struct BoucWenFitOptions {
     /// it on.
     #[serde(default)]
     pub refine_within_bounds: bool,
+    /// Fit the model with a return-point memory: its minor loops close
+    /// (`piezo_models::bouc_wen::ReturnPointMemory`), as FlexureStage's
+    /// `return_point_memory` runs its stacks. A model fitted so is run so
+    /// ([`predict`]); off, seed 001's eq. (3) as integrated.
+    #[serde(default)]
+    pub return_point_memory: bool,
 }
 
 fn default_search_substeps() -> f64 {
@@ -159,6 +165,7 @@ impl Default for BoucWenFitOptions {
             search_substeps: SUBSTEPS_PER_INPUT_SCALE,
             refine: true,
             refine_within_bounds: false,
+            return_point_memory: false,
         }
     }
 }
@@ -293,6 +300,7 @@ struct ScaledRecord {
     monotone: bool,
     /// RK4 substeps per unit of the scaled input.
     substeps: f64,
+    return_point_memory: bool,
 }
 
 impl ScaledRecord {
@@ -304,6 +312,7 @@ impl ScaledRecord {
             fit_offset: self.fit_offset,
             monotone: self.monotone,
             substeps: self.substeps,
+            return_point_memory: self.return_point_memory,
         }
     }
 
@@ -323,6 +332,7 @@ impl ScaledRecord {
             scaled_params(shape),
             &self.input,
             1.0 / self.substeps,
+            self.return_point_memory,
             &mut states,
         );
         states
@@ -446,8 +456,14 @@ fn physical(shape: &[f64], coefficients: [f64; 3], scales: Scales) -> (BoucWenPa
 }
 
 /// The model's prediction of `input` (from rest): eq. (4) plus `offset`,
-/// integrated with substeps of max|u|/500.
-pub fn predict(params: BoucWenParams, offset: f64, input: &[f64]) -> Vec<f64> {
+/// integrated with substeps of max|u|/500, with a return-point memory when
+/// the model was fitted with one.
+pub fn predict(
+    params: BoucWenParams,
+    offset: f64,
+    input: &[f64],
+    return_point_memory: bool,
+) -> Vec<f64> {
     let scale = input.iter().fold(0.0_f64, |m, u| m.max(u.abs()));
     let max_du = if scale > 0.0 {
         scale / SUBSTEPS_PER_INPUT_SCALE
@@ -455,7 +471,7 @@ pub fn predict(params: BoucWenParams, offset: f64, input: &[f64]) -> Vec<f64> {
         1.0
     };
     let mut states = vec![0.0; input.len()];
-    hysteretic_states_into(params, input, max_du, &mut states);
+    hysteretic_states_into(params, input, max_du, return_point_memory, &mut states);
     input
         .iter()
         .zip(states)
@@ -574,6 +590,7 @@ pub fn identify_bouc_wen(
         fit_offset: options.fit_offset,
         monotone: options.monotone,
         substeps: SUBSTEPS_PER_INPUT_SCALE,
+        return_point_memory: options.return_point_memory,
     };
     if !(options.search_substeps.is_finite() && options.search_substeps >= 1.0) {
         return Err(BoucWenFitError::Substeps);
@@ -787,10 +804,13 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for ProjectedResidual<'_> {
 mod tests {
     use super::*;
 
+    /// With and without the return-point memory: the loops shrink, so the
+    /// memory's nested reversals are exercised, and its tilts scale with
+    /// the input and the state as eq. (3) does.
     #[test]
     fn physical_parameters_reproduce_the_scaled_fit() {
         let input: Vec<f64> = (0..400)
-            .map(|i| 40.0 * (1.0 - (i as f64 * 0.05).cos()))
+            .map(|i| 40.0 * (1.0 - (i as f64 * 0.05).cos()) * (1.0 - i as f64 / 800.0))
             .collect();
         let scales = Scales {
             input: 80.0,
@@ -798,26 +818,30 @@ mod tests {
         };
         let shape = [2.0, -0.5, 1.6, 0.3];
         let coefficients = [0.9, -0.4, 0.05];
-        let record = ScaledRecord {
-            input: input.iter().map(|u| u / scales.input).collect(),
-            output: vec![0.0; input.len()],
-            fitted: vec![true; 400],
-            fit_offset: true,
-            monotone: false,
-            substeps: SUBSTEPS_PER_INPUT_SCALE,
-        };
-        let states = record.states(&shape);
-        let (params, offset) = physical(&shape, coefficients, scales);
-        assert_eq!(params.q.abs(), 1.0);
-        let predicted = predict(params, offset, &input);
-        for (i, y) in predicted.iter().enumerate() {
-            let scaled =
-                coefficients[0] * record.input[i] + coefficients[1] * states[i] + coefficients[2];
-            assert!(
-                (y - scales.output * scaled).abs() < 1e-6,
-                "sample {i}: {y} vs {}",
-                scales.output * scaled
-            );
+        for return_point_memory in [false, true] {
+            let record = ScaledRecord {
+                input: input.iter().map(|u| u / scales.input).collect(),
+                output: vec![0.0; input.len()],
+                fitted: vec![true; 400],
+                fit_offset: true,
+                monotone: false,
+                substeps: SUBSTEPS_PER_INPUT_SCALE,
+                return_point_memory,
+            };
+            let states = record.states(&shape);
+            let (params, offset) = physical(&shape, coefficients, scales);
+            assert_eq!(params.q.abs(), 1.0);
+            let predicted = predict(params, offset, &input, return_point_memory);
+            for (i, y) in predicted.iter().enumerate() {
+                let scaled = coefficients[0] * record.input[i]
+                    + coefficients[1] * states[i]
+                    + coefficients[2];
+                assert!(
+                    (y - scales.output * scaled).abs() < 1e-6,
+                    "memory {return_point_memory}, sample {i}: {y} vs {}",
+                    scales.output * scaled
+                );
+            }
         }
     }
 
@@ -833,6 +857,7 @@ mod tests {
             fit_offset: true,
             monotone: false,
             substeps: SUBSTEPS_PER_INPUT_SCALE,
+            return_point_memory: false,
         };
         assert_eq!(record.rms(&[0.0, -100.0, 2.0, 0.0]), f64::INFINITY);
         assert!(record.rms(&[1.0, 0.0, 2.0, 0.0]).is_finite());
@@ -850,6 +875,7 @@ mod tests {
             fit_offset: false,
             monotone,
             substeps: SUBSTEPS_PER_INPUT_SCALE,
+            return_point_memory: false,
         };
         // β = γ = δ = 0, n = 1: h = ũ, so the best fit is y = −ũ, slope −1.
         let linear = [0.0, 0.0, 1.0, 0.0];

@@ -1291,6 +1291,9 @@ pub struct BoucWenSettings {
     pub fit_offset: bool,
     pub monotone: bool,
     pub refine: bool,
+    /// Fit (and score) the model with a return-point memory
+    /// (`BoucWenFitOptions::return_point_memory`).
+    pub return_point_memory: bool,
 }
 
 impl Default for BoucWenSettings {
@@ -1303,6 +1306,7 @@ impl Default for BoucWenSettings {
             fit_offset: true,
             monotone: false,
             refine: true,
+            return_point_memory: false,
         }
     }
 }
@@ -1369,7 +1373,12 @@ impl BoucWenProtocolFit {
     pub fn predictions_on(&self, u: &[f64], sample_period: f64) -> ForwardPredictions {
         let best = self.identification.best();
         ForwardPredictions {
-            bouc_wen: predict_bouc_wen(best.params, best.offset, u),
+            bouc_wen: predict_bouc_wen(
+                best.params,
+                best.offset,
+                u,
+                self.options.return_point_memory,
+            ),
             classical: predict(&mut ClassicalPi::new(self.classical), u, sample_period),
             line: u.iter().map(|v| self.line[0] * v + self.line[1]).collect(),
         }
@@ -1397,7 +1406,12 @@ impl BoucWenProtocolFit {
         ForwardErrors {
             bouc_wen: ErrorFigures::of(&predictions.bouc_wen, y, scored, span),
             gapso: ErrorFigures::of(
-                &predict_bouc_wen(gapso.params, gapso.offset, u),
+                &predict_bouc_wen(
+                    gapso.params,
+                    gapso.offset,
+                    u,
+                    self.options.return_point_memory,
+                ),
                 y,
                 scored,
                 span,
@@ -1440,6 +1454,7 @@ pub fn identify_bouc_wen_protocol(
         search_substeps: BOUC_WEN_SEARCH_SUBSTEPS,
         refine: settings.refine,
         refine_within_bounds: true,
+        return_point_memory: settings.return_point_memory,
     };
     progress(ProgressEvent::Phase {
         name: "GA-PSO",

@@ -175,7 +175,7 @@ fn recovers_known_parameters_from_noisy_records() {
 
         let unseen = sine(rate, 1.0, 40.0);
         let truth_unseen = piezo_models::simulate(truth, &unseen);
-        let predicted = predict(fit.best().params, fit.best().offset, &unseen);
+        let predicted = predict(fit.best().params, fit.best().offset, &unseen, false);
         let error = prediction_error(&predicted, &truth_unseen, 0);
         println!(
             "  unseen 2 Hz sine: RMS {:.2e} um ({:.3} %), max {:.2e} um ({:.3} %)",

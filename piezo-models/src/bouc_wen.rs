@@ -762,15 +762,21 @@ pub fn simulate(params: BoucWenParams, inputs: &[f64]) -> Vec<f64> {
 /// The hysteretic state h after each input of `inputs`, written to `states`
 /// (one per input), from rest, with input substeps of at most `max_du`: the
 /// allocation-free core of [`simulate`] for callers that evaluate many
-/// parameter sets on one record.
+/// parameter sets on one record. With `return_point_memory` the model closes
+/// its minor loops ([`ReturnPointMemory`], from a virgin rest), as
+/// FlexureStage's `return_point_memory` runs its stacks.
 pub fn hysteretic_states_into(
     params: BoucWenParams,
     inputs: &[f64],
     max_du: f64,
+    return_point_memory: bool,
     states: &mut [f64],
 ) {
     assert_eq!(inputs.len(), states.len(), "one state per input");
     let mut model = AsymmetricBoucWen::new(params);
+    if return_point_memory {
+        model = model.with_return_point_memory(0.0);
+    }
     for (&u, h) in inputs.iter().zip(states.iter_mut()) {
         model.advance_to(u, max_du);
         *h = model.hysteretic_state();
@@ -970,13 +976,28 @@ mod tests {
     fn hysteretic_states_into_follows_the_model() {
         let bw = params(1.5, 1e-4);
         let inputs = [10.0, 50.0, 20.0];
-        let mut states = [0.0; 3];
-        hysteretic_states_into(bw, &inputs, SIMULATE_MAX_DU, &mut states);
-        let mut model = AsymmetricBoucWen::new(bw);
-        for (u, h) in inputs.iter().zip(states) {
-            model.advance_to(*u, SIMULATE_MAX_DU);
-            assert_eq!(model.hysteretic_state(), h);
+        for memory in [false, true] {
+            let mut states = [0.0; 3];
+            hysteretic_states_into(bw, &inputs, SIMULATE_MAX_DU, memory, &mut states);
+            let mut model = AsymmetricBoucWen::new(bw);
+            if memory {
+                model = model.with_return_point_memory(0.0);
+            }
+            for (u, h) in inputs.iter().zip(states) {
+                model.advance_to(*u, SIMULATE_MAX_DU);
+                assert_eq!(model.hysteretic_state(), h, "memory {memory}");
+            }
         }
+        // The two differ once a minor loop turns back: 50 -> 20 -> 50 closes
+        // at the first 50 V state with the memory only.
+        let loop_inputs = [50.0, 20.0, 50.0];
+        let ends = [false, true].map(|memory| {
+            let mut states = [0.0; 3];
+            hysteretic_states_into(bw, &loop_inputs, SIMULATE_MAX_DU, memory, &mut states);
+            states
+        });
+        assert!((ends[1][2] - ends[1][0]).abs() < 1e-9, "{ends:?}");
+        assert!((ends[0][2] - ends[0][0]).abs() > 1e-6, "{ends:?}");
     }
 
     /// PZT1 of the stage preset (presets/flexure_stage.json).

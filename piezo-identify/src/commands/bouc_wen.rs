@@ -87,6 +87,11 @@ pub(crate) struct BoucWenArgs {
     /// Stop at the GA-PSO optimum, as seed 001 does.
     #[arg(long)]
     pub(crate) no_refine: bool,
+    /// Fit and score the model with a return-point memory: its minor loops
+    /// close, as FlexureStage's `return_point_memory` runs its stacks (give
+    /// the plant that parameter when it runs the fitted model).
+    #[arg(long)]
+    pub(crate) return_point_memory: bool,
     /// Search box of the scaled shape, e.g. "beta=0:10,gamma=-10:10,n=1:3,delta=-2:2"
     /// (u scaled by max|u|, y by its span, A = 1; any subset).
     #[arg(long)]
@@ -317,6 +322,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
         fit_offset: !args.no_offset,
         monotone: args.monotone,
         refine: !args.no_refine,
+        return_point_memory: args.return_point_memory,
     };
     if settings.decimation == Some(0) {
         return Err(Failure::Input(
@@ -431,6 +437,7 @@ pub(crate) fn bouc_wen(args: &BoucWenArgs) -> Result<(), Failure> {
             &serde_json::json!({
                 "model": "asymmetric Bouc-Wen (seed 001 eq. 3-4): displacement from voltage, plus the sensor offset",
                 "params": best.params,
+                "return_point_memory": settings.return_point_memory,
                 "sensor_offset_um": best.offset,
                 "sample_period_s": dt,
                 "columns": loaded.columns,
@@ -475,6 +482,11 @@ pub(crate) fn print_bouc_wen_fit(
     notes: &mut Notes,
 ) {
     let identification = &fit.identification;
+    if settings.return_point_memory {
+        say!(
+            "\nthe Bouc-Wen model closes its minor loops (return-point memory): fitted, scored and written so; run it so (FlexureStage: return_point_memory = true)"
+        );
+    }
     for (i, search) in fit.unusable_searches.iter().enumerate() {
         let next = fit
             .unusable_searches
