@@ -52,6 +52,11 @@ const BACKLASH_PATTERN: [f64; BACKLASH_OPERATORS] =
 /// stays finite for every model a fit produces.
 pub const MAX_DEMAND_RATE: f64 = 1e12;
 
+/// The demanded rate as eq. (4)'s weights take it: within ±[`MAX_DEMAND_RATE`].
+fn bounded_rate(rate: f64) -> f64 {
+    rate.clamp(-MAX_DEMAND_RATE, MAX_DEMAND_RATE)
+}
+
 /// Backlash (play) operator, eq. (1): the output follows the input with a
 /// play of ±r around its previous value.
 pub fn backlash(input: f64, threshold: f64, previous: f64) -> f64 {
@@ -270,7 +275,7 @@ impl ModifiedInversePi {
     /// Eq. (4)'s weights take the rate within ±[`MAX_DEMAND_RATE`].
     pub fn evaluate(&mut self, y: f64, y_rate: f64) -> f64 {
         let p = &self.params;
-        let y_rate = y_rate.clamp(-MAX_DEMAND_RATE, MAX_DEMAND_RATE);
+        let y_rate = bounded_rate(y_rate);
         let z: f64 = self
             .dead_zone_thresholds
             .iter()
@@ -324,7 +329,7 @@ pub fn linear_regressors(
         .zip(backward_rates(y, sample_period))
         .map(|(&y, rate)| {
             // The rate as `ModifiedInversePi::evaluate` weights it.
-            let rate = rate.clamp(-MAX_DEMAND_RATE, MAX_DEMAND_RATE);
+            let rate = bounded_rate(rate);
             let h = memories.advance(dead_zone_superposition(y, ws, c), &thresholds);
             let mut row = [0.0; LINEAR_COEFFICIENTS];
             row[..4].copy_from_slice(&[y * y * y, y * y, y, 1.0]);
@@ -383,14 +388,11 @@ mod tests {
     /// NaN through the k_i of both signs and the zero ones.
     #[test]
     fn a_rate_that_overflows_gives_a_finite_command() {
+        // A zero k_i among them: 0·∞ alone made NaN.
         let params = InversePiParams {
             k: [0.1, -0.2, 0.05, 0.0, 0.3, -0.1, 0.02, 0.04, -0.06, 0.0],
-            b: [1.0, 0.5, -0.3, 0.2, 0.1, 0.4, -0.2, 0.3, 0.1, -0.05],
-            ws: [0.9, 0.05, -0.02, 0.01, 0.03, -0.01],
-            c: 1.1,
-            u1max: 11.0,
-            a: [1e-4, -0.02, 0.9, -0.1],
             rest_cycle: 10.0,
+            ..test_params()
         };
         let subnormal_period = f64::from_bits(1);
         for jump in [3.0, -3.0] {
@@ -413,9 +415,9 @@ mod tests {
         assert_eq!(u1max_over_range(&ws, 1.0, 4.0), 2.0);
     }
 
-    #[test]
-    fn regressors_reproduce_the_model() {
-        let params = InversePiParams {
+    /// A model with weights of both signs, from zero memories.
+    fn test_params() -> InversePiParams {
+        InversePiParams {
             k: [0.1, -0.2, 0.05, 0.0, 0.3, -0.1, 0.02, 0.04, -0.06, 0.08],
             b: [1.0, 0.5, -0.3, 0.2, 0.1, 0.4, -0.2, 0.3, 0.1, -0.05],
             ws: [0.9, 0.05, -0.02, 0.01, 0.03, -0.01],
@@ -423,7 +425,12 @@ mod tests {
             u1max: 11.0,
             a: [1e-4, -0.02, 0.9, -0.1],
             rest_cycle: 0.0,
-        };
+        }
+    }
+
+    #[test]
+    fn regressors_reproduce_the_model() {
+        let params = test_params();
         let y: Vec<f64> = (0..400)
             .map(|n| 6.0 + 5.0 * (n as f64 * 0.05).sin())
             .collect();
