@@ -712,8 +712,13 @@ impl FlexureStage {
             let y_a = model.output();
             model.advance_to(v_b[i], max_du);
             let dv = v_b[i] - v_a[i];
+            // a = slope·(V_a − V_t) with slope = Δy/ΔV, taken as
+            // Δy·((V_a − V_t)/ΔV): the ratio of the two voltage differences
+            // is −1/(1 − e^{−dt/τ}) and finite for any ΔV ≠ 0, where Δy/ΔV
+            // overflows once ΔV is subnormal (a voltage settling onto its
+            // target) and Δy carries a rounding error.
             let a = if dv != 0.0 {
-                (model.output() - y_a) / dv * (v_a[i] - targets[i])
+                (model.output() - y_a) * ((v_a[i] - targets[i]) / dv)
             } else {
                 0.0
             };
@@ -993,6 +998,46 @@ mod tests {
         assert!((0.035..0.05).contains(&with_creep), "{with_creep}");
         let settled = y_after_cycle(true, 10.0);
         assert!(settled.abs() < 0.005, "{settled}");
+    }
+
+    /// A voltage settling onto its target passes through subnormal steps
+    /// (1.5e-323 V to 0): the chord of such a piece stays finite, with and
+    /// without the return-point memory. With the memory, a rounding-sized
+    /// change of the output over that piece divided by the 1.5e-323 V
+    /// overflowed: NaN after a 0 → 100 → 0 V cycle and 40 ms of rest.
+    #[test]
+    fn a_voltage_settling_through_subnormal_steps_keeps_the_stage_finite() {
+        for memory in [false, true] {
+            let params = FlexureStageParams {
+                return_point_memory: memory,
+                ..FlexureStageParams::default()
+            };
+            let mut stage = FlexureStage::new(params).unwrap();
+            let ramp = 10_000;
+            for k in 1..=2 * ramp {
+                let up = k.min(2 * ramp - k) as f64 / ramp as f64;
+                stage.step([10.0 * up, 0.0, 0.0], 1e-4);
+            }
+            let mut reached_subnormal = false;
+            for _ in 0..2_000 {
+                let report = stage.step([0.0; 3], 1e-4);
+                assert!(
+                    report.fault.is_none(),
+                    "memory {memory}: {:?}",
+                    report.fault
+                );
+                let v = stage.amplifier_voltages()[0];
+                reached_subnormal |= v != 0.0 && v.abs() < f64::MIN_POSITIVE;
+            }
+            assert!(
+                reached_subnormal,
+                "memory {memory}: the voltage settles through subnormals"
+            );
+            assert!(
+                stage.sensors().iter().all(|s| s.is_finite()),
+                "memory {memory}"
+            );
+        }
     }
 
     /// Zero commands from rest keep everything exactly at rest.
