@@ -26,7 +26,7 @@ FMU_SPECS := $(PLANT) $(CONTROLLER)
 # binaries/<platform>/<library> for linux64 (glibc 2.17) and win64.
 PLATFORM_BINARIES := $(BUILD)/binaries
 
-.PHONY: all fmus test demo lint master sweep rust-test python-test model-descriptions stage-preset xy200s-preset xy200s-controller-preset identify system-deps wine venv clean
+.PHONY: all fmus test demo lint master sweep rust-test python-test model-descriptions stage-preset stage-memory-preset xy200s-preset xy200s-controller-preset identify system-deps wine venv clean
 
 all: fmus
 
@@ -92,10 +92,15 @@ fmus: system-deps
 	@# initialization (fmpy start_values, a Simulink mask, an SSP .ssv).
 	mkdir -p $(DIST)/presets
 	$(RELEASE)/flexure-stage-parameters 3dof $(DIST)/presets/FlexureStage.3dof.json
+	$(RELEASE)/flexure-stage-parameters 3dof_memory $(DIST)/presets/FlexureStage.3dof_memory.json
 	$(RELEASE)/flexure-stage-parameters xy200s $(DIST)/presets/FlexureStage.xy200s.json
 	$(RELEASE)/piezo-controller-parameters stage $(DIST)/presets/PiezoController.stage.json
 	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_stage_once.json \
 	  $(DIST)/presets/PiezoController.stage_once.json
+	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_stage_memory.json \
+	  $(DIST)/presets/PiezoController.stage_memory.json
+	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_stage_memory_once.json \
+	  $(DIST)/presets/PiezoController.stage_memory_once.json
 	$(RELEASE)/piezo-controller-parameters paper $(DIST)/presets/PiezoController.paper.json
 	$(RELEASE)/piezo-controller-parameters piezo-models/presets/piezo_controller_xy200s.json \
 	  $(DIST)/presets/PiezoController.xy200s.json
@@ -160,6 +165,19 @@ stage-preset: fmus
 	  --out-fitted-once piezo-models/presets/piezo_controller_stage_once.json \
 	  --report out/stage/identification.json
 	$(MAKE) model-descriptions fmus
+
+# PiezoController identified by the same procedure on seed 000's stage with
+# its stacks' return-point memory on, calibrated with it (the 3dof_memory
+# parameter set; docs/seed000.md measures both beside each other).
+stage-memory-preset: fmus
+	$(CARGO) build --release --locked -p piezo-identify
+	mkdir -p out/stage
+	$(RELEASE)/piezo-identify stage --plant $(DIST)/FlexureStage.fmu \
+	  --plant-parameters $(DIST)/presets/FlexureStage.3dof_memory.json \
+	  --out piezo-models/presets/piezo_controller_stage_memory.json \
+	  --out-fitted-once piezo-models/presets/piezo_controller_stage_memory_once.json \
+	  --report out/stage/memory_identification.json
+	$(MAKE) fmus
 
 # PiezoController identified on the XY200S preset of FlexureStage by the same
 # procedure as the stage preset, rescaled to its strokes (144.37 / 12.74 =

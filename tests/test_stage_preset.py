@@ -99,7 +99,7 @@ def scratch(tmp_path_factory) -> pathlib.Path:
     return tmp_path_factory.mktemp("identified")
 
 
-@pytest.mark.parametrize("target", ["stage-preset", "xy200s-controller-preset"])
+@pytest.mark.parametrize("target", ["stage-preset", "stage-memory-preset", "xy200s-controller-preset"])
 def test_the_preset_target_makes_the_shipped_preset(scratch, target):
     _, shipped = makefile_command(target)
     made, _ = identified(target, scratch)
@@ -109,17 +109,19 @@ def test_the_preset_target_makes_the_shipped_preset(scratch, target):
         f"(run `make {target}` after a plant or identification change):\n" + "\n".join(problems))
 
 
-def test_the_stage_target_makes_the_shipped_law_fitted_once(scratch):
-    """`make stage-preset` also writes the preset with D1..D4 fitted once
+@pytest.mark.parametrize("target", ["stage-preset", "stage-memory-preset"])
+def test_the_stage_target_makes_the_shipped_law_fitted_once(scratch, target):
+    """`make stage-preset` (and `make stage-memory-preset`, on the stage with
+    the return-point memory) also writes the preset with D1..D4 fitted once
     (seed 000 §4's procedure, which make demo's seed 000 table runs): the
     same identification gives it again, and it differs from the refined
     preset in the decoupling law alone."""
-    shipped = fitted_once_preset("stage-preset")
-    assert shipped is not None, "make stage-preset writes no --out-fitted-once preset"
-    made, _ = identified("stage-preset", scratch)
-    once = _FITTED_ONCE["stage-preset"]
+    shipped = fitted_once_preset(target)
+    assert shipped is not None, f"make {target} writes no --out-fitted-once preset"
+    made, _ = identified(target, scratch)
+    once = _FITTED_ONCE[target]
     problems = differences(json.loads(shipped.read_text()), once)
-    assert not problems, (f"`make stage-preset` no longer makes {shipped.name}:\n"
+    assert not problems, (f"`make {target}` no longer makes {shipped.name}:\n"
                           + "\n".join(problems))
     assert {k: v for k, v in once.items() if k != "decoupling_params"} == \
         {k: v for k, v in made.items() if k != "decoupling_params"}

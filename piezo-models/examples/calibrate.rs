@@ -27,6 +27,10 @@
 //!
 //! Usage: `cargo run --release -p piezo-models --example calibrate [-- --write]`
 //! (`--write` replaces the preset file; otherwise the JSON is printed).
+//! `--memory` calibrates the same stage with its stacks' return-point memory
+//! on, starting from the preset, and writes `presets/flexure_stage_memory.json`
+//! (MODEL.md §6: the memory flattens the small loops the Ziegler-Nichols
+//! figures are taken on, so the modes move).
 
 use piezo_models::fingerprint::{self, Axis, Fingerprints, LoopAxis};
 use piezo_models::{BoucWenParams, FlexureStageParams};
@@ -290,13 +294,24 @@ fn report(f: &Fingerprints, params: &FlexureStageParams) {
 
 fn main() {
     let write = std::env::args().any(|a| a == "--write");
-    let base = FlexureStageParams::default();
+    let memory = std::env::args().any(|a| a == "--memory");
+    let base = FlexureStageParams {
+        return_point_memory: memory,
+        ..FlexureStageParams::default()
+    };
     let params = calibrate(&base);
     params.validate().expect("calibrated parameters are valid");
     report(&fingerprint::measure(&params), &params);
     let json = serde_json::to_string_pretty(&params).expect("parameters serialise") + "\n";
     if write {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/presets/flexure_stage.json");
+        let path = if memory {
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/presets/flexure_stage_memory.json"
+            )
+        } else {
+            concat!(env!("CARGO_MANIFEST_DIR"), "/presets/flexure_stage.json")
+        };
         std::fs::write(path, json).expect("preset written");
         eprintln!("wrote {path}");
     } else {

@@ -112,7 +112,21 @@ const PRESET_JSON: &str = include_str!("../presets/flexure_stage.json");
 /// conversion in `piezo_identify::xy200s`).
 const XY200S_JSON: &str = include_str!("../presets/xy200s_stage.json");
 
+/// Seed 000's stage calibrated with its stacks' return-point memory on
+/// (`examples/calibrate.rs -- --memory`): the same loop shapes, strokes,
+/// rotation and couplings, the modes moved so that the Ziegler-Nichols
+/// figures hold on the memory's flatter small loops (MODEL.md §6).
+const MEMORY_JSON: &str = include_str!("../presets/flexure_stage_memory.json");
+
 impl FlexureStageParams {
+    /// Seed 000's stage with `return_point_memory` on, calibrated with it
+    /// (`presets/flexure_stage_memory.json`; docs/seed000.md measures it
+    /// beside the default).
+    pub fn with_closed_minor_loops() -> Self {
+        serde_json::from_str(MEMORY_JSON)
+            .expect("presets/flexure_stage_memory.json must parse (a test checks it)")
+    }
+
     /// The XY200S preset (seed 001 §5.1): PZT1 is the Y actuator, PZT2 and
     /// PZT3 both the X actuator (drive them together), amplifier 0..10 V to
     /// 0..150 V, strokes 144.37 µm (x) and 149.27 µm (y).

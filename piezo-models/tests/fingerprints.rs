@@ -211,3 +211,26 @@ fn the_return_point_memory_moves_the_ziegler_nichols_gain_by_44_percent() {
         "{k_without} -> {k_with}: +{rise}"
     );
 }
+
+/// The preset calibrated with the return-point memory
+/// (`FlexureStageParams::with_closed_minor_loops`, `examples/calibrate.rs --
+/// --memory`) reproduces every fingerprint of seed 000 as the default does:
+/// what moved to keep them is the modes (MODEL.md §5).
+#[test]
+fn the_memory_preset_holds_every_fingerprint() {
+    let params = FlexureStageParams::with_closed_minor_loops();
+    assert!(params.return_point_memory);
+    let checks = fingerprint::measure(&params).checks();
+    for check in &checks {
+        println!(
+            "{}: {:.6} {} ({})",
+            check.name, check.measured, check.unit, check.within
+        );
+    }
+    let failing: Vec<_> = checks
+        .iter()
+        .filter(|c| !c.within)
+        .map(|c| &c.name)
+        .collect();
+    assert!(failing.is_empty(), "{failing:?}");
+}
