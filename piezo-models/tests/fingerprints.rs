@@ -181,10 +181,10 @@ fn ziegler_nichols_ultimate_gains_match_the_papers_pi_gains() {
     }
 }
 
-/// MODEL.md §6 and docs/seed000.md ("Calibrated with the memory, the lead
-/// does not hold"): the Ziegler-Nichols test oscillates on a held stack's
-/// minor loops, which close along a flatter path with the return-point
-/// memory, so the ultimate gain x of the preset's modes rises by 44 %
+/// MODEL.md §6 and docs/seed000.md ("Calibrated with the memory"): the
+/// Ziegler-Nichols test oscillates on a held stack's minor loops, which
+/// close along a flatter path with the return-point memory, so the
+/// ultimate gain x of the preset's modes rises by 44 %
 /// (0.1111 → 0.1601 V/µm), far outside the fingerprint's 10 %: the preset's
 /// modes are calibrated for the stage without the memory. Deterministic; the
 /// band is the printed 44 % to its last digit.
