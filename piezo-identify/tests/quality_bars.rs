@@ -572,3 +572,57 @@ fn lab_records_meet_the_bars_for_any_seed() {
     }
     docs_figures::assert_documented("identification.md", DOC_TABLE, 3, &rows);
 }
+
+/// `bouc-wen --return-point-memory` on the real P-885 records
+/// (docs/identification.md, "Return-point memory on the P-885 records"):
+/// fitted on the identification record (a 1 Hz sine of one amplitude) and
+/// run on the validation record (1 Hz, the amplitude ramping up and down),
+/// the model whose minor loops close predicts the unseen record better than
+/// seed 001's eq. (3) as integrated, and better than the classical P-I model.
+/// Measured at the commit that added the option: 1.184 um without the
+/// memory, 0.831 um with it, 1.047 um for the classical P-I model. The
+/// bounds leave the memory's gain room to shrink by half before failing
+/// (0.831 is 0.70 of 1.184; the bound is 0.85) and keep it under the
+/// classical P-I model, which it beats by 21 %.
+#[test]
+fn the_memory_predicts_the_unseen_p885_record_better() {
+    let validate = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(DATA)
+        .join("Test_Vi_Do_Di.dat");
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("model.json");
+    // The report's validation errors [um RMS] of the Bouc-Wen and classical
+    // P-I models, and what `--out` wrote.
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "--validate",
+            validate.to_str().unwrap(),
+            "--out",
+            model.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let report = p885("bouc-wen", "Model_Vi_Do.dat", &args);
+        let errors = &report["validation"]["errors"];
+        let rms = |name: &str| errors[name]["rms"].as_f64().unwrap();
+        let written: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+        (rms("bouc_wen"), rms("classical"), written)
+    };
+    let (without, classical, written_without) = run(&[]);
+    let (with, classical_again, written_with) = run(&["--return-point-memory"]);
+    assert_eq!(
+        classical, classical_again,
+        "the baseline does not depend on the option"
+    );
+    assert!(
+        with <= 0.85 * without,
+        "with memory {with} um, without {without} um"
+    );
+    assert!(
+        with < classical,
+        "with memory {with} um, classical P-I {classical} um"
+    );
+    // The written model says how it must be run.
+    assert_eq!(written_without["return_point_memory"], false);
+    assert_eq!(written_with["return_point_memory"], true);
+}
