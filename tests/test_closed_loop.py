@@ -124,6 +124,49 @@ def test_the_single_axis_runs_start_from_rest_with_the_held_axes_at_zero(results
         assert 0.5 * paper_without <= without <= 1.5 * paper_without, (name, without)
 
 
+@pytest.mark.parametrize("key", ["fig7_x_ffpi", "fig7_theta_ffpi"])
+def test_the_papers_gains_sit_at_the_memory_plants_limit_while_tracking(key):
+    """docs/seed000.md, "Why Fig. 7 is a draw there": on the plant calibrated
+    with the memory (`3dof_memory` with its own controller) the error the
+    sensor noise makes bursts over the quarter cycle before a reversal, where
+    the driven stack is steepest (largest twentieth of the cycle 10.9x (x) and
+    9.5x (theta) its median), and not at 0.9 of the paper's gains (1.4x,
+    1.3x) nor on the shipped plant (1.3x): a loop at its stability limit
+    there, which a filter of the noise would not be. Bounds 5x and 2x sit
+    between the two kinds of run by a factor of 2 or more either way."""
+    experiment = next(e for e in ex.experiments() if e.key == key)
+    shipped = ex.preset("PiezoController.stage.json")
+    own = {k: v for k, v in experiment.controller.items() if shipped.get(k) != v}
+    memory = {k: v for k, v in ex.preset("FlexureStage.3dof_memory.json").items()
+              if not k.startswith("noise.")}
+    memory_controller = ex.preset("PiezoController.stage_memory.json")
+    detuned = {"translation.kp": 0.9 * 0.05, "translation.ki": 0.9 * 50.0,
+               "rotation.kp": 0.9 * 0.06, "rotation.ki": 0.9 * 70.0}
+    cases = {"memory": (memory, memory_controller),
+             "memory, 0.9 of the gains": (memory, memory_controller | detuned),
+             "shipped": ({}, shipped)}
+    found = {}
+    with Fmu(PLANT) as plant, Fmu(CONTROLLER) as controller:
+        for name, (plant_set, controller_set) in cases.items():
+            noisy, clean = (
+                simulate(plant, controller, experiment.reference(), experiment.duration,
+                         plant_parameters=experiment.plant | plant_set | {"noise.enabled": noise},
+                         controller_parameters=controller_set | own)
+                for noise in (True, False))
+            found[name] = ex.noise_error_by_phase(
+                experiment, noisy, clean, float(controller_set["L"]) * 1e3)
+    bursts = {name: rms.max() / np.median(rms) for name, (rms, _) in found.items()}
+    assert bursts["memory"] >= 5.0, bursts
+    assert bursts["memory, 0.9 of the gains"] <= 2.0, bursts
+    assert bursts["shipped"] <= 2.0, bursts
+    # Where: the bin of the largest burst is where the shipped run's stack is
+    # within 10 % of its steepest (the memory run's own slopes there are its
+    # ringing's).
+    worst = int(np.argmax(found["memory"][0]))
+    slope = found["shipped"][1]
+    assert slope[worst] >= 0.9 * slope.max(), (worst, slope)
+
+
 @pytest.mark.parametrize("parameters, logged", [
     ({"controller_parameters": {"translation.kp": -1.0}},
      "[fmi2Error|logStatusError|controller] fmi2ExitInitializationMode: parameter "
