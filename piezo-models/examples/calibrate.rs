@@ -30,7 +30,10 @@
 //! `--memory` calibrates the same stage with its stacks' return-point memory
 //! on, starting from the preset, and writes `presets/flexure_stage_memory.json`
 //! (MODEL.md §6: the memory flattens the small loops the Ziegler-Nichols
-//! figures are taken on, so the modes move).
+//! figures are taken on, so the modes move). `--memory --moving` takes the
+//! Ziegler-Nichols figures while the stage moves instead
+//! (`fingerprint::ultimate_gain_while_moving`: on branches, not on a held
+//! point's small loops) and writes `presets/flexure_stage_tracking.json`.
 
 use piezo_models::fingerprint::{self, Axis, Fingerprints, LoopAxis};
 use piezo_models::{BoucWenParams, FlexureStageParams};
@@ -122,7 +125,7 @@ fn round_model(bw: &mut BoucWenParams) {
     bw.q = round6(bw.q);
 }
 
-fn calibrate(base: &FlexureStageParams) -> FlexureStageParams {
+fn calibrate(base: &FlexureStageParams, ultimate_gain: UltimateGainProbe) -> FlexureStageParams {
     // 1. PZT1 from the y stroke.
     let [s1] = solve(
         "PZT1",
@@ -200,14 +203,19 @@ fn calibrate(base: &FlexureStageParams) -> FlexureStageParams {
     }
 
     // 4. Modes from the Ziegler-Nichols figures of the §3.2 gains.
-    calibrate_modes(&mut params);
+    calibrate_modes(&mut params, ultimate_gain);
     params
 }
+
+/// How the Ziegler-Nichols ultimate gain is measured: at a held point
+/// (`fingerprint::ultimate_gain`, the default) or while the stage moves
+/// (`fingerprint::ultimate_gain_while_moving`, `--moving`).
+type UltimateGainProbe = fn(&FlexureStageParams, f64, LoopAxis) -> fingerprint::UltimateGain;
 
 /// Fixed-point iteration on the two near-proportionalities of the sampled
 /// loop: K_u ∝ ζ (the resonant peak's height is ∝ 1/ζ) and T_u ∝ 1/f. The
 /// targets are the K_u and T_u that Ziegler-Nichols maps to seed 000's gains.
-fn calibrate_modes(params: &mut FlexureStageParams) {
+fn calibrate_modes(params: &mut FlexureStageParams, ultimate_gain: UltimateGainProbe) {
     let u_home = fingerprint::x_home_command(params);
     let ku_translation = paper("ultimate_gain_x");
     let tu_translation = paper("ultimate_period_x");
@@ -215,7 +223,7 @@ fn calibrate_modes(params: &mut FlexureStageParams) {
     for iteration in 0..30 {
         let mut worst = 0.0f64;
         for axis in LoopAxis::ALL {
-            let ku = fingerprint::ultimate_gain(params, u_home, axis);
+            let ku = ultimate_gain(params, u_home, axis);
             let mode = match axis {
                 LoopAxis::X => &mut params.modes.x,
                 LoopAxis::Y => &mut params.modes.y,
@@ -295,16 +303,27 @@ fn report(f: &Fingerprints, params: &FlexureStageParams) {
 fn main() {
     let write = std::env::args().any(|a| a == "--write");
     let memory = std::env::args().any(|a| a == "--memory");
+    let moving = std::env::args().any(|a| a == "--moving");
     let base = FlexureStageParams {
         return_point_memory: memory,
         ..FlexureStageParams::default()
     };
-    let params = calibrate(&base);
+    let probe: UltimateGainProbe = if moving {
+        |p, u, a| fingerprint::ultimate_gain_while_moving(p, u, a)
+    } else {
+        |p, u, a| fingerprint::ultimate_gain(p, u, a)
+    };
+    let params = calibrate(&base, probe);
     params.validate().expect("calibrated parameters are valid");
     report(&fingerprint::measure(&params), &params);
     let json = serde_json::to_string_pretty(&params).expect("parameters serialise") + "\n";
     if write {
-        let path = if memory {
+        let path = if memory && moving {
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/presets/flexure_stage_tracking.json"
+            )
+        } else if memory {
             concat!(
                 env!("CARGO_MANIFEST_DIR"),
                 "/presets/flexure_stage_memory.json"

@@ -609,33 +609,75 @@ pub fn proportional_loop_growth<S: Stage>(rig: &mut Rig<S>, axis: LoopAxis, kp: 
 }
 
 fn loop_probe<S: Stage>(rig: &mut Rig<S>, axis: LoopAxis, kp: f64) -> (f64, f64) {
+    match loop_errors(rig, axis, kp, LOOP_STEP_UM, 0.0) {
+        Some(errors) => growth_and_period(&errors, false),
+        None => (f64::INFINITY, f64::NAN),
+    }
+}
+
+/// The errors r − reading of a proportional loop on `axis` from the rig's
+/// state, the reference stepped by `step_um` and the operating commands
+/// ramped along the axis's directions at `command_rate` [V/s] (0: held);
+/// None once a command leaves 0..10 V. A loop that is stable never leaves
+/// the command range after a small step from mid-stroke; once limited, an
+/// unstable loop's amplitude stops growing and would look marginal.
+fn loop_errors<S: Stage>(
+    rig: &mut Rig<S>,
+    axis: LoopAxis,
+    kp: f64,
+    step_um: f64,
+    command_rate: f64,
+) -> Option<Vec<f64>> {
     let operating = rig.commands;
     let directions = axis.directions();
-    let reference = axis.reading(rig) + LOOP_STEP_UM;
+    let reference = axis.reading(rig) + step_um;
     let mut previous = axis.reading(rig);
     let mut current = previous;
     let steps = (LOOP_PROBE_TIME / SAMPLE_PERIOD).round() as usize;
     let mut errors = Vec::with_capacity(steps);
-    for _ in 0..steps {
-        let v = kp * (reference - previous);
+    for k in 0..steps {
+        let v = kp * (reference - previous) + command_rate * (k as f64 * SAMPLE_PERIOD);
         let raw = [0, 1, 2].map(|c| operating[c] + directions[c] * v);
         if raw.iter().any(|u| !(0.0..=FULL_COMMAND).contains(u)) {
-            // A loop that is stable never leaves the command range after a
-            // 0.05 µm step from mid-stroke; once limited, an unstable loop's
-            // amplitude stops growing and would look marginal.
-            return (f64::INFINITY, f64::NAN);
+            return None;
         }
         rig.stage.step(raw, SAMPLE_PERIOD);
         previous = current;
         current = axis.reading(rig);
         errors.push(reference - current);
     }
+    Some(errors)
+}
+
+/// The growth rate [1/s] and period [s] of the oscillation in a probe's
+/// errors ([`proportional_loop_growth`] says how), each window's mean taken
+/// out, and with `detrend` its straight line (a moving probe's slow drift).
+fn growth_and_period(errors: &[f64], detrend: bool) -> (f64, f64) {
     let window = |(from, to): (f64, f64)| {
         let a = (from / SAMPLE_PERIOD).round() as usize;
         let b = ((to / SAMPLE_PERIOD).round() as usize).min(errors.len());
         let segment = &errors[a..b];
-        let mean = segment.iter().sum::<f64>() / segment.len() as f64;
-        let centred: Vec<f64> = segment.iter().map(|e| e - mean).collect();
+        let n = segment.len() as f64;
+        let mean = segment.iter().sum::<f64>() / n;
+        let middle = 0.5 * (n - 1.0);
+        let trend = if detrend {
+            let sxx: f64 = (0..segment.len())
+                .map(|k| (k as f64 - middle).powi(2))
+                .sum();
+            segment
+                .iter()
+                .enumerate()
+                .map(|(k, e)| (k as f64 - middle) * (e - mean))
+                .sum::<f64>()
+                / sxx
+        } else {
+            0.0
+        };
+        let centred: Vec<f64> = segment
+            .iter()
+            .enumerate()
+            .map(|(k, e)| e - mean - trend * (k as f64 - middle))
+            .collect();
         let rms = (centred.iter().map(|e| e * e).sum::<f64>() / centred.len() as f64).sqrt();
         (rms, centred)
     };
@@ -688,6 +730,77 @@ pub fn ultimate_gain<P: StageSource>(plant: &P, u_home: f64, axis: LoopAxis) -> 
     // The period of the oscillation just inside the stable side, where the
     // probe does not leave the command range.
     let (_, period) = proportional_loop_growth(&mut rig, axis, stable);
+    UltimateGain { gain, period }
+}
+
+/// Command rate of the moving loop probe [V/s]: the x stroke (12.74 µm per
+/// 10 V, seed 000 §2) at the mid-stroke speed of seed 000's Fig. 7 sine, a
+/// 10 µm span at 1 Hz (π·10 µm·1 Hz = 31.4 µm/s).
+pub const MOVING_LOOP_COMMAND_RATE: f64 = 25.0;
+/// Reference step of the moving loop probe [µm]: its oscillation's command,
+/// kp·step at 818 Hz, moves at about 1 V/s at the ultimate gain, far below
+/// the ramp, so the stacks never reverse and the loop sees the branch's own
+/// slope (a held probe's stacks reverse at every half period).
+pub const MOVING_LOOP_STEP_UM: f64 = 0.002;
+
+/// [`proportional_loop_growth`] with the operating commands ramping along
+/// the axis at [`MOVING_LOOP_COMMAND_RATE`] from the rig's state: the loop
+/// as a tracking stage has it, on a branch rather than on a held point's
+/// small loops. The oscillation is the difference between the probe with a
+/// [`MOVING_LOOP_STEP_UM`] step and the same probe without one, which takes
+/// the ramp's own trajectory out.
+pub fn proportional_loop_growth_while_moving<S: Stage>(
+    rig: &mut Rig<S>,
+    axis: LoopAxis,
+    kp: f64,
+) -> (f64, f64) {
+    let saved = rig.stage.snapshot();
+    let saved_commands = rig.commands;
+    let mut run = |step_um: f64| {
+        let errors = loop_errors(rig, axis, kp, step_um, MOVING_LOOP_COMMAND_RATE);
+        rig.stage.restore(&saved);
+        rig.commands = saved_commands;
+        errors
+    };
+    match (run(MOVING_LOOP_STEP_UM), run(0.0)) {
+        (Some(stepped), Some(unstepped)) => {
+            let difference: Vec<f64> = stepped.iter().zip(&unstepped).map(|(a, b)| a - b).collect();
+            growth_and_period(&difference, true)
+        }
+        _ => (f64::INFINITY, f64::NAN),
+    }
+}
+
+/// [`ultimate_gain`] of the loop while the stage moves
+/// ([`proportional_loop_growth_while_moving`]) from the same operating point:
+/// the gain raised from 0.01 V/µm in steps of 5 % until the oscillation
+/// grows, as the Ziegler-Nichols procedure raises it, then bisected within
+/// that step. (Not bisected over the whole range: well above K_u the
+/// oscillation soon outruns the ramp, the stacks reverse, their flatter small
+/// loops hold its amplitude, and the growth between the two windows reads
+/// about 0.)
+pub fn ultimate_gain_while_moving<P: StageSource>(
+    plant: &P,
+    u_home: f64,
+    axis: LoopAxis,
+) -> UltimateGain {
+    let mut rig = rig_at_loop_operating_point(plant, u_home);
+    let mut stable: f64 = 0.01;
+    while proportional_loop_growth_while_moving(&mut rig, axis, 1.05 * stable).0 <= 0.0 {
+        stable *= 1.05;
+        assert!(stable < 10.0, "no ultimate gain below 10 V/µm");
+    }
+    let mut unstable = 1.05 * stable;
+    while unstable / stable > 1.0 + 1e-4 {
+        let kp = (stable * unstable).sqrt();
+        if proportional_loop_growth_while_moving(&mut rig, axis, kp).0 > 0.0 {
+            unstable = kp;
+        } else {
+            stable = kp;
+        }
+    }
+    let gain = (stable * unstable).sqrt();
+    let (_, period) = proportional_loop_growth_while_moving(&mut rig, axis, stable);
     UltimateGain { gain, period }
 }
 

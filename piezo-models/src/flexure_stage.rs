@@ -118,6 +118,12 @@ const XY200S_JSON: &str = include_str!("../presets/xy200s_stage.json");
 /// figures hold on the memory's flatter small loops (MODEL.md §6).
 const MEMORY_JSON: &str = include_str!("../presets/flexure_stage_memory.json");
 
+/// The same stage calibrated with the memory, its Ziegler-Nichols figures
+/// taken while it moves (`examples/calibrate.rs -- --memory --moving`): the
+/// modes are set by the loop on the branches a tracking stage runs along
+/// rather than on a held point's small loops (MODEL.md §6).
+const TRACKING_JSON: &str = include_str!("../presets/flexure_stage_tracking.json");
+
 impl FlexureStageParams {
     /// Seed 000's stage with `return_point_memory` on, calibrated with it
     /// (`presets/flexure_stage_memory.json`; docs/seed000.md measures it
@@ -125,6 +131,14 @@ impl FlexureStageParams {
     pub fn with_closed_minor_loops() -> Self {
         serde_json::from_str(MEMORY_JSON)
             .expect("presets/flexure_stage_memory.json must parse (a test checks it)")
+    }
+
+    /// Seed 000's stage with `return_point_memory` on, its modes calibrated
+    /// to the Ziegler-Nichols figures of a loop on a moving stage
+    /// (`presets/flexure_stage_tracking.json`; docs/seed000.md measures it).
+    pub fn calibrated_while_tracking() -> Self {
+        serde_json::from_str(TRACKING_JSON)
+            .expect("presets/flexure_stage_tracking.json must parse (a test checks it)")
     }
 
     /// The XY200S preset (seed 001 §5.1): PZT1 is the Y actuator, PZT2 and
