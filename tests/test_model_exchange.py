@@ -41,6 +41,10 @@ CVODE_ROWS = {
     1e-9: "CVode, relative tolerance 1e-9",
 }
 EULER_ROWS = ("forward Euler, 2 µs steps", "forward Euler, 1 µs steps")
+MEMORY_ROWS = (
+    "CVode, relative tolerance 1e-10, return-point memory on (`3dof_tracking`)",
+    "the same run with `return_point_memory = false` (the memory's branches not followed)",
+)
 
 
 def assert_documented(rows: list[list[str]]) -> None:
@@ -110,9 +114,10 @@ def test_both_interfaces_validate_and_are_declared():
     assert me is not None and md.coSimulation is not None
     assert me.modelIdentifier == md.coSimulation.modelIdentifier == "FlexureStage"
     assert md.numberOfContinuousStates == 19
-    # The hysteretic states, where each Bouc-Wen rate switches branch
-    # (clipping acts on the inputs and needs none).
-    assert md.numberOfEventIndicators == 7
+    # Per Bouc-Wen model (7): its branch state, where its rate switches
+    # form, and the return-point memory's turn and wipe-out (clipping acts on
+    # the inputs and needs none).
+    assert md.numberOfEventIndicators == 21
     assert me.completedIntegratorStepNotNeeded is False
     assert me.canGetAndSetFMUstate and me.canSerializeFMUstate
     states = [d.variable.derivative.name for d in md.derivatives]
@@ -165,6 +170,60 @@ def test_forward_euler_converges_to_co_simulation():
     assert 0.4 < differences[1] / differences[0] < 0.6, differences
     assert differences[1] < 0.5
     assert_documented([[row, "10 ms", f"{d:.2f} µm"] for row, d in zip(EULER_ROWS, differences)])
+
+
+#: Commands held 2 ms each (the FMU's inputs, before the amplifier [V]): every
+#: channel turns at each change, and the later holds carry the voltages past
+#: earlier turns, where the return-point memory wipes loops out.
+MEMORY_HOLDS = [
+    (5.0, 3.0, 7.0), (2.0, 1.0, 4.0), (4.0, 2.5, 6.0), (1.0, 0.5, 3.0), (6.0, 4.0, 8.0),
+    (3.0, 2.0, 5.0), (3.5, 2.2, 5.5), (-0.2, -0.1, 1.0), (9.0, 7.0, 10.0), (4.0, 3.0, 6.0),
+]
+
+
+def held_commands(hold: float) -> np.ndarray:
+    """MEMORY_HOLDS as an fmpy input signal: piecewise constant, each change a
+    repeated time stamp (fmpy's time event)."""
+    rows = []
+    for k, commands in enumerate(MEMORY_HOLDS):
+        rows += [(k * hold, *commands), ((k + 1) * hold, *commands)]
+    return np.array(rows, dtype=[("time", float), ("u1", float), ("u2", float), ("u3", float)])
+
+
+def test_model_exchange_runs_the_return_point_memory():
+    """With the stacks' minor loops closed (the tracking parameter set), CVode
+    with the memory's events (each turn remembered, each wipe-out taken where
+    its indicator crosses 0) traces the loops Co-Simulation steps through:
+    20 ms of commands that turn every channel at each 2 ms change and pass
+    earlier turns. Bound: 1e5 x the relative tolerance in um, as for the
+    memory-free stage above. The same run with the memory off differs from
+    this co-simulation by orders of magnitude more, so the bound tells the
+    two apart."""
+    import json
+    preset = json.loads((DIST / "presets" / "FlexureStage.3dof_tracking.json").read_text())
+    assert preset["return_point_memory"] is True
+    preset.pop("noise.enabled", None)
+    hold, stop = 2e-3, 2e-3 * len(MEMORY_HOLDS)
+    signal = held_commands(hold)
+    common = dict(input=signal, stop_time=stop, output_interval=1e-4, output=SENSORS)
+    cs = fmpy.simulate_fmu(require(PLANT), fmi_type="CoSimulation", step_size=1e-4,
+                           start_values={**preset, "solver.max_voltage_step": 1e-3}, **common)
+    tolerance = 1e-10
+    me = fmpy.simulate_fmu(require(PLANT), fmi_type="ModelExchange", solver="CVode",
+                           relative_tolerance=tolerance, start_values=preset, **common)
+    worst = largest_difference(cs, me)
+    forgetting = fmpy.simulate_fmu(require(PLANT), fmi_type="ModelExchange", solver="CVode",
+                                   relative_tolerance=tolerance,
+                                   start_values={**preset, "return_point_memory": False}, **common)
+    without = largest_difference(cs, forgetting)
+    print(f"return-point memory, CVode (rtol {tolerance:g}) vs Co-Simulation: {worst:.2e} um; "
+          f"with the memory off {without:.2e} um")
+    assert worst < 1e5 * tolerance
+    assert without > 100 * 1e5 * tolerance
+    assert_documented([
+        [MEMORY_ROWS[0], "20 ms", f"{worst:.1e} µm"],
+        [MEMORY_ROWS[1], "20 ms", f"{without:.2f} µm"],
+    ])
 
 
 def test_model_exchange_refuses_sensor_noise():

@@ -761,7 +761,8 @@ const MINOR_LOOPS: &[Variable<FlexureStageFmu>] =
         "Close the stacks' minor loops, as a real stack's close: each branch is the Bouc-Wen \
          branch (ABW-XY eq. 3) tilted to end at the reversal it returns to, and an excursion past \
          a reversal wipes its loop out (false: eq. 3 as integrated; its minor loops drift and \
-         dither ratchets it). Co-Simulation only",
+         dither ratchets it). In Model Exchange the memory is discrete state, updated at the \
+         turn and wipe-out event indicators",
         Variability::Fixed,
         |m| m.params.return_point_memory,
         |m, v| m.params.return_point_memory = v,
@@ -778,7 +779,7 @@ impl CoSimModel for FlexureStageFmu {
         model_name: "FlexureStage",
         description: "3-DOF piezo-driven flexure stage (x, y, theta_z; three PZTs with asymmetric \
                       Bouc-Wen hysteresis and coupled hysteresis; first mode 790 Hz in theta_z); \
-                      Co-Simulation and Model Exchange (19 continuous states; 7 event indicators, the hysteretic states)",
+                      Co-Simulation and Model Exchange (19 continuous states; 21 event indicators: per Bouc-Wen model, its branch state and the return-point memory's turn and wipe-out)",
         author: "piezo-fmu project",
         version: env!("CARGO_PKG_VERSION"),
         license: "MIT OR Apache-2.0",
@@ -791,9 +792,10 @@ impl CoSimModel for FlexureStageFmu {
     const UNITS: &'static [UnitDefinition] = UNITS;
     const MODEL_EXCHANGE: Option<ModelExchangeInfo> = Some(ModelExchangeInfo {
         number_of_continuous_states: NUMBER_OF_STATES,
-        // The hysteretic states, where each Bouc-Wen rate changes branch. No
-        // event for the amplifier's clipping: it clips its target G·u, a
-        // function of the inputs alone (piezo_models::flexure_stage::ode).
+        // Per Bouc-Wen model: its branch state, where its rate changes form,
+        // and the return-point memory's turn and wipe-out. No event for the
+        // amplifier's clipping: it clips its target G·u, a function of the
+        // inputs alone (piezo_models::flexure_stage::ode).
         number_of_event_indicators: ode::NUMBER_OF_SWITCHING_FUNCTIONS,
     });
 
@@ -816,14 +818,6 @@ impl CoSimModel for FlexureStageFmu {
                 "noise.enabled = true: the sensor noise is one sample per communication step, \
                  and Model Exchange has none; add the noise in the importer, or use \
                  Co-Simulation"
-                    .to_owned(),
-            ));
-        }
-        if ctx.interface() == Interface::ModelExchange && self.params.return_point_memory {
-            return Err(ModelError(
-                "return_point_memory = true: the memory turns each branch at the input's \
-                 reversals, which a co-simulation step sees and Model Exchange's continuous \
-                 states do not; use Co-Simulation, or return_point_memory = false"
                     .to_owned(),
             ));
         }
@@ -999,7 +993,7 @@ impl ModelExchange for FlexureStageFmu {
     }
 
     fn event_indicators(&self, _time: f64, indicators: &mut [f64]) {
-        indicators.copy_from_slice(&self.stage.switching_functions());
+        indicators.copy_from_slice(&self.stage.switching_functions(self.commands));
     }
 
     fn update_discrete_states(
@@ -1007,8 +1001,15 @@ impl ModelExchange for FlexureStageFmu {
         ctx: &mut Context<'_>,
         time: f64,
     ) -> Result<EventUpdate, ModelError> {
+        // The return-point memory is the discrete state: a turn of a
+        // voltage is remembered, a wipe-out moves a hysteretic state onto
+        // the branch it continues (the integrator reads the states again).
+        let values_changed = self.stage.settle_memories(self.commands);
         self.supervise(ctx, time)?;
-        Ok(EventUpdate::default())
+        Ok(EventUpdate {
+            values_changed,
+            ..EventUpdate::default()
+        })
     }
 
     fn completed_integrator_step(

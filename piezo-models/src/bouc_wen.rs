@@ -520,10 +520,40 @@ impl AsymmetricBoucWen {
 
     /// dy/du at the current point for an input moving in the direction of
     /// `direction` (its sign): p + q·dh/du, with dh/du from eq. (3) in the
-    /// module's reading. Used by the inverse model's Newton steps.
+    /// module's reading, on the current branch (its tilt included, for a
+    /// model with a return-point memory; a turn against the branch's
+    /// direction would start another). Used by the inverse model's Newton
+    /// steps.
     pub fn output_slope(&self, direction: f64) -> f64 {
         let p = &self.params;
-        p.p + p.q * p.state_slope(self.u, self.h, direction)
+        p.p + p.q * self.branch_slope(direction)
+    }
+
+    /// dh/du on the current branch for an input moving in the direction of
+    /// `direction`: eq. (3)'s slope at the branch's untilted state, plus its
+    /// tilt ([`ReturnPointMemory`]).
+    fn branch_slope(&self, direction: f64) -> f64 {
+        let (origin, tilt) = self.branch();
+        let untilted = self.h - tilt * (self.u - origin);
+        self.params.state_slope(self.u, untilted, direction) + tilt
+    }
+
+    /// The current branch's origin u_b [V] and tilt [µm/V]: the last
+    /// remembered reversal's, (0, 0) for a model without memory or without a
+    /// reversal (an untilted branch).
+    fn branch(&self) -> (f64, f64) {
+        self.memory
+            .as_deref()
+            .and_then(|memory| memory.reversals().last())
+            .map_or((0.0, 0.0), |r| (r.u, r.tilt))
+    }
+
+    /// Eq. (3)'s own state on the current branch, h − c·(u − u_b) with the
+    /// branch's tilt c and origin u_b (h itself without a memory or a
+    /// tilt) [µm]: where it crosses 0, eq. (3)'s slope changes form.
+    pub fn branch_state(&self) -> f64 {
+        let (origin, tilt) = self.branch();
+        self.h - tilt * (self.u - origin)
     }
 
     /// Sets the input and the hysteretic state (a continuous-state
@@ -534,10 +564,100 @@ impl AsymmetricBoucWen {
     }
 
     /// dh/dt while the input moves at `u_rate` = du/dt: eq. (3) in this
-    /// module's reading, (dh/du)·u̇, with sgn(du) = sgn(u̇). Continuous in u̇
-    /// (every term is proportional to it), so a held input holds h.
+    /// module's reading, (dh/du)·u̇, with sgn(du) = sgn(u̇), on the current
+    /// branch (with a return-point memory, eq. (3) of the untilted state
+    /// plus the branch's tilt, as [`AsymmetricBoucWen::advance_to`]
+    /// integrates it). Continuous in u̇ (every term is proportional to it),
+    /// so a held input holds h.
     pub fn state_rate(&self, u_rate: f64) -> f64 {
-        self.params.state_slope(self.u, self.h, u_rate) * u_rate
+        self.branch_slope(u_rate) * u_rate
+    }
+
+    /// For an integrator in time that owns the point (u, h) (a model-exchange
+    /// importer's solver): the two functions of the point whose change of
+    /// sign, from ≤ 0 to > 0, is where the return-point memory must be
+    /// updated by [`AsymmetricBoucWen::settle_memory`]. `u_rate` is the
+    /// input's rate, or any quantity of its sign.
+    ///
+    /// - `[0]`, a turn: −d·u̇ for the direction d of the last motion, so
+    ///   that a held input (0) and a motion that goes on (< 0) lie on one
+    ///   side and a turn (> 0) on the other. A model that has not moved since
+    ///   its rest has no direction: u̇ there, which marks a start upward; a
+    ///   start downward is told by the turn that ends it.
+    /// - `[1]`, a wipe-out: d·(u − u_a) for the reversal u_a that the current
+    ///   branch closes onto; −1 when it closes onto none.
+    ///
+    /// Both are −1 (no event ever) for a model without a memory: its rate is
+    /// the same function of the point whatever the input did before.
+    pub fn memory_event_functions(&self, u_rate: f64) -> [f64; 2] {
+        let Some(memory) = self.memory.as_deref() else {
+            return [-1.0, -1.0];
+        };
+        let turn = if memory.direction == 0.0 {
+            u_rate
+        } else {
+            -memory.direction * u_rate
+        };
+        let wipe_out = match memory.points[..] {
+            [.., closes_at, _] => memory.direction * (self.u - closes_at.u),
+            _ => -1.0,
+        };
+        [turn, wipe_out]
+    }
+
+    /// The event update of the return-point memory for an integrator in time
+    /// (see [`AsymmetricBoucWen::memory_event_functions`]), at the current
+    /// point (u, h) with the input moving at `u_rate` (or any quantity of its
+    /// sign): an input that has reached, or passed, the reversal its branch
+    /// closes onto forgets both and continues the branch that turned there;
+    /// an input that turns is remembered turning here, as
+    /// [`AsymmetricBoucWen::advance_to`] remembers it. A model that had not
+    /// moved since its rest came there from u = 0. `max_du` as for
+    /// `advance_to`. Returns whether h changed (only a wipe-out moves it,
+    /// onto the branch it continues). Allocates nothing; nothing happens to
+    /// a model without memory.
+    pub fn settle_memory(&mut self, u_rate: f64, max_du: f64) -> bool {
+        let params = self.params;
+        let Some(memory) = self.memory.as_deref_mut() else {
+            return false;
+        };
+        if !(self.u.is_finite() && self.h.is_finite() && u_rate.is_finite()) {
+            return false;
+        }
+        let h_before = self.h;
+        if memory.direction == 0.0 {
+            // Rest is u = 0: a model away from it has moved, the way it went.
+            memory.direction = sign_or_zero(self.u);
+        }
+        let (u, direction) = (self.u, memory.direction);
+        let mut wiped = false;
+        while let [.., closes_at, _] = memory.points[..] {
+            if direction * (u - closes_at.u) < 0.0 {
+                break;
+            }
+            self.u = closes_at.u;
+            self.h = closes_at.h;
+            memory.points.truncate(memory.points.len() - 2);
+            wiped = true;
+        }
+        if wiped {
+            let (origin, tilt) = memory
+                .reversals()
+                .last()
+                .map_or((self.u, 0.0), |r| (r.u, r.tilt));
+            let untilted = self.h - tilt * (self.u - origin);
+            let untilted = integrate(&params, self.u, untilted, u, max_du);
+            self.h = untilted + tilt * (u - origin);
+            self.u = u;
+        }
+        let moving = sign_or_zero(u_rate);
+        if moving != 0.0 && moving != memory.direction {
+            if memory.direction != 0.0 {
+                memory.remember_reversal(&params, self.u, self.h, moving, max_du);
+            }
+            memory.direction = moving;
+        }
+        self.h != h_before
     }
 
     /// Takes `from`'s point (input and hysteretic state), keeping this
@@ -652,6 +772,17 @@ impl ReturnPointMemory {
             _ => 0.0,
         };
         self.points.push(Reversal { u, h, tilt });
+    }
+}
+
+/// The sign of `x`, 0 for ±0 (`f64::signum` gives ±1 there).
+fn sign_or_zero(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
     }
 }
 
@@ -1159,5 +1290,74 @@ mod tests {
                 model.output()
             );
         }
+    }
+
+    /// The memory's event interface (Model Exchange) and `advance_to` give
+    /// the same loops: h integrated in u by RK4 on `state_rate`, with
+    /// `settle_memory` called at each turn and where the wipe-out function
+    /// reaches 0, against `advance_to` along the same path, at every vertex.
+    /// Both a virgin model (its first motion downward, told only by the turn
+    /// that ends it) and an exercised rest, whose path runs past its rest
+    /// cycle's top; the path wipes out two loops on the way.
+    #[test]
+    fn the_memorys_event_interface_traces_the_loops_advance_to_does() {
+        let path = [-20.0, 30.0, 10.0, 25.0, 15.0, 40.0, 120.0, -5.0];
+        for (cycle, start) in [(0.0, 0.0), (100.0, 0.0)] {
+            let mut reference = AsymmetricBoucWen::at_exercised_rest(stack(), cycle)
+                .with_return_point_memory(cycle);
+            let mut by_events = reference.clone();
+            let mut u: f64 = start;
+            let mut wipe_outs = 0;
+            for &vertex in &path {
+                reference.advance_to(vertex, 1e-3);
+                let direction = (vertex - u).signum();
+                if cycle != 0.0 || vertex != path[0] {
+                    // The virgin model's first motion, downward, is not an
+                    // event: the turn at its end tells it.
+                    by_events.settle_memory(direction, 1e-3);
+                    assert!(by_events.memory_event_functions(direction)[0] < 0.0);
+                }
+                let steps = ((vertex - u).abs() / 1e-3).round() as usize;
+                let du = (vertex - u) / steps as f64;
+                for k in 0..steps {
+                    let u0 = u + du * k as f64;
+                    let h0 = by_events.hysteretic_state();
+                    let slope = |model: &mut AsymmetricBoucWen, u: f64, h: f64| {
+                        model.set_point(u, h);
+                        model.state_rate(direction) * direction
+                    };
+                    let k1 = slope(&mut by_events, u0, h0);
+                    let k2 = slope(&mut by_events, u0 + du / 2.0, h0 + du / 2.0 * k1);
+                    let k3 = slope(&mut by_events, u0 + du / 2.0, h0 + du / 2.0 * k2);
+                    let k4 = slope(&mut by_events, u0 + du, h0 + du * k3);
+                    by_events.set_point(u0 + du, h0 + du / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4));
+                    // The wipe-out points of this path lie on the grid.
+                    if by_events.memory_event_functions(direction)[1] >= 0.0 {
+                        by_events.settle_memory(direction, 1e-3);
+                        wipe_outs += 1;
+                    }
+                }
+                u = vertex;
+                assert!(
+                    (by_events.hysteretic_state() - reference.hysteretic_state()).abs() < 1e-9,
+                    "rest cycle {cycle} V, at {vertex} V: {} vs {}",
+                    by_events.hysteretic_state(),
+                    reference.hysteretic_state()
+                );
+                assert_eq!(
+                    by_events.return_point_memory().unwrap().reversals().len(),
+                    reference.return_point_memory().unwrap().reversals().len()
+                );
+            }
+            assert!(
+                wipe_outs >= 2,
+                "rest cycle {cycle} V: {wipe_outs} wipe-outs"
+            );
+        }
+        // Without a memory there is nothing to settle and no event.
+        let mut plain = AsymmetricBoucWen::new(stack());
+        plain.advance_to(5.0, 1e-3);
+        assert_eq!(plain.memory_event_functions(-1.0), [-1.0, -1.0]);
+        assert!(!plain.settle_memory(-1.0, 1e-3));
     }
 }

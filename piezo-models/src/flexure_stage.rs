@@ -94,7 +94,8 @@ pub struct FlexureStageParams {
     /// eq. (3)'s branches, each tilted to end at the reversal it returns
     /// to). `false`, the default: seed 001's model as integrated, whose
     /// minor loops drift and which dither ratchets (MODEL.md §6).
-    /// Co-simulation only: Model Exchange integrates h without the memory.
+    /// In Model Exchange the memory is discrete state, changed at its events
+    /// (`flexure_stage::ode`).
     #[serde(default)]
     pub return_point_memory: bool,
     pub modes: ModeSet,

@@ -11,7 +11,11 @@
 //! q̇   = v,   v̇ = ω²(q_qs − q) − 2ζω·v   for q ∈ {x, y, θ}, q_qs from seed 000 §2
 //! ```
 //!
-//! with 19 states in [`STATES`] order. Two properties matter to an integrator:
+//! with 19 states in [`STATES`] order. With `return_point_memory = true`,
+//! dh/du is that of the model's current branch: eq. (3) at the branch's
+//! untilted state h − c·(V − V_b), plus its tilt c (MODEL.md §6), where the
+//! memory (its reversals and the direction of the last motion) is discrete
+//! state. What matters to an integrator:
 //!
 //! - **The right-hand side is continuous** in the states and the inputs. The
 //!   amplifier's clipping acts on the target V_t, a function of the input u
@@ -25,19 +29,28 @@
 //!   variable-step solver meets it with a smaller step. With inputs held
 //!   between samples, V approaches its target exponentially and never
 //!   reverses within a sample.
-//! - **ḣ is not smooth where h crosses 0**: |h|ⁿ and |h|ⁿ⁻¹·h switch branch
-//!   there. For n = 1 (seed 000's actuators) the slope of ḣ in h jumps by
-//!   2γ·V̇, in the middle of a slew where V̇ is large; for n > 1 a higher
-//!   derivative jumps. The
-//!   stage starts at its exercised rest (h < 0), so every step of the
-//!   voltage from rest drives each h through 0. A BDF solver at tight
-//!   tolerance spends hundreds of steps on such a kink (CVode at relative
-//!   tolerance 1e-11 exceeded its 500 steps per output interval on the
-//!   three actuator kinks of one 0→50/30/70 V step). So the 7 hysteretic
-//!   states are the [`switching_functions`](FlexureStage::switching_functions):
-//!   a solver with root finding stops at h = 0 and restarts there. Nothing
-//!   changes at the event; the model has no discrete state.
-//!
+//! - **ḣ is not smooth where eq. (3)'s state crosses 0**: |h|ⁿ and |h|ⁿ⁻¹·h
+//!   switch branch there. For n = 1 (seed 000's actuators) the slope of ḣ
+//!   in h jumps by 2γ·V̇, in the middle of a slew where V̇ is large; for
+//!   n > 1 a higher derivative jumps. The stage starts at its exercised rest
+//!   (h < 0), so every step of the voltage from rest drives each h through
+//!   0. A BDF solver at tight tolerance spends hundreds of steps on such a
+//!   kink (CVode at relative tolerance 1e-11 exceeded its 500 steps per
+//!   output interval on the three actuator kinks of one 0→50/30/70 V step).
+//!   So the 7 branch states are the first 7
+//!   [`switching_functions`](FlexureStage::switching_functions): a solver
+//!   with root finding stops there and restarts. Nothing changes at such an
+//!   event.
+//! - **The return-point memory changes at two kinds of event** per Bouc-Wen
+//!   model, its other 14 switching functions: where the voltage turns (V_t − V
+//!   changes sign against the last motion: the turn is remembered, and the
+//!   branch that leaves it gets its tilt) and where it reaches the reversal
+//!   the branch closes onto (both are forgotten and the older branch goes on:
+//!   a wipe-out, which sets h onto that branch, so the importer must read the
+//!   states again). The event update [`FlexureStage::settle_memories`] does
+//!   what [`FlexureStage::step`] does at the same points; without the memory
+//!   these functions are −1 and never fire.
+
 //! Sensor noise is a sample drawn per communication step, which a
 //! continuous-time model does not have; the sensors here read the pose.
 
@@ -45,7 +58,7 @@ use super::{
     ACTUATOR_STATES, AMPLIFIER_STATES, COUPLING_DRIVER, COUPLING_STATES, CREEP_STATES,
     FlexureStage, FlexureStageParams, MODE_POSITIONS, MODE_VELOCITIES, StateFault,
 };
-use crate::bouc_wen::BoucWenParams;
+use crate::bouc_wen::{AsymmetricBoucWen, BoucWenParams};
 use crate::oscillator::ModalPoint;
 
 /// Number of continuous states.
@@ -77,9 +90,12 @@ pub const STATES: [&str; NUMBER_OF_STATES] = [
     MODE_VELOCITIES[2],
 ];
 
-/// Number of switching functions (the hysteretic states, module comment):
-/// 3 actuators and 4 couplings.
-pub const NUMBER_OF_SWITCHING_FUNCTIONS: usize = 7;
+/// Number of Bouc-Wen models: 3 actuators and 4 couplings.
+const HYSTERESIS_MODELS: usize = 7;
+
+/// Number of switching functions (module comment): three per Bouc-Wen model,
+/// its branch's state and the return-point memory's two events.
+pub const NUMBER_OF_SWITCHING_FUNCTIONS: usize = 3 * HYSTERESIS_MODELS;
 
 /// Index of the first amplifier voltage, hysteretic state, creep, position and
 /// velocity in the state vector.
@@ -132,15 +148,8 @@ impl FlexureStage {
     /// nothing.
     pub fn derivatives(&self, commands: [f64; 3]) -> [f64; NUMBER_OF_STATES] {
         let mut dx = [0.0; NUMBER_OF_STATES];
-        let amplifier = &self.params.amplifier;
         let voltages = self.amplifier.voltages();
-        let mut voltage_rates = [0.0; 3];
-        for i in 0..3 {
-            // Through the amplifier's own target, so that its limits are the
-            // ones the step uses.
-            let (target, _) = amplifier.target(commands[i]);
-            voltage_rates[i] = (target - voltages[i]) / self.tau;
-        }
+        let voltage_rates = self.approach(commands).map(|gap| gap / self.tau);
         dx[VOLTAGES..VOLTAGES + 3].copy_from_slice(&voltage_rates);
         let mut extension = [0.0; 3];
         for i in 0..3 {
@@ -169,16 +178,65 @@ impl FlexureStage {
         dx
     }
 
-    /// The switching functions (module comment): the hysteretic states of
-    /// PZT1..PZT3 and of the couplings x←1, rot←1, y←2, y←3 [µm], in
-    /// [`STATES`] order. Where one changes sign, ḣ changes branch.
-    pub fn switching_functions(&self) -> [f64; NUMBER_OF_SWITCHING_FUNCTIONS] {
+    /// V_t − V per channel [V]: what each amplifier voltage still has to go
+    /// to its target under `commands`, of the sign of V̇. Through the
+    /// amplifier's own target, so that its limits are the ones the step uses.
+    fn approach(&self, commands: [f64; 3]) -> [f64; 3] {
+        let amplifier = &self.params.amplifier;
+        let voltages = self.amplifier.voltages();
+        std::array::from_fn(|i| amplifier.target(commands[i]).0 - voltages[i])
+    }
+
+    /// The 7 Bouc-Wen models, PZT1..PZT3 then the couplings x←1, rot←1,
+    /// y←2, y←3, each with the channel that drives it.
+    fn hysteresis_models(&self) -> impl Iterator<Item = (&AsymmetricBoucWen, usize)> {
+        let channels = [0, 1, 2].into_iter().chain(COUPLING_DRIVER);
+        self.actuators.iter().chain(&self.couplings).zip(channels)
+    }
+
+    /// The switching functions (module comment) under `commands`, for the 7
+    /// Bouc-Wen models in the order of [`STATES`] (PZT1..PZT3, then the
+    /// couplings x←1, rot←1, y←2, y←3):
+    ///
+    /// - `[0..7]`: each model's eq. (3) state on its branch [µm] (the
+    ///   hysteretic state, less the branch's tilt with a return-point memory):
+    ///   where one changes sign, ḣ changes form;
+    /// - `[7..14]`: where each model's input turns, and `[14..21]`: where it
+    ///   reaches the reversal its branch closes onto [V] (the return-point
+    ///   memory's events, [`AsymmetricBoucWen::memory_event_functions`];
+    ///   −1 throughout with `return_point_memory = false`).
+    ///
+    /// At a crossing of the last two kinds an event update
+    /// ([`FlexureStage::settle_memories`]) changes the memory.
+    pub fn switching_functions(&self, commands: [f64; 3]) -> [f64; NUMBER_OF_SWITCHING_FUNCTIONS] {
         let mut g = [0.0; NUMBER_OF_SWITCHING_FUNCTIONS];
-        let models = self.actuators.iter().chain(&self.couplings);
-        for (value, model) in g.iter_mut().zip(models) {
-            *value = model.hysteretic_state();
+        let approach = self.approach(commands);
+        for (k, (model, channel)) in self.hysteresis_models().enumerate() {
+            let [turn, wipe_out] = model.memory_event_functions(approach[channel]);
+            g[k] = model.branch_state();
+            g[HYSTERESIS_MODELS + k] = turn;
+            g[2 * HYSTERESIS_MODELS + k] = wipe_out;
         }
         g
+    }
+
+    /// The event update of Model Exchange under `commands`: every Bouc-Wen
+    /// model's return-point memory settled at the current point
+    /// ([`AsymmetricBoucWen::settle_memory`]; nothing with
+    /// `return_point_memory = false`). Returns whether a continuous state
+    /// changed (a wipe-out puts a hysteretic state on the branch it
+    /// continues). Allocates nothing.
+    pub fn settle_memories(&mut self, commands: [f64; 3]) -> bool {
+        let approach = self.approach(commands);
+        let max_du = self.max_du;
+        let mut changed = false;
+        for (model, channel) in self.actuators.iter_mut().zip([0, 1, 2]) {
+            changed |= model.settle_memory(approach[channel], max_du);
+        }
+        for (model, channel) in self.couplings.iter_mut().zip(COUPLING_DRIVER) {
+            changed |= model.settle_memory(approach[channel], max_du);
+        }
+        changed
     }
 
     /// The first state that is non-finite or beyond the divergence bounds
@@ -251,7 +309,17 @@ mod tests {
     /// commands held. A step across a switching function's zero is split
     /// there, as a solver with root finding does (module comment): the kink
     /// of an n = 1 rate at h = 0 would otherwise cost RK4 its order.
-    fn integrate(stage: &mut FlexureStage, commands: [f64; 3], h: f64, steps: usize) {
+    /// With `memory_events`, the return-point memory is settled at the
+    /// commands' jump and at every located crossing, as an importer's event
+    /// updates do; returns the number of updates that moved a state (the
+    /// wipe-outs).
+    fn integrate(
+        stage: &mut FlexureStage,
+        commands: [f64; 3],
+        h: f64,
+        steps: usize,
+        memory_events: bool,
+    ) -> usize {
         let at = |stage: &FlexureStage, x: &[f64; NUMBER_OF_STATES]| {
             let mut probe = stage.clone();
             probe.set_continuous_states(x);
@@ -278,14 +346,24 @@ mod tests {
         let switching = |stage: &FlexureStage, x: &[f64; NUMBER_OF_STATES]| {
             let mut probe = stage.clone();
             probe.set_continuous_states(x);
-            probe.switching_functions()
+            probe.switching_functions(commands)
         };
-        let crosses = |g0: &[f64], g1: &[f64]| g0.iter().zip(g1).any(|(a, b)| a * b < 0.0);
+        // FMI 2.0's reading of a crossing: a change between z > 0 and z <= 0.
+        let crosses =
+            |g0: &[f64], g1: &[f64]| g0.iter().zip(g1).any(|(a, b)| (*a > 0.0) != (*b > 0.0));
+        let mut wipe_outs = 0;
+        let mut settle = |stage: &mut FlexureStage| {
+            if memory_events && stage.settle_memories(commands) {
+                wipe_outs += 1;
+            }
+        };
+        // An importer's event at the commands' jump (an input event).
+        settle(stage);
         for _ in 0..steps {
             let mut left = h;
             while left > 0.0 {
                 let x0 = stage.continuous_states();
-                let g0 = stage.switching_functions();
+                let g0 = stage.switching_functions(commands);
                 let mut x1 = rk4(stage, &x0, left);
                 let mut taken = left;
                 if crosses(&g0, &switching(stage, &x1)) {
@@ -303,9 +381,14 @@ mod tests {
                     x1 = rk4(stage, &x0, taken);
                 }
                 stage.set_continuous_states(&x1);
+                if taken < left {
+                    // The event update at the located crossing.
+                    settle(stage);
+                }
                 left -= taken;
             }
         }
+        wipe_outs
     }
 
     /// A stage moving in every state: 30 ms of a three-phase ramp from rest.
@@ -333,9 +416,10 @@ mod tests {
         assert_eq!(copy.sensors(), stage.sensors());
         assert_eq!(copy.actuator_extensions(), stage.actuator_extensions());
         assert_eq!(copy.derivatives([3.0; 3]), stage.derivatives([3.0; 3]));
-        let g = copy.switching_functions();
+        let g = copy.switching_functions([3.0; 3]);
         assert_eq!(g[..3], x[ACTUATORS..ACTUATORS + 3]);
-        assert_eq!(g[3..], x[COUPLINGS..COUPLINGS + 4]);
+        assert_eq!(g[3..7], x[COUPLINGS..COUPLINGS + 4]);
+        assert_eq!(g[7..], [-1.0; 14], "no memory, no memory events");
     }
 
     #[test]
@@ -364,7 +448,7 @@ mod tests {
             by_step.step(commands, 1e-4);
         }
         let mut by_ode = start.clone();
-        integrate(&mut by_ode, commands, 2e-7, 5000);
+        integrate(&mut by_ode, commands, 2e-7, 5000, true);
         let (a, b) = (by_step.continuous_states(), by_ode.continuous_states());
         let nominal = state_nominals(&params);
         for k in 0..NUMBER_OF_STATES {
@@ -387,6 +471,70 @@ mod tests {
                 sb[i]
             );
         }
+    }
+
+    /// With the return-point memory, the ODE with its event updates (turns
+    /// remembered, wipe-outs taken where the located crossings are) and
+    /// `FlexureStage::step` trace the same minor loops: 12 ms of commands held
+    /// 1 ms each, from rest, that turn every channel 11 times and carry it
+    /// past earlier reversals (wipe-outs inside a hold), on the tracking
+    /// parameter set. Tolerance as in the memory-free test above: the memory
+    /// adds no approximation of its own to either (the step takes a wipe-out
+    /// at the exact voltage inside its chord, the ODE at the located zero).
+    #[test]
+    fn the_ode_with_its_events_and_the_step_trace_the_same_minor_loops() {
+        let params = FlexureStageParams {
+            solver: SolverParams {
+                max_voltage_step: 1e-3,
+            },
+            ..FlexureStageParams::calibrated_while_tracking()
+        };
+        assert!(params.return_point_memory);
+        let holds: [[f64; 3]; 12] = [
+            [5.0, 3.0, 7.0],
+            [2.0, 1.0, 4.0],
+            [4.0, 2.5, 6.0],
+            [1.0, 0.5, 3.0],
+            [6.0, 4.0, 8.0],
+            [3.0, 2.0, 5.0],
+            [3.5, 2.2, 5.5],
+            [-0.2, -0.1, 1.0],
+            [0.5, 0.4, 2.0],
+            [0.0, 0.0, 0.0],
+            [9.0, 7.0, 10.0],
+            [4.0, 3.0, 6.0],
+        ];
+        let mut by_step = FlexureStage::new(params.clone()).unwrap();
+        let mut by_ode = by_step.clone();
+        let mut without_events = by_step.clone();
+        let mut wipe_outs = 0;
+        for commands in holds {
+            for _ in 0..10 {
+                by_step.step(commands, 1e-4);
+            }
+            wipe_outs += integrate(&mut by_ode, commands, 2e-7, 5000, true);
+            integrate(&mut without_events, commands, 2e-7, 5000, false);
+        }
+        assert!(
+            wipe_outs >= 10,
+            "the holds carry the models past their reversals: {wipe_outs} wipe-outs"
+        );
+        let nominal = state_nominals(&params);
+        let worst = |other: &FlexureStage| {
+            let (a, b) = (by_step.continuous_states(), other.continuous_states());
+            (0..NUMBER_OF_STATES)
+                .map(|k| ((a[k] - b[k]).abs() / nominal[k], STATES[k], a[k], b[k]))
+                .fold((0.0, "", 0.0, 0.0), |m, e| if e.0 > m.0 { e } else { m })
+        };
+        let (error, state, a, b) = worst(&by_ode);
+        assert!(
+            error <= 1e-9,
+            "{state}: step {a} vs ode {b}, {error:e} of its nominal"
+        );
+        // Without the event updates the ODE runs every branch from the rest
+        // loop's memory: the check above would fail by orders of magnitude.
+        let (error, state, ..) = worst(&without_events);
+        assert!(error > 1e-4, "{state}: {error:e} of its nominal");
     }
 
     /// A held input holds every hysteretic state: the rates vanish with V̇

@@ -39,6 +39,35 @@ fn step_allocates_nothing() {
     assert_eq!(allocations, 0, "step allocated {allocations} times");
 }
 
+/// With the return-point memory (the tracking parameter set): 10 000 steps
+/// that turn every channel at each sample (dither on a sine), and the Model
+/// Exchange calls an importer makes between and at events (states set,
+/// derivatives, switching functions, the memory's event update): zero
+/// allocations.
+#[test]
+fn the_memory_allocates_nothing_in_either_interface() {
+    let mut stage = FlexureStage::new(FlexureStageParams::calibrated_while_tracking()).unwrap();
+    let mut finite = true;
+    let mut checksum = 0.0;
+    let allocations = allocations_of(|| {
+        for k in 1..=10_000 {
+            let t = k as f64 * 1e-4;
+            let dither = if k % 2 == 0 { 0.02 } else { -0.02 };
+            let u = 5.0 * (1.0 - (TAU * t).cos()) + dither;
+            let commands = [u, 10.0 - u, u];
+            finite &= stage.step(commands, 1e-4).fault.is_none();
+            let mut x = stage.continuous_states();
+            x[0] += 1e-3;
+            stage.set_continuous_states(&x);
+            checksum += stage.derivatives(commands)[3];
+            checksum += stage.switching_functions(commands)[7];
+            stage.settle_memories(commands);
+        }
+    });
+    assert!(finite && checksum.is_finite());
+    assert_eq!(allocations, 0, "the memory allocated {allocations} times");
+}
+
 /// 10 000 controller samples with every part on (feedforward, decoupling,
 /// three PI loops), limited commands and varying sample periods: zero
 /// allocations.
