@@ -600,6 +600,21 @@ const SENSOR_OFFSETS: &[Variable<PiezoControllerFmu>] = &[
     ),
 ];
 
+/// Whether the Bouc-Wen models close their minor loops (appended, see
+/// [`BLOCKS`]).
+const BOUC_WEN_MEMORY: &[Variable<PiezoControllerFmu>] =
+    &[Variable::<PiezoControllerFmu>::boolean_parameter(
+        "bouc_wen.return_point_memory",
+        "The Bouc-Wen models (ABW-XY) close their minor loops, as FlexureStage's stacks do with its \
+         return_point_memory: each branch is the eq. 3 branch tilted to end at the reversal it \
+         returns to, and an excursion past a reversal wipes its loop out (false: eq. 3 as \
+         integrated, whose minor loops drift)",
+        Variability::Fixed,
+        |m| m.params.bouc_wen.return_point_memory,
+        |m, v| m.params.bouc_wen.return_point_memory = v,
+    )
+    .model_path("bouc_wen.return_point_memory")];
+
 /// The blocks of the table, in value-reference order.
 ///
 /// APPEND ONLY. A variable's value reference is its position in this table,
@@ -625,6 +640,7 @@ const BLOCKS: &[&[Variable<PiezoControllerFmu>]] = &[
     BOUC_WEN_Y_FROM_X,
     RESTS,
     SENSOR_OFFSETS,
+    BOUC_WEN_MEMORY,
 ];
 
 /// Every variable, in value-reference order.

@@ -366,22 +366,36 @@ pub fn sine_records(
     periods: f64,
     sample_rate: f64,
 ) -> Result<(Record, Record), PlantError> {
+    let samples = (periods / frequency * sample_rate).round() as usize;
+    let input: Vec<f64> = (0..samples)
+        .map(|n| {
+            let t = n as f64 / sample_rate;
+            0.5 * peak * (1.0 - (2.0 * std::f64::consts::PI * frequency * t).cos())
+        })
+        .collect();
+    command_records(plant, axis, &input, sample_rate)
+}
+
+/// `input` [V] on one axis's channel(s), the other channels at 0 V, from the
+/// plant's rest at `sample_rate`: the records of [`sine_records`] for any
+/// command.
+pub fn command_records(
+    plant: &PlantFmu,
+    axis: RecordAxis,
+    input: &[f64],
+    sample_rate: f64,
+) -> Result<(Record, Record), PlantError> {
     let mut session = plant.session()?;
     let h = 1.0 / sample_rate;
-    let samples = (periods / frequency * sample_rate).round() as usize;
-    let mut input = Vec::with_capacity(samples);
-    let mut driven = Vec::with_capacity(samples);
-    let mut coupled = Vec::with_capacity(samples);
-    for n in 0..samples {
-        let t = n as f64 * h;
-        let u = 0.5 * peak * (1.0 - (2.0 * std::f64::consts::PI * frequency * t).cos());
+    let mut driven = Vec::with_capacity(input.len());
+    let mut coupled = Vec::with_capacity(input.len());
+    for &u in input {
         let commands = match axis {
             RecordAxis::Y => [u, 0.0, 0.0],
             RecordAxis::X => [0.0, u, u],
         };
         let s = session.step(commands, h)?;
         let (x, y) = (0.5 * (s[1] + s[2]), s[0]);
-        input.push(u);
         let (own, other) = match axis {
             RecordAxis::Y => (y, x),
             RecordAxis::X => (x, y),
@@ -390,7 +404,7 @@ pub fn sine_records(
         coupled.push(other);
     }
     let record = |output| Record {
-        input: input.clone(),
+        input: input.to_vec(),
         output,
         sample_period: h,
     };

@@ -28,6 +28,15 @@
 //!    ([`crate::bouc_wen_fit`]), in command volts, with no offset (the plant
 //!    starts at rest at 0). They fill `bouc_wen` of the preset; the preset
 //!    keeps seed 000's feedforward and decoupling selected.
+//! 5. Whether the Bouc-Wen models close their minor loops
+//!    (`bouc_wen.return_point_memory`), chosen from one more record per
+//!    driven axis, taken for it: from rest up to 7 V, then four 2 Hz cycles
+//!    between 7 and 3 V (minor loops inside the 0-10 V loop of step 4, where
+//!    a stack's loops close and eq. (3)'s drift). H_XX and H_YY, at the rest
+//!    the controller starts them at, predict those records with and without
+//!    the memory; the smaller summed RMS error decides, for all four models.
+//!    The fit of step 4 is on the major loop, which the memory leaves as it
+//!    is (its rest loop is eq. (3)'s own), so it serves both.
 //!
 //! Single-axis runs, as seed 000 §5 prints them: "the motion axis was driven
 //! (10 µm or 9.2×10⁻³ deg), with the demand on the other two axes held at
@@ -44,6 +53,7 @@
 use std::f64::consts::PI;
 use std::sync::LazyLock;
 
+use piezo_models::bouc_wen::AsymmetricBoucWen;
 use piezo_models::decoupling::rotation_demand;
 use piezo_models::{
     BoucWenModels, BoucWenParams, ControllerParams, DecouplingModel, DecouplingParams,
@@ -60,7 +70,8 @@ use crate::decoupling::{
 use crate::fit::{Fit, FitError, FitOptions, StartResult, fit_modified_inverse_pi_with_progress};
 use crate::gapso::GaPsoOptions;
 use crate::plant::{
-    PlantError, PlantFmu, RecordAxis, closed_loop, eq6_record, exercise_samples, sine_records,
+    PlantError, PlantFmu, RecordAxis, closed_loop, command_records, eq6_record, exercise_samples,
+    sine_records,
 };
 use crate::protocol::LINEAR_RSS_INCREASE;
 
@@ -349,7 +360,80 @@ pub struct StageIdentification {
     pub rounds: Vec<[Compensation; 4]>,
     /// Seed 001's models: name and eq. (5) RMS of the refined fit [µm].
     pub bouc_wen_fits: Vec<(String, f64)>,
+    /// Step 5 (module comment): the minor-loop records' prediction errors,
+    /// and the choice.
+    pub bouc_wen_memory: MemoryChoice,
 }
+
+/// Step 5 (module comment): RMS errors [µm] of H_XX and H_YY, summed, on the
+/// minor-loop records, without and with the return-point memory.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct MemoryChoice {
+    pub rms_without_um: f64,
+    pub rms_with_um: f64,
+    pub return_point_memory: bool,
+}
+
+/// Step 5's record: from rest up to the top, then cycles between top and
+/// bottom [V], at seed 001's identification frequency.
+const MINOR_LOOP_TOP: f64 = 7.0;
+const MINOR_LOOP_BOTTOM: f64 = 3.0;
+const MINOR_LOOP_CYCLES: f64 = 4.0;
+
+/// Step 5's command: a raised cosine from 0 to the top over half a period,
+/// then `MINOR_LOOP_CYCLES` cosine cycles between top and bottom.
+fn minor_loop_command(sample_rate: f64) -> Vec<f64> {
+    let period = 1.0 / BOUC_WEN_HZ;
+    let rise = (0.5 * period * sample_rate).round() as usize;
+    let cycles = (MINOR_LOOP_CYCLES * period * sample_rate).round() as usize;
+    let phase = |n: usize, samples_per_period: f64| {
+        2.0 * std::f64::consts::PI * n as f64 / samples_per_period
+    };
+    let per_period = period * sample_rate;
+    let middle = 0.5 * (MINOR_LOOP_TOP + MINOR_LOOP_BOTTOM);
+    let half_span = 0.5 * (MINOR_LOOP_TOP - MINOR_LOOP_BOTTOM);
+    (0..rise)
+        .map(|n| 0.5 * MINOR_LOOP_TOP * (1.0 - phase(n, per_period).cos()))
+        .chain((0..cycles).map(|n| middle + half_span * phase(n, per_period).cos()))
+        .collect()
+}
+
+/// Step 5 (module comment).
+fn choose_bouc_wen_memory(
+    plant: &PlantFmu,
+    models: &BoucWenModels,
+) -> Result<MemoryChoice, StageError> {
+    let input = minor_loop_command(1.0 / SAMPLE_PERIOD);
+    let mut rms = [0.0; 2];
+    for (axis, params) in [(RecordAxis::X, models.x), (RecordAxis::Y, models.y)] {
+        let (driven, _) = command_records(plant, axis, &input, 1.0 / SAMPLE_PERIOD)?;
+        for (memory, total) in [false, true].into_iter().zip(&mut rms) {
+            let mut model = AsymmetricBoucWen::at_exercised_rest(params, models.rest_cycle);
+            if memory {
+                model = model.with_return_point_memory(models.rest_cycle);
+            }
+            let squares: f64 = driven
+                .input
+                .iter()
+                .zip(&driven.output)
+                .map(|(&u, &y)| {
+                    model.advance_to(u, MINOR_LOOP_MAX_DU);
+                    (model.output() - y).powi(2)
+                })
+                .sum();
+            *total += (squares / driven.input.len() as f64).sqrt();
+        }
+    }
+    Ok(MemoryChoice {
+        rms_without_um: rms[0],
+        rms_with_um: rms[1],
+        return_point_memory: rms[1] < rms[0],
+    })
+}
+
+/// Substep of step 5's predictions [V]: the controller's own (its
+/// `BOUC_WEN_MAX_DU`).
+const MINOR_LOOP_MAX_DU: f64 = 0.01;
 
 impl StageIdentification {
     /// The preset with the compensations of the first round alone: D1..D4
@@ -429,6 +513,8 @@ fn fit_bouc_wen_models(
         // The plant rests on its loop to 10 V of command (100 V): so do the
         // models.
         rest_cycle: BOUC_WEN_PEAK,
+        // Step 5 decides.
+        return_point_memory: false,
     };
     Ok((
         models,
@@ -595,7 +681,10 @@ pub fn identify_stage(
         fits.push(fit);
     }
     let (x_fit, y_fit) = (fits.remove(0), fits.remove(0));
-    let (bouc_wen, bouc_wen_fits) = fit_bouc_wen_models(plant, progress)?;
+    let (mut bouc_wen, bouc_wen_fits) = fit_bouc_wen_models(plant, progress)?;
+    progress("minor-loop runs: do the Bouc-Wen models need a return-point memory");
+    let bouc_wen_memory = choose_bouc_wen_memory(plant, &bouc_wen)?;
+    bouc_wen.return_point_memory = bouc_wen_memory.return_point_memory;
     let mut controller = ControllerParams {
         feedforward: true,
         decoupling: false,
@@ -726,6 +815,7 @@ pub fn identify_stage(
         y_fit: FitSummary::of(&y_fit),
         rounds: all_rounds,
         bouc_wen_fits,
+        bouc_wen_memory,
     })
 }
 

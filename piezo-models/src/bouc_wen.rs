@@ -707,52 +707,132 @@ impl AsymmetricBoucWen {
     /// reversal before it; an input that reaches that one forgets both and
     /// goes on along the branch that turned there.
     fn advance_with_memory(&mut self, u_new: f64, max_du: f64) {
-        let params = self.params;
+        let Some(path) = self.memory_path(u_new, max_du) else {
+            return;
+        };
         let Some(memory) = self.memory.as_deref_mut() else {
             return;
         };
+        if let Some(turn) = path.turn {
+            if memory.points.is_full() {
+                memory.points.drain(..2);
+            }
+            memory.points.push(turn);
+        }
+        memory.points.truncate(path.kept);
+        memory.direction = path.direction;
+        self.h = path.h;
+        self.u = u_new;
+    }
+
+    /// Where [`AsymmetricBoucWen::advance_to`] takes a model with a
+    /// return-point memory, without moving it: what an inverse model's trial
+    /// inputs need, with no copy of the memory. `None` where nothing moves
+    /// (u_new is the input) or the model has no memory.
+    fn memory_path(&self, u_new: f64, max_du: f64) -> Option<MemoryPath> {
+        let params = &self.params;
+        let memory = self.memory.as_deref()?;
         let du_total = u_new - self.u;
         if du_total == 0.0 {
-            return;
+            return None;
         }
         if !du_total.is_finite() {
-            // No direction to remember; the state turns non-finite as without memory.
-            self.h = integrate(&params, self.u, self.h, u_new, max_du);
-            self.u = u_new;
-            return;
+            // No direction to remember; the state turns non-finite as
+            // without memory.
+            let h = integrate(params, self.u, self.h, u_new, max_du);
+            return Some(MemoryPath {
+                turn: None,
+                kept: memory.points.len(),
+                direction: memory.direction,
+                h,
+                tilt: 0.0,
+                untilted: h,
+            });
         }
         let direction = du_total.signum();
-        if memory.direction != 0.0 && direction != memory.direction {
-            memory.remember_reversal(&params, self.u, self.h, direction, max_du);
-        }
-        memory.direction = direction;
+        let turn = (memory.direction != 0.0 && direction != memory.direction)
+            .then(|| memory.turn_at(params, self.u, self.h, direction, max_du));
+        // The memory after the turn is remembered: a full one forgets its
+        // two oldest reversals first.
+        let base = match turn {
+            Some(_) if memory.points.is_full() => &memory.points[2..],
+            _ => &memory.points[..],
+        };
+        let point = |i: usize| match turn {
+            Some(t) if i == base.len() => t,
+            _ => base[i],
+        };
+        let mut kept = base.len() + usize::from(turn.is_some());
+        let (mut u, mut h) = (self.u, self.h);
         // Wiping out: past the reversal this branch closes onto, the branch
         // that turned there goes on.
-        while let [.., closes_at, _] = memory.points[..] {
+        while kept >= 2 {
+            let closes_at = point(kept - 2);
             if direction * (u_new - closes_at.u) < 0.0 {
                 break;
             }
-            self.u = closes_at.u;
-            self.h = closes_at.h;
-            memory.points.truncate(memory.points.len() - 2);
+            (u, h) = (closes_at.u, closes_at.h);
+            kept -= 2;
         }
-        let (origin, tilt) = memory
-            .reversals()
-            .last()
-            .map_or((self.u, 0.0), |r| (r.u, r.tilt));
+        let (origin, tilt) = if kept > 0 {
+            let last = point(kept - 1);
+            (last.u, last.tilt)
+        } else {
+            (u, 0.0)
+        };
         // eq. (3) integrates the untilted branch; the tilt is added to its state.
-        let untilted = self.h - tilt * (self.u - origin);
-        let untilted = integrate(&params, self.u, untilted, u_new, max_du);
-        self.h = untilted + tilt * (u_new - origin);
-        self.u = u_new;
+        let untilted = integrate(params, u, h - tilt * (u - origin), u_new, max_du);
+        Some(MemoryPath {
+            turn,
+            kept,
+            direction,
+            h: untilted + tilt * (u_new - origin),
+            tilt,
+            untilted,
+        })
+    }
+
+    /// The output and dy/du that [`AsymmetricBoucWen::advance_to`]`(u_new)`
+    /// would leave, the model unmoved: the inverse model's trial of an input.
+    /// dy/du is the slope on the branch the input ends on, for its direction
+    /// of motion. Allocates nothing, with or without a memory.
+    pub fn trial(&self, u_new: f64, max_du: f64) -> (f64, f64) {
+        let p = &self.params;
+        let direction = u_new - self.u;
+        let (h, untilted, tilt) = match self.memory_path(u_new, max_du) {
+            Some(path) => (path.h, path.untilted, path.tilt),
+            None if self.memory.is_some() => {
+                return (self.output(), self.output_slope(direction));
+            }
+            None => {
+                let h = integrate(p, self.u, self.h, u_new, max_du);
+                (h, h, 0.0)
+            }
+        };
+        let output = p.p * u_new + p.q * h - self.rest.offset;
+        let slope = p.p + p.q * (p.state_slope(u_new, untilted, direction) + tilt);
+        (output, slope)
     }
 }
 
+/// What [`AsymmetricBoucWen::memory_path`] finds.
+#[derive(Clone, Copy, Debug)]
+struct MemoryPath {
+    /// The turn to remember, where the input turns.
+    turn: Option<Reversal>,
+    /// How many reversals stay (counted after the turn is remembered).
+    kept: usize,
+    direction: f64,
+    /// The hysteretic state at u_new.
+    h: f64,
+    /// The branch u_new is on: its tilt, and its untilted state there.
+    tilt: f64,
+    untilted: f64,
+}
+
 impl ReturnPointMemory {
-    /// Remembers that the input turned at (u, h) to move in `direction`, with
-    /// the tilt that brings eq. (3)'s branch from there to the last reversal
-    /// (the branch of a first reversal, or of one whose predecessor is not
-    /// ahead, has none).
+    /// Remembers that the input turned at (u, h) to move in `direction`
+    /// ([`ReturnPointMemory::turn_at`]).
     fn remember_reversal(
         &mut self,
         params: &BoucWenParams,
@@ -761,9 +841,25 @@ impl ReturnPointMemory {
         direction: f64,
         max_du: f64,
     ) {
+        let turn = self.turn_at(params, u, h, direction, max_du);
         if self.points.is_full() {
             self.points.drain(..2);
         }
+        self.points.push(turn);
+    }
+
+    /// The reversal of an input that turns at (u, h) to move in `direction`,
+    /// with the tilt that brings eq. (3)'s branch from there to the last
+    /// reversal (the branch of a first reversal, or of one whose predecessor
+    /// is not ahead, has none).
+    fn turn_at(
+        &self,
+        params: &BoucWenParams,
+        u: f64,
+        h: f64,
+        direction: f64,
+        max_du: f64,
+    ) -> Reversal {
         let tilt = match self.reversals().last() {
             Some(closes_at) if direction * (closes_at.u - u) > 0.0 => {
                 let untilted_end = integrate(params, u, h, closes_at.u, max_du);
@@ -771,7 +867,7 @@ impl ReturnPointMemory {
             }
             _ => 0.0,
         };
-        self.points.push(Reversal { u, h, tilt });
+        Reversal { u, h, tilt }
     }
 }
 

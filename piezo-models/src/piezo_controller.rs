@@ -25,6 +25,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::bouc_wen::AsymmetricBoucWen;
 use crate::decoupling::{DecoupledReferences, DecouplingParams, decouple};
 use crate::flexure_stage::{FlexureStageParams, ParamError};
 use crate::inverse_bouc_wen::{BoucWenFeedforward, BoucWenModels, CouplingEstimator};
@@ -456,6 +457,7 @@ impl PiezoController {
         // while running, see `set_tuning`), so they stay virgin.
         let unused = BoucWenModels {
             rest_cycle: 0.0,
+            return_point_memory: false,
             ..params.bouc_wen
         };
         let selected = |yes: bool| if yes { &params.bouc_wen } else { &unused };
@@ -576,8 +578,15 @@ impl PiezoController {
         let output = ControllerOutput::NAMES
             .into_iter()
             .zip(self.output.values());
+        let bouc_wen_memories = self
+            .bouc_wen
+            .models()
+            .into_iter()
+            .chain(self.coupling.models())
+            .filter_map(AsymmetricBoucWen::unreachable_memory);
         memories
             .chain(bouc_wen)
+            .chain(bouc_wen_memories)
             .chain(references)
             .chain(integrals)
             .chain(output)

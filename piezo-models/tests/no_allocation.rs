@@ -5,7 +5,10 @@
 //! thread only, so the harness's own threads do not disturb the count.
 
 use counting_allocator::{CountingAllocator, allocations_of};
-use piezo_models::{ControllerParams, FlexureStage, FlexureStageParams, PiezoController};
+use piezo_models::{
+    ControllerParams, DecouplingModel, FlexureStage, FlexureStageParams, HysteresisModel,
+    PiezoController,
+};
 use std::f64::consts::TAU;
 
 #[global_allocator]
@@ -95,6 +98,37 @@ fn controller_step_allocates_nothing() {
         }
     });
 
+    assert!(total.is_finite());
+    assert_eq!(
+        allocations, 0,
+        "the controller allocated {allocations} times"
+    );
+}
+
+/// Seed 001's method with the Bouc-Wen models' return-point memory: the
+/// inverse's Newton trials copy nothing (a copy of a memory would allocate),
+/// on a demand that turns at every sample (dither on a sine): zero
+/// allocations.
+#[test]
+fn the_bouc_wen_controller_with_its_memory_allocates_nothing() {
+    let mut params = ControllerParams {
+        decoupling: true,
+        hysteresis_model: HysteresisModel::BoucWen,
+        decoupling_model: DecouplingModel::ModelBased,
+        ..ControllerParams::default()
+    };
+    params.bouc_wen.return_point_memory = true;
+    let mut controller = PiezoController::new(params).unwrap();
+    let mut total = 0.0;
+    let allocations = allocations_of(|| {
+        for k in 1..=10_000 {
+            let t = k as f64 * 1e-4;
+            let dither = if k % 2 == 0 { 0.01 } else { -0.01 };
+            let y_ref = 6.0 + 5.0 * (TAU * t).sin() + dither;
+            let out = controller.step(6.0 + dither, y_ref, 0.0, [y_ref, 6.0, 6.1], 1e-4);
+            total += out.u[0] + out.u[1] + out.u[2];
+        }
+    });
     assert!(total.is_finite());
     assert_eq!(
         allocations, 0,

@@ -164,6 +164,17 @@ pub(crate) fn stage(args: &StageArgs) -> Result<(), Failure> {
     for (name, rms) in &identified.bouc_wen_fits {
         say!("{name} Bouc-Wen model on seed 001's 2 Hz sine: eq. (5) RMS {rms:.6} um");
     }
+    let memory = &identified.bouc_wen_memory;
+    say!(
+        "H_XX + H_YY on the 7-3 V minor loops: RMS {:.6} um without a return-point memory, {:.6} um with one: {}",
+        memory.rms_without_um,
+        memory.rms_with_um,
+        if memory.return_point_memory {
+            "the Bouc-Wen models close their minor loops"
+        } else {
+            "no memory"
+        }
+    );
     for (round, compensations) in identified.rounds.iter().enumerate() {
         say!("decoupling round {}:", round + 1);
         for (i, c) in compensations.iter().enumerate() {
