@@ -24,7 +24,7 @@ import fmpy
 from tqdm import tqdm
 
 from .cosim import SAMPLE_PERIOD, Fmu, simulate
-from .experiments import CONDITIONS, experiments, report_figures
+from .experiments import CONDITIONS, experiments, on_parameter_sets, report_figures
 from .report import figure, write_report
 
 
@@ -56,6 +56,44 @@ def previous_metrics(path: Path) -> dict:
     return entries if isinstance(entries, dict) else {}
 
 
+def read_parameter_set(path: Path, fmu: Path) -> dict:
+    """A parameter set by FMI name: a JSON object whose every name is a
+    parameter of `fmu`, every value a number or a Boolean."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ValueError(f"{path}: cannot read it ({e.strerror})") from None
+    try:
+        values = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: line {e.lineno}, column {e.colno}: {e.msg}") from None
+    if not isinstance(values, dict):
+        raise ValueError(f"{path}: a parameter set is a JSON object of names and values")
+    parameters = {v.name for v in fmpy.read_model_description(str(fmu)).modelVariables
+                  if v.causality == "parameter"}
+    for name, value in values.items():
+        if name not in parameters:
+            raise ValueError(f"{path}: {name!r} is not a parameter of {fmu.name}")
+        if not isinstance(value, (bool, int, float)):
+            raise ValueError(f"{path}: {name!r} = {value!r} is not a number or a Boolean")
+    return values
+
+
+def parameter_sets(args) -> tuple[dict, dict, dict | None] | None:
+    """The plant and controller sets the options name (both or neither), and
+    the law fitted once; None for the start values."""
+    given = (args.plant_parameters, args.controller_parameters)
+    if not any(given) and args.controller_fitted_once is None:
+        return None
+    if not all(given):
+        raise ValueError("--plant-parameters and --controller-parameters go together: a "
+                         "controller is identified on its stage (piezo-identify stage)")
+    once = (read_parameter_set(args.controller_fitted_once, args.controller)
+            if args.controller_fitted_once else None)
+    return (read_parameter_set(args.plant_parameters, args.plant),
+            read_parameter_set(args.controller_parameters, args.controller), once)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="output folder")
@@ -63,13 +101,33 @@ def main(argv=None) -> int:
     parser.add_argument("--controller", type=Path, default=Path("dist/PiezoController.fmu"))
     parser.add_argument("--only", nargs="*",
                         help="run only these experiment keys (metrics.json keeps the others)")
+    parser.add_argument(
+        "--plant-parameters", type=Path, metavar="SET",
+        help="FlexureStage parameters by FMI name (a dist/presets/FlexureStage.*.json file, or "
+             "flexure-stage-parameters' output): the experiments on that stage")
+    parser.add_argument(
+        "--controller-parameters", type=Path, metavar="SET",
+        help="PiezoController parameters by FMI name, identified on that stage "
+             "(piezo-identify stage, then piezo-controller-parameters)")
+    parser.add_argument(
+        "--controller-fitted-once", type=Path, metavar="SET",
+        help="the same identification's law fitted once (its --out-fitted-once preset, by FMI "
+             "name), for the runs of seed 000's table; default: the law of "
+             "--controller-parameters")
     args = parser.parse_args(argv)
     for path in (args.plant, args.controller):
         if not path.is_file():
             print(f"{path}: no such FMU (run `make fmus`)", file=sys.stderr)
             return 2
+    try:
+        sets = parameter_sets(args)
+    except ValueError as e:
+        print(e, file=sys.stderr)
+        return 2
     args.out.mkdir(parents=True, exist_ok=True)
     every_run = experiments()
+    if sets:
+        every_run = on_parameter_sets(every_run, *sets)
     runs = every_run
     if args.only:
         unknown = set(args.only) - {e.key for e in runs}
@@ -83,7 +141,9 @@ def main(argv=None) -> int:
     interrupted = False
     try:
         with Fmu(args.plant) as plant, Fmu(args.controller) as controller:
-            spacing_um = float(controller.variables["L"].start) * 1e3
+            # The sensors' spacing the controller converts rotations with.
+            spacing_mm = sets[1].get("L") if sets else None
+            spacing_um = float(spacing_mm or controller.variables["L"].start) * 1e3
             with tqdm(total=total_steps, unit="step", unit_scale=True,
                       desc="co-simulation") as bar:
                 for experiment in runs:
@@ -117,6 +177,11 @@ def main(argv=None) -> int:
         with replaced(report_path) as partial:
             write_report(partial, merged, {
                 "fmpy": fmpy.__version__, "step": SAMPLE_PERIOD, "preview": 2, "preset": "stage",
+                "sets": None if not sets else {
+                    "plant": args.plant_parameters.name,
+                    "controller": args.controller_parameters.name,
+                    "fitted_once": (args.controller_fitted_once or args.controller_parameters).name,
+                },
                 "experiments": every_run, "conditions": CONDITIONS, "wall": wall,
                 "simulated": sum(e.duration for e in runs if e.key in results),
                 "ran": None if ran_everything else len(results),

@@ -292,6 +292,33 @@ def experiments() -> list[Experiment]:
     return runs
 
 
+def on_parameter_sets(runs: list[Experiment], plant_set: dict, controller_set: dict,
+                      fitted_once_set: dict | None = None) -> list[Experiment]:
+    """The runs on another stage: FlexureStage's parameters `plant_set` and
+    PiezoController's `controller_set` (sets by FMI name, as dist/presets
+    holds them and `flexure-stage-parameters`, `piezo-controller-parameters`
+    write them) in place of the start values, each run's own settings kept:
+    the plant's noise switch and seed (the set's noise level is the stage's),
+    the controller's switches. A run with the law fitted once takes
+    `fitted_once_set`'s D1..D4 (the `--out-fitted-once` preset of
+    `piezo-identify stage`; without it, `controller_set`'s own law). A run
+    on a stage of its own (the XY200S runs) stays on it."""
+    shipped = preset("PiezoController.stage.json")
+    once = {k: v for k, v in (fitted_once_set or controller_set).items()
+            if k.startswith("compensation.")}
+    moved = []
+    for e in runs:
+        if set(e.plant) - set(PLANT_PARAMETERS):  # a stage of its own: the XY200S's
+            moved.append(e)
+            continue
+        own = {k: v for k, v in e.controller.items() if shipped.get(k) != v}
+        if any(k.startswith("compensation.") for k in own):
+            own |= once
+        moved.append(replace(e, plant={**plant_set, **e.plant},
+                             controller={**controller_set, **own}))
+    return moved
+
+
 #: The conditions and readings report.md lists (the module comment says why).
 CONDITIONS = [
     "Demands as seed 000 prints them, absolute from the de-energized rest (every stack at "

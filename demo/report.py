@@ -249,6 +249,23 @@ def feedforward_xy_section(results: dict) -> list[str]:
     return lines
 
 
+def _parameters_sentence(context: dict) -> str:
+    """What the runs ran on: the start values, or the sets `--plant-parameters`
+    and `--controller-parameters` named."""
+    sets = context.get("sets")
+    if sets:
+        return (f"Parameters: FlexureStage's from `{sets['plant']}` (the XY200S runs on their "
+                f"own stage), PiezoController's from `{sets['controller']}`, identified on it, "
+                f"with the decoupling law D1..D4 fitted once from `{sets['fitted_once']}` for "
+                "the table's runs; switches per run as listed below. The refined law's section "
+                f"runs `{sets['controller']}`'s own law.")
+    return (f"Controller parameters: the `{context['preset']}` preset identified on the plant by "
+            "seed 000's procedure (§3.1, §4), with the decoupling law D1..D4 fitted once from the "
+            f"Fig. 7 runs, as §4 does (`{FITTED_ONCE_PRESET}`); switches per run as listed below. "
+            "The FMU's start values refine that law over two more rounds fitted on the same "
+            "runs, with the decoupling on: the section after the table measures it.")
+
+
 def write_report(path: Path, results: dict, context: dict) -> None:
     rows = paper.rows(results)
     met = sum(r.met for r in rows)
@@ -262,11 +279,7 @@ def write_report(path: Path, results: dict, context: dict) -> None:
         f"Jacobi master, references previewed by {context['preview']} samples, "
         "sensor noise on (seeded), with the demands as seed 000 prints them where it prints "
         "them, and the readings listed under Conditions (at the end) where it does not.",
-        f"Controller parameters: the `{context['preset']}` preset identified on the plant by "
-        "seed 000's procedure (§3.1, §4), with the decoupling law D1..D4 fitted once from the "
-        f"Fig. 7 runs, as §4 does (`{FITTED_ONCE_PRESET}`); switches per run as listed below. "
-        "The FMU's start values refine that law over two more rounds fitted on the same "
-        "runs, with the decoupling on: the section after the table measures it.",
+        _parameters_sentence(context),
         "",
         "## Every numbered figure of seed 000 beside the simulated one",
         "",

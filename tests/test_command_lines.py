@@ -136,6 +136,64 @@ def test_only_keeps_the_other_runs_and_the_report_agrees(tmp_path, monkeypatch):
     assert (tmp_path / "report.md").read_text() == "the report"
 
 
+def _sets(tmp_path, plant: str, controller: str) -> list[str]:
+    (tmp_path / "plant.json").write_text(plant)
+    (tmp_path / "controller.json").write_text(controller)
+    return ["--plant-parameters", str(tmp_path / "plant.json"),
+            "--controller-parameters", str(tmp_path / "controller.json")]
+
+
+@pytest.mark.parametrize("plant, controller, problem", [
+    ('{"mode.x.frequency": 800.0,\n "pzt[1].A": }', "{}", "plant.json: line 2, column 14"),
+    ('{"no.such.parameter": 1.0}', "{}", "'no.such.parameter' is not a parameter of FlexureStage.fmu"),
+    ("{}", '{"translation.kp": "high"}',
+     "controller.json: 'translation.kp' = 'high' is not a number"),
+    ("[1, 2]", "{}", "plant.json: a parameter set is a JSON object"),
+])
+def test_a_malformed_parameter_set_is_refused_before_any_run(tmp_path, capsys, plant, controller,
+                                                             problem):
+    from demo import __main__ as report_command
+    out = tmp_path / "out"
+    assert report_command.main(["--out", str(out), *_sets(tmp_path, plant, controller)]) == 2
+    assert problem in capsys.readouterr().err
+    assert not out.exists(), "nothing is run or written"
+
+
+def test_a_plant_set_without_its_controller_is_refused(tmp_path, capsys):
+    from demo import __main__ as report_command
+    (tmp_path / "plant.json").write_text("{}")
+    status = report_command.main(["--out", str(tmp_path / "out"),
+                                  "--plant-parameters", str(tmp_path / "plant.json")])
+    assert status == 2
+    assert "go together" in capsys.readouterr().err
+
+
+def test_the_sets_replace_the_start_values_and_keep_each_runs_settings():
+    """`on_parameter_sets`: the sets under every run's own settings (the
+    noise switch and seed, the controller's switches), the law fitted once
+    where a run takes it, and the XY200S runs on their own stage."""
+    from demo.experiments import experiments, on_parameter_sets, preset
+    plant_set = {"mode.x.frequency": 801.0, "noise.enabled": False, "noise.rms": 0.007}
+    controller_set = {"translation.kp": 0.04, "feedback_x": False, "compensation.dk[1]": 1.0}
+    once = {"compensation.dk[1]": 2.0, "translation.kp": 9.9}  # only its law is taken
+    runs = experiments()
+    moved = on_parameter_sets(runs, plant_set, controller_set, once)
+    assert [e.key for e in moved] == [e.key for e in runs]
+    shipped = preset("PiezoController.stage.json")
+    for e, m in zip(runs, moved):
+        if "xy200s" in e.key:
+            assert m is e
+            continue
+        assert m.plant == {**plant_set, **e.plant}
+        assert m.plant["noise.enabled"] is True and m.plant["noise.rms"] == 0.007
+        own = {k: v for k, v in e.controller.items() if shipped.get(k) != v}
+        takes_once = any(k.startswith("compensation.") for k in own)
+        assert m.controller["compensation.dk[1]"] == (2.0 if takes_once else 1.0), e.key
+        assert m.controller["translation.kp"] == own.get("translation.kp", 0.04)
+        assert all(m.controller[k] == v for k, v in own.items() if not k.startswith("compensation."))
+    assert any("xy200s" in e.key for e in runs)
+
+
 # --------------------------------------------------------------------------
 # demo.master
 
