@@ -13,7 +13,17 @@
 //!   `ode_solvers` crate) over the sample on the states scaled by their
 //!   nominals, relative and absolute tolerance 1e-10, through
 //!   `fmi2SetTime`/`fmi2SetContinuousStates`/`fmi2GetDerivatives`, and
-//!   `fmi2CompletedIntegratorStep` after it.
+//!   `fmi2CompletedIntegratorStep` after it. Where an event indicator
+//!   changes sign over the sample (FMI's z > 0 against z <= 0), the first
+//!   crossing is located by bisection to 2^-40 of the sample (or the time's
+//!   resolution), and the
+//!   importer's event is taken there (event mode, new discrete states, the
+//!   states read again, back to continuous time) before the sample goes on:
+//!   the kinks of the Bouc-Wen rates and, with `return_point_memory`, the
+//!   memory's wipe-outs inside a sample.
+//!
+//! Both parameter sets the stage ships with its loops open and closed run:
+//! the default, and `3dof_tracking` (the return-point memory on).
 //!
 //! Asserted: every sensor reading of every sample within 1e-6 µm; the
 //! fingerprints computed from them (coupling spans and loop widths, major
@@ -25,6 +35,7 @@
 mod docs_figures;
 
 use fmi2_conformance::{Fmu, Instance, OK, WARNING};
+use fmi2_cosim::parameter_set::{ScalarValue, parameter_values};
 use fmu_plant::FlexureStageFmu;
 use ode_solvers::{Dop853, SVector, System};
 use piezo_models::FlexureStageParams;
@@ -34,7 +45,10 @@ use piezo_models::fingerprint::{
 };
 
 const STATES: usize = 19;
+const INDICATORS: usize = 21;
 type State = SVector<f64, STATES>;
+/// Bisection steps that locate a crossing inside a sample: to 2^-40 of it.
+const BISECTIONS: usize = 40;
 
 /// The agreement asked of the two interfaces, on every sensor reading.
 const TOLERANCE_UM: f64 = 1e-6;
@@ -71,20 +85,47 @@ enum Rig<'a> {
         inst: Instance<'a>,
         nominals: [f64; STATES],
         evaluations: usize,
+        events: usize,
     },
 }
 
+/// Sets every parameter of `params` (by FMI name) on an instantiated
+/// instance.
+fn apply(inst: &Instance<'_>, params: &FlexureStageParams) {
+    let model = FlexureStageFmu::with_params(params.clone()).expect("a shipped parameter set");
+    for (name, value) in parameter_values(&model) {
+        let vr = inst.fmu.variable(name).vr;
+        let status = match value {
+            ScalarValue::Real(v) => inst.set_real(&[vr], &[v]),
+            ScalarValue::Integer(v) => inst.set_integer(&[vr], &[v]),
+            ScalarValue::Boolean(v) => inst.set_boolean(&[vr], &[v]),
+            ScalarValue::String(_) => continue,
+        };
+        assert_eq!(status, OK, "{name}: {:#?}", inst.take_log());
+    }
+}
+
+/// Whether an indicator changed domain (FMI 2.0: z > 0 against z <= 0).
+fn crossed(before: &[f64], after: &[f64]) -> bool {
+    before
+        .iter()
+        .zip(after)
+        .any(|(a, b)| (*a > 0.0) != (*b > 0.0))
+}
+
 impl<'a> Rig<'a> {
-    fn co_simulation(fmu: &'a Fmu) -> Rig<'a> {
+    fn co_simulation(fmu: &'a Fmu, params: &FlexureStageParams) -> Rig<'a> {
         let mut inst = fmu.instantiate("cs", false);
+        apply(&inst, params);
         let vr = fmu.variable("solver.max_voltage_step").vr;
         assert_eq!(inst.set_real(&[vr], &[1e-3]), OK);
         inst.initialize();
         Rig::CoSimulation(inst)
     }
 
-    fn model_exchange(fmu: &'a Fmu) -> Rig<'a> {
+    fn model_exchange(fmu: &'a Fmu, params: &FlexureStageParams) -> Rig<'a> {
         let mut inst = fmu.instantiate_model_exchange("me", false);
+        apply(&inst, params);
         inst.initialize();
         inst.event_iteration();
         let (status, nominals) = inst.get_nominals(STATES);
@@ -93,6 +134,7 @@ impl<'a> Rig<'a> {
             inst,
             nominals: nominals.try_into().expect("19 states"),
             evaluations: 0,
+            events: 0,
         }
     }
 
@@ -123,6 +165,7 @@ impl<'a> Rig<'a> {
                 inst,
                 nominals,
                 evaluations,
+                events,
             } => {
                 // A jump of the inputs is an event for the importer.
                 let vrs = ["u1", "u2", "u3"].map(|name| inst.fmu.variable(name).vr);
@@ -132,24 +175,70 @@ impl<'a> Rig<'a> {
                 let (status, _) = inst.new_discrete_states();
                 assert_eq!(status, OK);
                 assert_eq!(inst.enter_continuous_time_mode(), OK);
-                let (status, x) = inst.get_continuous_states(STATES);
-                assert_eq!(status, OK);
-                let z = State::from_fn(|i, _| x[i] / nominals[i]);
-                let t0 = inst.time;
-                let system = Scaled {
-                    inst,
-                    nominals: *nominals,
-                };
-                let mut solver =
-                    Dop853::new(system, t0, t0 + h, h, z, SOLVER_TOLERANCE, SOLVER_TOLERANCE);
-                solver.set_output(ode_solvers::OutputType::Sparse);
-                let stats = solver.integrate().expect("Dop853 integrates the sample");
-                *evaluations += stats.num_eval as usize;
-                let z1 = solver.y_out().last().expect("the end of the sample");
-                let x1: Vec<f64> = (0..STATES).map(|i| z1[i] * nominals[i]).collect();
-                inst.time = t0 + h;
+                let nominals = *nominals;
+                let end = inst.time + h;
+                loop {
+                    let t0 = inst.time;
+                    let (status, x) = inst.get_continuous_states(STATES);
+                    assert_eq!(status, OK);
+                    let z0 = State::from_fn(|i, _| x[i] / nominals[i]);
+                    let (_, before) = inst.get_event_indicators(INDICATORS);
+                    // The states at t0 + span from (t0, z0), left set in the instance.
+                    let mut reach = |span: f64| -> Vec<f64> {
+                        let system = Scaled {
+                            inst: &*inst,
+                            nominals,
+                        };
+                        let mut solver = Dop853::new(
+                            system,
+                            t0,
+                            t0 + span,
+                            span,
+                            z0,
+                            SOLVER_TOLERANCE,
+                            SOLVER_TOLERANCE,
+                        );
+                        solver.set_output(ode_solvers::OutputType::Sparse);
+                        let stats = solver.integrate().expect("Dop853 integrates the sample");
+                        *evaluations += stats.num_eval as usize;
+                        let z1 = solver.y_out().last().expect("the end of the span");
+                        let x1: Vec<f64> = (0..STATES).map(|i| z1[i] * nominals[i]).collect();
+                        assert_eq!(inst.set_time(t0 + span), OK);
+                        assert_eq!(inst.set_continuous_states(&x1), OK);
+                        inst.get_event_indicators(INDICATORS).1
+                    };
+                    let rest = end - t0;
+                    if !crossed(&before, &reach(rest)) {
+                        break;
+                    }
+                    // The first crossing, to 2^-40 of the sample; the event
+                    // just past it.
+                    let (mut lo, mut hi) = (0.0, rest);
+                    // No finer than the time can resolve (a few ulps of t).
+                    let resolution = 16.0 * f64::EPSILON * end.abs();
+                    for _ in 0..BISECTIONS {
+                        if hi - lo <= resolution {
+                            break;
+                        }
+                        let mid = 0.5 * (lo + hi);
+                        if crossed(&before, &reach(mid)) {
+                            hi = mid;
+                        } else {
+                            lo = mid;
+                        }
+                    }
+                    reach(hi);
+                    inst.time = t0 + hi;
+                    let (status, _, _) = inst.completed_integrator_step();
+                    assert!(status == OK || status == WARNING, "{:#?}", inst.take_log());
+                    inst.event_iteration();
+                    *events += 1;
+                    if hi >= rest {
+                        break;
+                    }
+                }
+                inst.time = end;
                 assert_eq!(inst.set_time(inst.time), OK);
-                assert_eq!(inst.set_continuous_states(&x1), OK);
                 let (status, _, _) = inst.completed_integrator_step();
                 assert!(status == OK || status == WARNING, "{:#?}", inst.take_log());
             }
@@ -245,15 +334,21 @@ struct Outcome {
     seconds: f64,
 }
 
-fn simulate(mut rig: Rig<'_>, procedure: &Procedure) -> (Outcome, usize) {
+/// The sensors of every sample, and (for Model Exchange) the derivative
+/// evaluations and the located events.
+fn simulate(mut rig: Rig<'_>, procedure: &Procedure) -> (Outcome, (usize, usize)) {
     let started = std::time::Instant::now();
     let sensors = procedure
         .iter()
         .map(|(h, commands)| rig.step(*commands, *h))
         .collect();
     let evaluations = match rig {
-        Rig::ModelExchange { evaluations, .. } => evaluations,
-        Rig::CoSimulation(_) => 0,
+        Rig::ModelExchange {
+            evaluations,
+            events,
+            ..
+        } => (evaluations, events),
+        Rig::CoSimulation(_) => (0, 0),
     };
     (
         Outcome {
@@ -285,14 +380,32 @@ fn window<'s>(
 
 #[test]
 fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
+    agree_on_the_fingerprints(
+        &FlexureStageParams::default(),
+        "### On the calibration fingerprints (Rust, through the C ABI)",
+    );
+}
+
+/// The same with the stacks' minor loops closed: the return-point memory's
+/// turns at the samples' input events, its wipe-outs located inside them.
+#[test]
+fn model_exchange_runs_the_return_point_memory_on_the_fingerprints() {
+    let params = FlexureStageParams::calibrated_while_tracking();
+    assert!(params.return_point_memory);
+    agree_on_the_fingerprints(
+        &params,
+        "### On the calibration fingerprints, with the return-point memory",
+    );
+}
+
+fn agree_on_the_fingerprints(params: &FlexureStageParams, section: &str) {
     let fmu = plant();
-    let params = FlexureStageParams::default();
     let spacing = params.sensor_spacing_mm * 1e3;
     // docs/fmi.md's rows: procedure, samples, largest difference, fingerprint.
     let mut rows = Vec::new();
-    for (name, procedure, from) in procedures(&params) {
-        let (cs, _) = simulate(Rig::co_simulation(&fmu), &procedure);
-        let (me, evaluations) = simulate(Rig::model_exchange(&fmu), &procedure);
+    for (name, procedure, from) in procedures(params) {
+        let (cs, _) = simulate(Rig::co_simulation(&fmu, params), &procedure);
+        let (me, (evaluations, events)) = simulate(Rig::model_exchange(&fmu, params), &procedure);
         let worst = cs
             .sensors
             .iter()
@@ -301,7 +414,7 @@ fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
             .fold(0.0, f64::max);
         println!(
             "{name}: {} samples, largest |s_ME - s_CS| {worst:.2e} um; CS {:.2} s, ME {:.2} s \
-             ({evaluations} derivative evaluations)",
+             ({evaluations} derivative evaluations, {events} located events)",
             procedure.len(),
             cs.seconds,
             me.seconds
@@ -380,5 +493,5 @@ fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
             Some(fingerprints),
         ]);
     }
-    docs_figures::assert_documented("fmi.md", "### On the calibration fingerprints", 1, &rows);
+    docs_figures::assert_documented("fmi.md", section, 1, &rows);
 }
