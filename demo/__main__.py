@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import os
 import sys
 import time
@@ -56,6 +57,15 @@ def previous_metrics(path: Path) -> dict:
     return entries if isinstance(entries, dict) else {}
 
 
+def recorded_provenance(path: Path) -> dict:
+    """The parameters an earlier invocation ran on (parameters.json); the
+    start values when it wrote none."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {"plant": None, "controller": None, "fitted_once": None}
+
+
 def read_parameter_set(path: Path, fmu: Path) -> dict:
     """A parameter set by FMI name: a JSON object whose every name is a
     parameter of `fmu`, every value a number or a Boolean."""
@@ -74,8 +84,8 @@ def read_parameter_set(path: Path, fmu: Path) -> dict:
     for name, value in values.items():
         if name not in parameters:
             raise ValueError(f"{path}: {name!r} is not a parameter of {fmu.name}")
-        if not isinstance(value, (bool, int, float)):
-            raise ValueError(f"{path}: {name!r} = {value!r} is not a number or a Boolean")
+        if not isinstance(value, (bool, int, float)) or not math.isfinite(value):
+            raise ValueError(f"{path}: {name!r} = {value!r} is not a finite number or a Boolean")
     return values
 
 
@@ -86,8 +96,9 @@ def parameter_sets(args) -> tuple[dict, dict, dict | None] | None:
     if not any(given) and args.controller_fitted_once is None:
         return None
     if not all(given):
-        raise ValueError("--plant-parameters and --controller-parameters go together: a "
-                         "controller is identified on its stage (piezo-identify stage)")
+        raise ValueError("--plant-parameters and --controller-parameters go together (and "
+                         "--controller-fitted-once needs both): a controller is identified on "
+                         "its stage (piezo-identify stage)")
     once = (read_parameter_set(args.controller_fitted_once, args.controller)
             if args.controller_fitted_once else None)
     return (read_parameter_set(args.plant_parameters, args.plant),
@@ -129,12 +140,23 @@ def main(argv=None) -> int:
     if sets:
         every_run = on_parameter_sets(every_run, *sets)
     runs = every_run
+    # What the runs ran on, beside metrics.json: a partial run may only add
+    # to figures of the same parameters, or report.md would mix two stages.
+    provenance_path = args.out / "parameters.json"
+    provenance = {"plant": None, "controller": None, "fitted_once": None} if not sets else {
+        "plant": sets[0], "controller": sets[1], "fitted_once": sets[2]}
     if args.only:
         unknown = set(args.only) - {e.key for e in runs}
         if unknown:
             print(f"unknown experiment(s): {', '.join(sorted(unknown))}", file=sys.stderr)
             return 2
         runs = [e for e in runs if e.key in args.only]
+        if previous_metrics(args.out / "metrics.json") and \
+                recorded_provenance(provenance_path) != provenance:
+            print(f"{args.out} holds runs on other parameters than these "
+                  f"({provenance_path.name} says which): run them all, or use another --out",
+                  file=sys.stderr)
+            return 2
     total_steps = sum(round(e.duration / SAMPLE_PERIOD) for e in runs)
     started = time.perf_counter()
     results = {}
@@ -172,6 +194,8 @@ def main(argv=None) -> int:
     if results:
         with replaced(metrics_path) as partial:
             partial.write_text(json.dumps(merged, indent=2))
+        with replaced(provenance_path) as partial:
+            partial.write_text(json.dumps(provenance, indent=2))
     missing = [e.key for e in every_run if e.key not in merged]
     if results and not missing:
         with replaced(report_path) as partial:

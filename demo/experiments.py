@@ -303,16 +303,17 @@ def on_parameter_sets(runs: list[Experiment], plant_set: dict, controller_set: d
     `fitted_once_set`'s D1..D4 (the `--out-fitted-once` preset of
     `piezo-identify stage`; without it, `controller_set`'s own law). A run
     on a stage of its own (the XY200S runs) stays on it."""
-    shipped = preset("PiezoController.stage.json")
-    once = {k: v for k, v in (fitted_once_set or controller_set).items()
-            if k.startswith("compensation.")}
+    law = "compensation."
+    once = {k: v for k, v in (fitted_once_set or controller_set).items() if k.startswith(law)}
     moved = []
     for e in runs:
         if set(e.plant) - set(PLANT_PARAMETERS):  # a stage of its own: the XY200S's
             moved.append(e)
             continue
-        own = {k: v for k, v in e.controller.items() if shipped.get(k) != v}
-        if any(k.startswith("compensation.") for k in own):
+        # Every setting of the run is kept, whatever its value; a run that
+        # names a law (the law fitted once) takes the set's.
+        own = {k: v for k, v in e.controller.items() if not k.startswith(law)}
+        if len(own) < len(e.controller):
             own |= once
         moved.append(replace(e, plant={**plant_set, **e.plant},
                              controller={**controller_set, **own}))

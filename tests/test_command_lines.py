@@ -147,8 +147,9 @@ def _sets(tmp_path, plant: str, controller: str) -> list[str]:
     ('{"mode.x.frequency": 800.0,\n "pzt[1].A": }', "{}", "plant.json: line 2, column 14"),
     ('{"no.such.parameter": 1.0}', "{}", "'no.such.parameter' is not a parameter of FlexureStage.fmu"),
     ("{}", '{"translation.kp": "high"}',
-     "controller.json: 'translation.kp' = 'high' is not a number"),
+     "controller.json: 'translation.kp' = 'high' is not a finite number"),
     ("[1, 2]", "{}", "plant.json: a parameter set is a JSON object"),
+    ('{"mode.x.frequency": NaN}', "{}", "'mode.x.frequency' = nan is not a finite number"),
 ])
 def test_a_malformed_parameter_set_is_refused_before_any_run(tmp_path, capsys, plant, controller,
                                                              problem):
@@ -157,6 +158,25 @@ def test_a_malformed_parameter_set_is_refused_before_any_run(tmp_path, capsys, p
     assert report_command.main(["--out", str(out), *_sets(tmp_path, plant, controller)]) == 2
     assert problem in capsys.readouterr().err
     assert not out.exists(), "nothing is run or written"
+
+
+def test_a_partial_run_on_other_parameters_than_the_folders_is_refused(tmp_path, capsys,
+                                                                       monkeypatch):
+    """--only adds to a folder's figures only when they are of the same
+    parameters: report.md would otherwise name one set for runs of two."""
+    from demo import __main__ as report_command
+    monkeypatch.setattr(report_command, "write_report", lambda path, *_: path.write_text("r"))
+    out = tmp_path / "out"
+    assert report_command.main(["--out", str(out), "--only", SHORT]) == 0
+    assert json.loads((out / "parameters.json").read_text())["plant"] is None
+    sets = _sets(tmp_path, '{"mode.x.frequency": 801.0}', '{"translation.kp": 0.04}')
+    assert report_command.main(["--out", str(out), "--only", SHORT, *sets]) == 2
+    assert "holds runs on other parameters" in capsys.readouterr().err
+    other = tmp_path / "other"
+    assert report_command.main(["--out", str(other), "--only", SHORT, *sets]) == 0
+    assert report_command.main(["--out", str(other), "--only", SHORT, *sets]) == 0
+    assert json.loads((other / "parameters.json").read_text())["plant"] == {
+        "mode.x.frequency": 801.0}
 
 
 def test_a_plant_set_without_its_controller_is_refused(tmp_path, capsys):
@@ -172,26 +192,30 @@ def test_the_sets_replace_the_start_values_and_keep_each_runs_settings():
     """`on_parameter_sets`: the sets under every run's own settings (the
     noise switch and seed, the controller's switches), the law fitted once
     where a run takes it, and the XY200S runs on their own stage."""
-    from demo.experiments import experiments, on_parameter_sets, preset
+    from demo.experiments import experiments, on_parameter_sets
     plant_set = {"mode.x.frequency": 801.0, "noise.enabled": False, "noise.rms": 0.007}
     controller_set = {"translation.kp": 0.04, "feedback_x": False, "compensation.dk[1]": 1.0}
     once = {"compensation.dk[1]": 2.0, "translation.kp": 9.9}  # only its law is taken
     runs = experiments()
     moved = on_parameter_sets(runs, plant_set, controller_set, once)
     assert [e.key for e in moved] == [e.key for e in runs]
-    shipped = preset("PiezoController.stage.json")
     for e, m in zip(runs, moved):
         if "xy200s" in e.key:
             assert m is e
             continue
         assert m.plant == {**plant_set, **e.plant}
         assert m.plant["noise.enabled"] is True and m.plant["noise.rms"] == 0.007
-        own = {k: v for k, v in e.controller.items() if shipped.get(k) != v}
-        takes_once = any(k.startswith("compensation.") for k in own)
+        takes_once = any(k.startswith("compensation.") for k in e.controller)
         assert m.controller["compensation.dk[1]"] == (2.0 if takes_once else 1.0), e.key
-        assert m.controller["translation.kp"] == own.get("translation.kp", 0.04)
-        assert all(m.controller[k] == v for k, v in own.items() if not k.startswith("compensation."))
+        assert m.controller["translation.kp"] == e.controller.get("translation.kp", 0.04)
+        # Every switch of the run, also one equal to the shipped start value.
+        assert all(m.controller[k] == v for k, v in e.controller.items()
+                   if not k.startswith("compensation.")), e.key
     assert any("xy200s" in e.key for e in runs)
+    # A set whose switch differs from the start value does not override a run's.
+    decoupled = {e.key: m for e, m in zip(runs, on_parameter_sets(
+        runs, {}, {"decoupling": False})) if e.controller.get("decoupling") is True}
+    assert decoupled and all(m.controller["decoupling"] is True for m in decoupled.values())
 
 
 # --------------------------------------------------------------------------

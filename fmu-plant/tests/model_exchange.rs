@@ -14,8 +14,9 @@
 //!   nominals, relative and absolute tolerance 1e-10, through
 //!   `fmi2SetTime`/`fmi2SetContinuousStates`/`fmi2GetDerivatives`, and
 //!   `fmi2CompletedIntegratorStep` after it. Where an event indicator
-//!   changes sign over the sample (FMI's z > 0 against z <= 0), the first
-//!   crossing is located by bisection to 2^-40 of the sample (or the time's
+//!   changes sign over the sample (FMI's z > 0 against z <= 0), a crossing
+//!   (the first, unless two indicators change sign in the same sample) is
+//!   located by bisection to 2^-40 of the sample (or the time's
 //!   resolution), and the
 //!   importer's event is taken there (event mode, new discrete states, the
 //!   states read again, back to continuous time) before the sample goes on:
@@ -211,8 +212,11 @@ impl<'a> Rig<'a> {
                     if !crossed(&before, &reach(rest)) {
                         break;
                     }
-                    // The first crossing, to 2^-40 of the sample; the event
-                    // just past it.
+                    // A crossing, to 2^-40 of the sample (the first where
+                    // one indicator changes sign; the rig compares the
+                    // ends of each span, so a sign that changes and
+                    // changes back inside a sample goes unseen, which held
+                    // inputs do not make); the event just past it.
                     let (mut lo, mut hi) = (0.0, rest);
                     // No finer than the time can resolve (a few ulps of t).
                     let resolution = 16.0 * f64::EPSILON * end.abs();

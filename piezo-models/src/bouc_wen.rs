@@ -379,7 +379,10 @@ impl ReturnPointMemory {
     /// state that comes from outside; one with more reversals than the
     /// capacity does not deserialize).
     fn unreachable(&self) -> Option<(&'static str, f64)> {
-        if !self.direction.is_finite() {
+        // A direction is a sign, and 0 only before any motion (no reversal
+        // but the rest cycle's top, whose memory starts moving down).
+        let sign = [-1.0, 0.0, 1.0].contains(&self.direction);
+        if !sign || (self.direction == 0.0 && !self.points.is_empty()) {
             return Some(("return-point memory's direction", self.direction));
         }
         self.reversals()
@@ -574,10 +577,14 @@ impl AsymmetricBoucWen {
     }
 
     /// For an integrator in time that owns the point (u, h) (a model-exchange
-    /// importer's solver): the two functions of the point whose change of
-    /// sign, from ≤ 0 to > 0, is where the return-point memory must be
-    /// updated by [`AsymmetricBoucWen::settle_memory`]. `u_rate` is the
-    /// input's rate, or any quantity of its sign.
+    /// importer's solver): the two functions of the point that rise through
+    /// 0 (from ≤ 0 to > 0, an event in FMI 2.0's reading) where the
+    /// return-point memory must be updated by
+    /// [`AsymmetricBoucWen::settle_memory`], after which both are ≤ 0 again.
+    /// `u_rate` is the input's rate, or any quantity of its sign. A jump of
+    /// the input is the importer's event (FMI 2.0 has it enter Event Mode
+    /// for a discontinuous input); one it integrates across unseen, with the
+    /// functions read only after the jump, is a turn the memory misses.
     ///
     /// - `[0]`, a turn: −d·u̇ for the direction d of the last motion, so
     ///   that a held input (0) and a motion that goes on (< 0) lie on one

@@ -366,7 +366,8 @@ mod tests {
                 let g0 = stage.switching_functions(commands);
                 let mut x1 = rk4(stage, &x0, left);
                 let mut taken = left;
-                if crosses(&g0, &switching(stage, &x1)) {
+                let crossed = crosses(&g0, &switching(stage, &x1));
+                if crossed {
                     // Bisection to the first zero, to a few ulps of the step.
                     let (mut lo, mut hi) = (0.0, left);
                     for _ in 0..60 {
@@ -381,8 +382,9 @@ mod tests {
                     x1 = rk4(stage, &x0, taken);
                 }
                 stage.set_continuous_states(&x1);
-                if taken < left {
-                    // The event update at the located crossing.
+                if crossed {
+                    // The event update at the located crossing (also one
+                    // located at the step's end).
                     settle(stage);
                 }
                 left -= taken;
