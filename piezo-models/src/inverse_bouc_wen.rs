@@ -338,16 +338,22 @@ mod tests {
                 let y_r = 6.0
                     + 5.0 * (2.0 * std::f64::consts::PI * t).sin()
                     + 0.8 * (2.0 * std::f64::consts::PI * 7.0 * t).sin();
-                let v = inverse.solve(y_r);
-                inverse.commit(v);
-                forward.advance_to(v, SIMULATE_MAX_DU);
-                assert!(
-                    (forward.output() - y_r).abs() < 1e-9,
-                    "t = {t}: {} vs {y_r}",
-                    forward.output()
-                );
+                follow(&mut inverse, &mut forward, y_r, t);
             }
         }
+    }
+
+    /// One sample of eq. (6): the inverse's command for `y_r`, applied to
+    /// both models, and the forward model's output at `y_r` to 1e-9 µm.
+    fn follow(inverse: &mut InverseBoucWen, forward: &mut AsymmetricBoucWen, y_r: f64, t: f64) {
+        let v = inverse.solve(y_r);
+        inverse.commit(v);
+        forward.advance_to(v, SIMULATE_MAX_DU);
+        assert!(
+            (forward.output() - y_r).abs() < 1e-9,
+            "t = {t}: {} vs {y_r}",
+            forward.output()
+        );
     }
 
     /// The same with the return-point memory on both sides, from the
@@ -367,14 +373,7 @@ mod tests {
                 + 1.5
                     * (2.0 * std::f64::consts::PI * t).sin()
                     * (std::f64::consts::PI * t / 3.0).sin();
-            let v = inverse.solve(y_r);
-            inverse.commit(v);
-            forward.advance_to(v, SIMULATE_MAX_DU);
-            assert!(
-                (forward.output() - y_r).abs() < 1e-9,
-                "t = {t}: {} vs {y_r}",
-                forward.output()
-            );
+            follow(&mut inverse, &mut forward, y_r, t);
             let reversals = forward.return_point_memory().unwrap().reversals();
             assert_eq!(
                 inverse.model.return_point_memory().unwrap().reversals(),
