@@ -175,13 +175,3 @@ def refined_rows(results: dict) -> list[Row]:
     over three rounds on the same runs (in-sample), labelled as such."""
     return [replace(r, what=REFINED_LABEL + r.what) for r in rows(results, "_refined")
             if r.decoupled]
-
-
-#: The rows the law fitted once misses (Table 3's x2 from y on its span and
-#: ratio, y from x and from rotation on the issue's 7x ratio): measured, and
-#: asserted as measured, so that a change either way is seen.
-MISSED_FITTED_ONCE = (
-    "coupling span x2 from y, without / with decoupling (ratio)",
-    "coupling span y from x, without / with decoupling (ratio)",
-    "coupling span y from rotation, without / with decoupling (ratio)",
-)

@@ -42,7 +42,7 @@ CVODE_ROWS = {
 }
 EULER_ROWS = ("forward Euler, 2 µs steps", "forward Euler, 1 µs steps")
 MEMORY_ROWS = (
-    "CVode, relative tolerance 1e-10, return-point memory on (`3dof_tracking`)",
+    "CVode, relative tolerance 1e-10, return-point memory on (the default)",
     "the same run with `return_point_memory = false` (the memory's branches not followed)",
 )
 
@@ -200,7 +200,7 @@ def test_model_exchange_runs_the_return_point_memory():
     this co-simulation by orders of magnitude more, so the bound tells the
     two apart."""
     import json
-    preset = json.loads((DIST / "presets" / "FlexureStage.3dof_tracking.json").read_text())
+    preset = json.loads((DIST / "presets" / "FlexureStage.3dof.json").read_text())
     assert preset["return_point_memory"] is True
     preset.pop("noise.enabled", None)
     hold, stop = 2e-3, 2e-3 * len(MEMORY_HOLDS)

@@ -55,12 +55,12 @@ def test_the_default_sets_are_the_start_values(fmu, preset):
     [
         ("FlexureStage", "FlexureStage.xy200s.json"),
         ("FlexureStage", "FlexureStage.3dof_memory.json"),
-        ("FlexureStage", "FlexureStage.3dof_tracking.json"),
+        ("FlexureStage", "FlexureStage.3dof_no_memory.json"),
         ("PiezoController", "PiezoController.paper.json"),
         ("PiezoController", "PiezoController.stage_memory.json"),
         ("PiezoController", "PiezoController.stage_memory_once.json"),
-        ("PiezoController", "PiezoController.stage_tracking.json"),
-        ("PiezoController", "PiezoController.stage_tracking_once.json"),
+        ("PiezoController", "PiezoController.stage_no_memory.json"),
+        ("PiezoController", "PiezoController.stage_no_memory_once.json"),
     ],
 )
 def test_every_set_loads_into_its_fmu(fmu, preset):

@@ -99,7 +99,7 @@ def scratch(tmp_path_factory) -> pathlib.Path:
     return tmp_path_factory.mktemp("identified")
 
 
-@pytest.mark.parametrize("target", ["stage-preset", "stage-memory-preset", "stage-tracking-preset",
+@pytest.mark.parametrize("target", ["stage-preset", "stage-memory-preset", "stage-no-memory-preset",
                                     "xy200s-controller-preset"])
 def test_the_preset_target_makes_the_shipped_preset(scratch, target):
     _, shipped = makefile_command(target)
@@ -110,7 +110,7 @@ def test_the_preset_target_makes_the_shipped_preset(scratch, target):
         f"(run `make {target}` after a plant or identification change):\n" + "\n".join(problems))
 
 
-@pytest.mark.parametrize("target", ["stage-preset", "stage-memory-preset", "stage-tracking-preset"])
+@pytest.mark.parametrize("target", ["stage-preset", "stage-memory-preset", "stage-no-memory-preset"])
 def test_the_stage_target_makes_the_shipped_law_fitted_once(scratch, target):
     """`make stage-preset` (and `make stage-memory-preset`, on the stage with
     the return-point memory) also writes the preset with D1..D4 fitted once

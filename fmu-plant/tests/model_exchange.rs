@@ -24,7 +24,7 @@
 //!   memory's wipe-outs inside a sample.
 //!
 //! Both parameter sets the stage ships with its loops open and closed run:
-//! the default, and `3dof_tracking` (the return-point memory on).
+//! `3dof_no_memory`, and the default (the return-point memory on).
 //!
 //! Asserted: every sensor reading of every sample within 1e-6 µm; the
 //! fingerprints computed from them (coupling spans and loop widths, major
@@ -385,16 +385,16 @@ fn window<'s>(
 #[test]
 fn model_exchange_and_co_simulation_agree_on_the_fingerprints() {
     agree_on_the_fingerprints(
-        &FlexureStageParams::default(),
+        &FlexureStageParams::without_memory(),
         "### On the calibration fingerprints (Rust, through the C ABI)",
     );
 }
 
-/// The same with the stacks' minor loops closed: the return-point memory's
+/// The same with the stacks' minor loops closed (the default): the return-point memory's
 /// turns at the samples' input events, its wipe-outs located inside them.
 #[test]
 fn model_exchange_runs_the_return_point_memory_on_the_fingerprints() {
-    let params = FlexureStageParams::calibrated_while_tracking();
+    let params = FlexureStageParams::default();
     assert!(params.return_point_memory);
     agree_on_the_fingerprints(
         &params,

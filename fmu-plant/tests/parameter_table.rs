@@ -34,6 +34,6 @@ fn a_set_by_fmi_name_is_named_as_such() {
         env!("CARGO_BIN_EXE_flexure-stage-parameters"),
         "3dof",
         "FlexureStage",
-        "3dof, 3dof_memory, 3dof_tracking, xy200s or a FlexureStageParams JSON file",
+        "3dof, 3dof_memory, 3dof_no_memory, xy200s or a FlexureStageParams JSON file",
     );
 }

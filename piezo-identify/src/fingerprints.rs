@@ -117,8 +117,12 @@ pub enum FingerprintError {
     NoSpacing(String),
 }
 
-/// Every fingerprint of `plant`, measured through its FMU.
-pub fn measure(plant: &PlantFmu) -> Result<Fingerprints, FingerprintError> {
+/// Every fingerprint of `plant`, measured through its FMU, the
+/// Ziegler-Nichols figures read as `reading` says.
+pub fn measure(
+    plant: &PlantFmu,
+    reading: fingerprint::ZieglerNicholsReading,
+) -> Result<Fingerprints, FingerprintError> {
     let spacing_mm = plant
         .start("L")
         .ok_or_else(|| FingerprintError::NoSpacing(plant.path().display().to_string()))?;
@@ -128,7 +132,7 @@ pub fn measure(plant: &PlantFmu) -> Result<Fingerprints, FingerprintError> {
         spacing_um: spacing_mm * 1e3,
         failure: &failure,
     };
-    let fingerprints = fingerprint::measure(&stages);
+    let fingerprints = fingerprint::measure_with(&stages, reading);
     match failure.into_inner() {
         Some(error) => Err(error.into()),
         None => Ok(fingerprints),

@@ -13,9 +13,11 @@
 //! [`lab_record_on`] on the x pair too, and on a stage of the user's own
 //! parameters.
 //!
-//! The default stage's amplifier limits are set here, not taken from the
-//! preset: a bipolar drive needs a negative limit, and a test must not change
-//! meaning when the preset's amplifier does. [`LAB_AMPLIFIER_LIMITS`] is the
+//! The records are taken from seed 000's stage without the return-point
+//! memory (`FlexureStageParams::without_memory`, the default when they were
+//! specified), its amplifier limits set here, not taken from the preset: a
+//! bipolar drive needs a negative limit, and a test must not change meaning
+//! when the default preset does. [`LAB_AMPLIFIER_LIMITS`] is the
 //! output range of a PI E-505 (−30..130 V); the commands stay within −2..10 V
 //! (−20..100 V after the gain of 10). A stage of the user's own keeps its own
 //! amplifier. A command the stage clips is refused, not recorded.
@@ -225,7 +227,10 @@ pub fn lab_record_on(
     let mut params = match stage {
         Some(own) => own.clone(),
         None => {
-            let mut params = FlexureStageParams::default();
+            // The stage the lab records were first taken from (seed 000's
+            // without the return-point memory): as with the amplifier, a
+            // record must not change when the default preset does.
+            let mut params = FlexureStageParams::without_memory();
             (params.amplifier.v_min, params.amplifier.v_max) = LAB_AMPLIFIER_LIMITS;
             params
         }

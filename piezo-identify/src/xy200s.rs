@@ -266,7 +266,9 @@ pub fn xy200s_preset() -> Result<Xy200sPreset, BoucWenFitError> {
     xx.stroke_scale = STROKE_X_UM / stroke_of(xx.identified);
     yy.stroke_scale = STROKE_Y_UM / stroke_of(yy.identified);
 
-    let mut stage = FlexureStageParams::default();
+    // The seed 000 stage as first calibrated, memory off: seed 001's models
+    // are eq. (3) as printed, without a return-point memory.
+    let mut stage = FlexureStageParams::without_memory();
     stage.amplifier.gain = AMPLIFIER_GAIN;
     stage.amplifier.v_min = 0.0;
     stage.amplifier.v_max = ACTUATOR_MAX_V;

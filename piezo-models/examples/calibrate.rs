@@ -1,6 +1,7 @@
 //! Calibrates the FlexureStage preset to the stage of seed 000.
 //!
-//! Starting from `presets/flexure_stage.json`, it keeps every loop *shape*
+//! Starting from `presets/flexure_stage_no_memory.json` (the stage as first
+//! calibrated), it keeps every loop *shape*
 //! (A, β, γ, n, δ of each Bouc-Wen model, the modes, amplifier and creep) and
 //! solves for the output scales and the sensor spacing that reproduce the
 //! figures of seed 000, using the measurement procedures of
@@ -26,14 +27,15 @@
 //! The results are rounded to 6 significant digits and measured again.
 //!
 //! Usage: `cargo run --release -p piezo-models --example calibrate [-- --write]`
-//! (`--write` replaces the preset file; otherwise the JSON is printed).
+//! (`--write` replaces the preset file; otherwise the JSON is printed):
+//! without options it writes `presets/flexure_stage_no_memory.json`.
 //! `--memory` calibrates the same stage with its stacks' return-point memory
-//! on, starting from the preset, and writes `presets/flexure_stage_memory.json`
-//! (MODEL.md §6: the memory flattens the small loops the Ziegler-Nichols
-//! figures are taken on, so the modes move). `--memory --moving` takes the
-//! Ziegler-Nichols figures while the stage moves instead
+//! on and writes `presets/flexure_stage_memory.json` (MODEL.md §6: the
+//! memory flattens the small loops the Ziegler-Nichols figures are taken
+//! on, so the modes move). `--memory --moving` takes the Ziegler-Nichols
+//! figures while the stage moves instead
 //! (`fingerprint::ultimate_gain_while_moving`: on branches, not on a held
-//! point's small loops) and writes `presets/flexure_stage_tracking.json`.
+//! point's small loops) and writes `presets/flexure_stage.json`, the default.
 
 use piezo_models::fingerprint::{self, Axis, Fingerprints, LoopAxis};
 use piezo_models::{BoucWenParams, FlexureStageParams};
@@ -304,9 +306,11 @@ fn main() {
     let write = std::env::args().any(|a| a == "--write");
     let memory = std::env::args().any(|a| a == "--memory");
     let moving = std::env::args().any(|a| a == "--moving");
+    // Every preset is calibrated from the stage without the memory, as each
+    // was first made.
     let base = FlexureStageParams {
         return_point_memory: memory,
-        ..FlexureStageParams::default()
+        ..FlexureStageParams::without_memory()
     };
     let probe: UltimateGainProbe = if moving {
         |p, u, a| fingerprint::ultimate_gain_while_moving(p, u, a)
@@ -315,21 +319,31 @@ fn main() {
     };
     let params = calibrate(&base, probe);
     params.validate().expect("calibrated parameters are valid");
-    report(&fingerprint::measure(&params), &params);
+    let reading = if moving {
+        fingerprint::ZieglerNicholsReading::WhileMoving
+    } else {
+        fingerprint::ZieglerNicholsReading::Held
+    };
+    report(&fingerprint::measure_with(&params, reading), &params);
     let json = serde_json::to_string_pretty(&params).expect("parameters serialise") + "\n";
     if write {
-        let path = if memory && moving {
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/presets/flexure_stage_tracking.json"
-            )
-        } else if memory {
-            concat!(
+        let path = match (memory, moving) {
+            (true, true) => concat!(env!("CARGO_MANIFEST_DIR"), "/presets/flexure_stage.json"),
+            (true, false) => concat!(
                 env!("CARGO_MANIFEST_DIR"),
                 "/presets/flexure_stage_memory.json"
-            )
-        } else {
-            concat!(env!("CARGO_MANIFEST_DIR"), "/presets/flexure_stage.json")
+            ),
+            (false, false) => concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/presets/flexure_stage_no_memory.json"
+            ),
+            (false, true) => {
+                eprintln!(
+                    "no preset is calibrated --moving without --memory: printed, not written"
+                );
+                println!("{json}");
+                return;
+            }
         };
         std::fs::write(path, json).expect("preset written");
         eprintln!("wrote {path}");

@@ -806,6 +806,37 @@ pub fn ultimate_gain_while_moving<P: StageSource>(
     bisected_ultimate_gain(&mut rig, (stable, (1.05 * stable).min(10.0)), growth)
 }
 
+/// Where the Ziegler-Nichols test's loop runs. Seed 000 §3.2 tuned the PI
+/// gains of a tracking stage by Ziegler-Nichols without saying at which
+/// operating point; a held stack answers the probe on its small minor loops,
+/// a moving one on the branch it runs along, and with the return-point
+/// memory the two differ by 44 % (MODEL.md §5-6).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ZieglerNicholsReading {
+    /// [`ultimate_gain_while_moving`]: the loop on a stage ramping at seed
+    /// 000's Fig. 7 speed, the reading the default preset is calibrated to.
+    WhileMoving,
+    /// [`ultimate_gain`]: the loop at a held point, the reading the
+    /// `3dof_memory` and `3dof_no_memory` presets are calibrated to.
+    Held,
+}
+
+impl ZieglerNicholsReading {
+    /// The ultimate gain of `axis` as this reading takes it.
+    pub fn ultimate_gain<P: StageSource>(
+        self,
+        plant: &P,
+        u_home: f64,
+        axis: LoopAxis,
+    ) -> UltimateGain {
+        match self {
+            ZieglerNicholsReading::WhileMoving => ultimate_gain_while_moving(plant, u_home, axis),
+            ZieglerNicholsReading::Held => ultimate_gain(plant, u_home, axis),
+        }
+    }
+}
+
 /// Every fingerprint of the calibrated stage.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Fingerprints {
@@ -818,12 +849,20 @@ pub struct Fingerprints {
     pub loop_x: LoopShape,
     pub loop_y: LoopShape,
     pub couplings: CouplingSweeps,
+    /// How [`Fingerprints::ultimate_gains`] were read.
+    pub ziegler_nichols: ZieglerNicholsReading,
     /// Ziegler-Nichols ultimate gains of x, y and θ (in [`LoopAxis::ALL`] order).
     pub ultimate_gains: [UltimateGain; 3],
 }
 
-/// Runs every procedure of this module.
+/// Runs every procedure of this module, the Ziegler-Nichols figures read on
+/// the moving stage ([`ZieglerNicholsReading::WhileMoving`]).
 pub fn measure<P: StageSource>(plant: &P) -> Fingerprints {
+    measure_with(plant, ZieglerNicholsReading::WhileMoving)
+}
+
+/// [`measure`] with the Ziegler-Nichols figures read as `reading` says.
+pub fn measure_with<P: StageSource>(plant: &P, reading: ZieglerNicholsReading) -> Fingerprints {
     let u_home = x_home_command(plant);
     Fingerprints {
         stroke_x_um: stroke(plant, Axis::X),
@@ -834,7 +873,8 @@ pub fn measure<P: StageSource>(plant: &P) -> Fingerprints {
         loop_x: major_loop(plant, Axis::X),
         loop_y: major_loop(plant, Axis::Y),
         couplings: coupling_sweeps(plant, u_home),
-        ultimate_gains: LoopAxis::ALL.map(|axis| ultimate_gain(plant, u_home, axis)),
+        ziegler_nichols: reading,
+        ultimate_gains: LoopAxis::ALL.map(|axis| reading.ultimate_gain(plant, u_home, axis)),
     }
 }
 

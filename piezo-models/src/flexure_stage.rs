@@ -75,7 +75,9 @@ pub struct SolverParams {
 }
 
 /// Everything that defines a stage. `Default` is the preset calibrated to seed
-/// 000's stage (`presets/flexure_stage.json`).
+/// 000's stage (`presets/flexure_stage.json`): the stacks close their minor
+/// loops, the modes set by the Ziegler-Nichols figures of the loop on the
+/// moving stage (MODEL.md §5-6).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FlexureStageParams {
@@ -92,8 +94,9 @@ pub struct FlexureStageParams {
     /// Whether every hysteresis model (actuators and couplings) closes its
     /// minor loops, as a real stack does (`bouc_wen::ReturnPointMemory`:
     /// eq. (3)'s branches, each tilted to end at the reversal it returns
-    /// to). `false`, the default: seed 001's model as integrated, whose
-    /// minor loops drift and which dither ratchets (MODEL.md §6).
+    /// to; on in the default preset). `false` (a file without the key):
+    /// seed 001's model as integrated, whose minor loops drift and which
+    /// dither ratchets (MODEL.md §6).
     /// In Model Exchange the memory is discrete state, changed at its events
     /// (`flexure_stage::ode`).
     #[serde(default)]
@@ -105,7 +108,12 @@ pub struct FlexureStageParams {
     pub solver: SolverParams,
 }
 
-/// The calibrated preset, the single source of the default parameters.
+/// The calibrated preset, the single source of the default parameters:
+/// seed 000's stage with its stacks' return-point memory on, calibrated with
+/// it (`examples/calibrate.rs -- --memory --moving`), its Ziegler-Nichols
+/// figures taken while it moves: the modes are set by the loop on the
+/// branches a tracking stage runs along rather than on a held point's small
+/// loops (MODEL.md §5-6).
 const PRESET_JSON: &str = include_str!("../presets/flexure_stage.json");
 
 /// Seed 001's XY200S stage as a parameter set of this model, built from the
@@ -113,33 +121,34 @@ const PRESET_JSON: &str = include_str!("../presets/flexure_stage.json");
 /// conversion in `piezo_identify::xy200s`).
 const XY200S_JSON: &str = include_str!("../presets/xy200s_stage.json");
 
-/// Seed 000's stage calibrated with its stacks' return-point memory on
-/// (`examples/calibrate.rs -- --memory`): the same loop shapes, strokes,
-/// rotation and couplings, the modes moved so that the Ziegler-Nichols
-/// figures hold on the memory's flatter small loops (MODEL.md §6).
+/// Seed 000's stage calibrated with its stacks' return-point memory on, the
+/// Ziegler-Nichols figures taken at a held point (`examples/calibrate.rs --
+/// --memory`): the same loop shapes, strokes, rotation and couplings, the
+/// modes moved so that those figures hold on the memory's flatter small
+/// loops (MODEL.md §6).
 const MEMORY_JSON: &str = include_str!("../presets/flexure_stage_memory.json");
 
-/// The same stage calibrated with the memory, its Ziegler-Nichols figures
-/// taken while it moves (`examples/calibrate.rs -- --memory --moving`): the
-/// modes are set by the loop on the branches a tracking stage runs along
-/// rather than on a held point's small loops (MODEL.md §6).
-const TRACKING_JSON: &str = include_str!("../presets/flexure_stage_tracking.json");
+/// Seed 000's stage as calibrated before the stacks closed their minor
+/// loops (`examples/calibrate.rs`): seed 001's eq. (3) as integrated, the
+/// Ziegler-Nichols figures taken at a held point. The default until the
+/// memory ran in Model Exchange and in the controller (docs/seed000.md
+/// measures both beside each other).
+const NO_MEMORY_JSON: &str = include_str!("../presets/flexure_stage_no_memory.json");
 
 impl FlexureStageParams {
-    /// Seed 000's stage with `return_point_memory` on, calibrated with it
-    /// (`presets/flexure_stage_memory.json`; docs/seed000.md measures it
-    /// beside the default).
+    /// Seed 000's stage with `return_point_memory` on, its Ziegler-Nichols
+    /// figures taken at a held point (`presets/flexure_stage_memory.json`;
+    /// docs/seed000.md measures it beside the default).
     pub fn with_closed_minor_loops() -> Self {
         serde_json::from_str(MEMORY_JSON)
             .expect("presets/flexure_stage_memory.json must parse (a test checks it)")
     }
 
-    /// Seed 000's stage with `return_point_memory` on, its modes calibrated
-    /// to the Ziegler-Nichols figures of a loop on a moving stage
-    /// (`presets/flexure_stage_tracking.json`; docs/seed000.md measures it).
-    pub fn calibrated_while_tracking() -> Self {
-        serde_json::from_str(TRACKING_JSON)
-            .expect("presets/flexure_stage_tracking.json must parse (a test checks it)")
+    /// Seed 000's stage without the return-point memory, its Ziegler-Nichols
+    /// figures taken at a held point (`presets/flexure_stage_no_memory.json`).
+    pub fn without_memory() -> Self {
+        serde_json::from_str(NO_MEMORY_JSON)
+            .expect("presets/flexure_stage_no_memory.json must parse (a test checks it)")
     }
 
     /// The XY200S preset (seed 001 §5.1): PZT1 is the Y actuator, PZT2 and
@@ -950,6 +959,26 @@ mod tests {
         params.validate().unwrap();
         assert_eq!(params, FlexureStageParams::default());
         assert!(!params.noise.enabled, "noise is off by default");
+        assert!(
+            params.return_point_memory,
+            "the default stage closes its minor loops"
+        );
+        for (name, set, memory) in [
+            (
+                "3dof_memory",
+                FlexureStageParams::with_closed_minor_loops(),
+                true,
+            ),
+            (
+                "3dof_no_memory",
+                FlexureStageParams::without_memory(),
+                false,
+            ),
+            ("xy200s", FlexureStageParams::xy200s(), false),
+        ] {
+            set.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(set.return_point_memory, memory, "{name}");
+        }
     }
 
     #[test]

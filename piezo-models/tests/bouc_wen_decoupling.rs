@@ -110,8 +110,8 @@ fn coupling_run(
 fn model_based_decoupling_shrinks_the_coupling_on_both_stages() {
     for (name, params, x_home, y_home) in [
         (
-            "FlexureStage (seed 000)",
-            FlexureStageParams::default(),
+            "FlexureStage (seed 000, without the memory: 3dof_no_memory)",
+            FlexureStageParams::without_memory(),
             8.0,
             7.0,
         ),
@@ -122,8 +122,8 @@ fn model_based_decoupling_shrinks_the_coupling_on_both_stages() {
             20.0,
         ),
         (
-            "FlexureStage with its minor loops closed (3dof_tracking; the models with the memory)",
-            FlexureStageParams::calibrated_while_tracking(),
+            "FlexureStage (seed 000, its minor loops closed: the default; the models with the memory)",
+            FlexureStageParams::default(),
             8.0,
             7.0,
         ),

@@ -49,7 +49,7 @@ fn step_allocates_nothing() {
 /// allocations.
 #[test]
 fn the_memory_allocates_nothing_in_either_interface() {
-    let mut stage = FlexureStage::new(FlexureStageParams::calibrated_while_tracking()).unwrap();
+    let mut stage = FlexureStage::new(FlexureStageParams::default()).unwrap();
     let mut finite = true;
     let mut checksum = 0.0;
     let allocations = allocations_of(|| {

@@ -15,7 +15,7 @@ use std::time::Instant;
 use clap::Parser;
 use piezo_identify::fingerprints::measure;
 use piezo_identify::plant::{PlantFmu, read_parameter_set};
-use piezo_models::fingerprint::{Check, Fingerprints};
+use piezo_models::fingerprint::{Check, Fingerprints, ZieglerNicholsReading};
 use serde_json::json;
 
 #[derive(Parser)]
@@ -37,6 +37,27 @@ struct Args {
     /// Also writes report.md and fingerprints.json into this folder.
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
+    /// Where the Ziegler-Nichols test's loop runs: on the stage moving at
+    /// seed 000's Fig. 7 speed (the default preset is calibrated so), or at
+    /// a held point (the 3dof_memory and 3dof_no_memory presets are).
+    #[arg(long, value_enum, default_value = "while-moving")]
+    ziegler_nichols: Reading,
+}
+
+/// [`ZieglerNicholsReading`] as the command line names it.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Reading {
+    WhileMoving,
+    Held,
+}
+
+impl From<Reading> for ZieglerNicholsReading {
+    fn from(reading: Reading) -> Self {
+        match reading {
+            Reading::WhileMoving => ZieglerNicholsReading::WhileMoving,
+            Reading::Held => ZieglerNicholsReading::Held,
+        }
+    }
 }
 
 /// `value` to six decimals, without trailing zeros (0.111111, 12.74, 790).
@@ -62,6 +83,16 @@ fn table(args: &Args, fingerprints: &Fingerprints, checks: &[Check]) -> String {
             c.x_sweep_amplitude,
             c.rotation_sweep_amplitude
         ),
+        match fingerprints.ziegler_nichols {
+            ZieglerNicholsReading::WhileMoving => {
+                "Ziegler-Nichols figures read on the stage moving at 25 V/s \
+                 (`--ziegler-nichols while-moving`)."
+            }
+            ZieglerNicholsReading::Held => {
+                "Ziegler-Nichols figures read at a held point (`--ziegler-nichols held`)."
+            }
+        }
+        .to_owned(),
         String::new(),
         "| figure | seed 000 | simulated | error | tolerance | within | where |".to_owned(),
         "|---|---|---|---|---|---|---|".to_owned(),
@@ -101,7 +132,9 @@ fn main() -> ExitCode {
             plant.with_parameters(&set).map_err(|e| e.to_string())
         }
     });
-    let fingerprints = match plant.and_then(|plant| measure(&plant).map_err(|e| e.to_string())) {
+    let fingerprints = match plant
+        .and_then(|plant| measure(&plant, args.ziegler_nichols.into()).map_err(|e| e.to_string()))
+    {
         Ok(f) => f,
         Err(e) => {
             eprintln!("{e}");

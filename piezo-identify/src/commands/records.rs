@@ -52,8 +52,9 @@ pub(crate) struct LabRecordArgs {
     pub(crate) axis: String,
     /// The stage: FlexureStage's parameters in their own form
     /// (piezo_models::FlexureStageParams, as piezo-models/presets/flexure_stage.json;
-    /// not a set by FMI name), its amplifier as given [default: the default
-    /// stage with the lab's -30..130 V amplifier].
+    /// not a set by FMI name), its amplifier as given [default: seed 000's
+    /// stage without the return-point memory, piezo-models/presets/flexure_stage_no_memory.json,
+    /// with the lab's -30..130 V amplifier]
     #[arg(long)]
     pub(crate) stage: Option<PathBuf>,
     /// The record file to write (comma-separated, with a header).
